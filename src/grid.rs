@@ -1,0 +1,321 @@
+//! The MAC grid (paper sec. 3, "Background"): cells, staggered faces and their indexing,
+//! generic over the dimension `D`.
+//!
+//! Everything here is in grid units: the cell size is 1 and cell `c` covers
+//! `[c_k, c_k + 1)` on every axis `k`. The face with index `i` on axis `a` lies at
+//! coordinate `i` along `a` (between cells `i - 1` and `i`) and at cell centres on the other
+//! axes. Linear indices run with axis 0 fastest.
+
+use nalgebra::SVector;
+
+/// A point or vector in grid units (cells).
+pub type Vector<const D: usize> = SVector<f64, D>;
+
+/// Integer cell coordinates.
+pub type Cell<const D: usize> = [usize; D];
+
+/// Cell and face layout of a `D`-dimensional MAC grid.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Grid<const D: usize> {
+    /// Cells per axis.
+    pub dims: [usize; D],
+    cell_strides: [usize; D],
+    face_dims: [[usize; D]; D],
+    face_strides: [[usize; D]; D],
+}
+
+fn strides<const D: usize>(dims: &[usize; D]) -> [usize; D] {
+    let mut s = [1; D];
+    for k in 1..D {
+        s[k] = s[k - 1] * dims[k - 1];
+    }
+    s
+}
+
+impl<const D: usize> Grid<D> {
+    pub fn new(dims: [usize; D]) -> Self {
+        assert!(dims.iter().all(|&n| n >= 1), "grid dims must be positive");
+        let face_dims = std::array::from_fn(|a| {
+            let mut d = dims;
+            d[a] += 1;
+            d
+        });
+        Self {
+            dims,
+            cell_strides: strides(&dims),
+            face_strides: std::array::from_fn(|a| strides(&face_dims[a])),
+            face_dims,
+        }
+    }
+
+    pub fn num_cells(&self) -> usize {
+        self.dims.iter().product()
+    }
+
+    /// Number of faces normal to `axis`.
+    pub fn num_faces(&self, axis: usize) -> usize {
+        self.face_dims[axis].iter().product()
+    }
+
+    pub fn face_dims(&self, axis: usize) -> [usize; D] {
+        self.face_dims[axis]
+    }
+
+    pub fn cell_stride(&self, axis: usize) -> usize {
+        self.cell_strides[axis]
+    }
+
+    pub fn face_stride(&self, face_axis: usize, along: usize) -> usize {
+        self.face_strides[face_axis][along]
+    }
+
+    pub fn cell_index(&self, c: Cell<D>) -> usize {
+        (0..D).map(|k| c[k] * self.cell_strides[k]).sum()
+    }
+
+    pub fn cell_coords(&self, mut idx: usize) -> Cell<D> {
+        let mut c = [0; D];
+        for k in 0..D {
+            c[k] = idx % self.dims[k];
+            idx /= self.dims[k];
+        }
+        c
+    }
+
+    pub fn face_index(&self, axis: usize, f: Cell<D>) -> usize {
+        (0..D).map(|k| f[k] * self.face_strides[axis][k]).sum()
+    }
+
+    pub fn face_coords(&self, axis: usize, mut idx: usize) -> Cell<D> {
+        let mut f = [0; D];
+        for k in 0..D {
+            f[k] = idx % self.face_dims[axis][k];
+            idx /= self.face_dims[axis][k];
+        }
+        f
+    }
+
+    /// Whether `x` lies inside the domain `[0, dims)`.
+    pub fn contains(&self, x: &Vector<D>) -> bool {
+        (0..D).all(|k| x[k] >= 0.0 && x[k] < self.dims[k] as f64)
+    }
+
+    /// The cell containing `x`, or `None` outside the domain (or for a non-finite point).
+    pub fn cell_of(&self, x: &Vector<D>) -> Option<Cell<D>> {
+        self.contains(x)
+            .then(|| std::array::from_fn(|k| (x[k].floor() as usize).min(self.dims[k] - 1)))
+    }
+
+    /// The linear index of the cell containing `x`; panics outside the domain (a bug).
+    pub fn cell_index_of(&self, x: &Vector<D>) -> usize {
+        let c = self
+            .cell_of(x)
+            .unwrap_or_else(|| panic!("point {:?} is outside the domain", x.as_slice()));
+        self.cell_index(c)
+    }
+
+    /// The neighbour of `c` one step along `axis` (`dir` = -1 or +1), if inside the domain.
+    pub fn neighbor(&self, c: Cell<D>, axis: usize, dir: i32) -> Option<Cell<D>> {
+        let mut n = c;
+        if dir < 0 {
+            n[axis] = c[axis].checked_sub(1)?;
+        } else {
+            n[axis] += 1;
+            if n[axis] >= self.dims[axis] {
+                return None;
+            }
+        }
+        Some(n)
+    }
+
+    /// Cell centre in grid units.
+    pub fn center(&self, c: Cell<D>) -> Vector<D> {
+        Vector::<D>::from_fn(|k, _| c[k] as f64 + 0.5)
+    }
+
+    /// All cells of the Moore neighbourhood of `c` inside the domain, `c` excluded.
+    pub fn moore_neighbors(&self, c: Cell<D>) -> impl Iterator<Item = Cell<D>> + '_ {
+        let n = 3usize.pow(D as u32);
+        (0..n).filter_map(move |code| {
+            let mut m = code;
+            let mut out = c;
+            let mut all_zero = true;
+            for k in 0..D {
+                let off = (m % 3) as i64 - 1;
+                m /= 3;
+                if off != 0 {
+                    all_zero = false;
+                }
+                let v = c[k] as i64 + off;
+                if v < 0 || v >= self.dims[k] as i64 {
+                    return None;
+                }
+                out[k] = v as usize;
+            }
+            (!all_zero).then_some(out)
+        })
+    }
+
+    /// The point of cell `c` closest to `q`, kept `margin` away from the cell's walls
+    /// (paper eq. best_cell_pos, `phi_close`, with `margin` = epsilon).
+    pub fn closest_in_cell(&self, q: &Vector<D>, c: Cell<D>, margin: f64) -> Vector<D> {
+        Vector::<D>::from_fn(|k, _| q[k].clamp(c[k] as f64 + margin, (c[k] + 1) as f64 - margin))
+    }
+}
+
+/// A velocity field stored on the faces of a MAC grid: component `a` lives on the faces normal
+/// to axis `a`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MacField<const D: usize> {
+    pub comp: [Vec<f64>; D],
+}
+
+impl<const D: usize> MacField<D> {
+    pub fn zeros(grid: &Grid<D>) -> Self {
+        Self {
+            comp: std::array::from_fn(|a| vec![0.0; grid.num_faces(a)]),
+        }
+    }
+
+    /// Largest absolute face value over all components.
+    pub fn max_abs(&self) -> f64 {
+        self.comp
+            .iter()
+            .flat_map(|c| c.iter())
+            .fold(0.0f64, |m, v| m.max(v.abs()))
+    }
+
+    /// Multilinear interpolation of the field at `x` (grid units).
+    pub fn interpolate(&self, grid: &Grid<D>, x: &Vector<D>) -> Vector<D> {
+        Vector::<D>::from_fn(|a, _| {
+            let mut v = 0.0;
+            for_each_face_weight(grid, a, x, |idx, w| v += w * self.comp[a][idx]);
+            v
+        })
+    }
+}
+
+/// Calls `f(face_index, weight)` for the `2^D` faces of component `axis` around `x`, with the
+/// multilinear ("tent") weights of paper sec. 3 (P2G and G2P). Weights sum to 1; points near the
+/// domain walls are clamped onto the outermost faces.
+#[inline]
+pub fn for_each_face_weight<const D: usize>(
+    grid: &Grid<D>,
+    axis: usize,
+    x: &Vector<D>,
+    mut f: impl FnMut(usize, f64),
+) {
+    let fd = grid.face_dims(axis);
+    let mut base = [0usize; D];
+    let mut frac = [0.0f64; D];
+    for k in 0..D {
+        // Face positions along k: integers on the face axis, half-integers on the others.
+        let s = if k == axis { x[k] } else { x[k] - 0.5 };
+        let hi = (fd[k] - 1) as f64;
+        let s = s.clamp(0.0, hi);
+        let i = (s.floor() as usize).min(fd[k].saturating_sub(2));
+        base[k] = i;
+        frac[k] = if fd[k] >= 2 { s - i as f64 } else { 0.0 };
+    }
+    for corner in 0..1usize << D {
+        let mut w = 1.0;
+        let mut idx = 0;
+        for k in 0..D {
+            let up = (corner >> k) & 1;
+            if fd[k] < 2 && up == 1 {
+                w = 0.0;
+                break;
+            }
+            w *= if up == 1 { frac[k] } else { 1.0 - frac[k] };
+            idx += (base[k] + up) * grid.face_stride(axis, k);
+        }
+        if w != 0.0 {
+            f(idx, w);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn indices_round_trip_2d_and_3d() {
+        let g2 = Grid::new([5, 7]);
+        for i in 0..g2.num_cells() {
+            assert_eq!(g2.cell_index(g2.cell_coords(i)), i);
+        }
+        let g3 = Grid::new([3, 4, 5]);
+        for a in 0..3 {
+            for i in 0..g3.num_faces(a) {
+                assert_eq!(g3.face_index(a, g3.face_coords(a, i)), i);
+            }
+        }
+        assert_eq!(g3.num_faces(0), 4 * 4 * 5);
+    }
+
+    #[test]
+    fn interpolation_reproduces_linear_fields() {
+        // A field linear in space must be interpolated exactly away from the walls.
+        fn check<const D: usize>(dims: [usize; D]) {
+            let g = Grid::new(dims);
+            let mut u = MacField::zeros(&g);
+            let lin = |p: &[f64]| {
+                p.iter()
+                    .enumerate()
+                    .map(|(k, v)| (k as f64 + 1.5) * v)
+                    .sum::<f64>()
+            };
+            for a in 0..D {
+                for i in 0..g.num_faces(a) {
+                    let f = g.face_coords(a, i);
+                    let p: Vec<f64> = (0..D)
+                        .map(|k| {
+                            if k == a {
+                                f[k] as f64
+                            } else {
+                                f[k] as f64 + 0.5
+                            }
+                        })
+                        .collect();
+                    u.comp[a][i] = lin(&p) + a as f64;
+                }
+            }
+            let x = Vector::<D>::from_fn(|k, _| 1.3 + 0.37 * k as f64);
+            let v = u.interpolate(&g, &x);
+            for a in 0..D {
+                assert!((v[a] - (lin(x.as_slice()) + a as f64)).abs() < 1e-12);
+            }
+        }
+        check([6, 5]);
+        check([5, 6, 7]);
+    }
+
+    #[test]
+    fn face_weights_sum_to_one_everywhere() {
+        let g = Grid::new([4, 3, 5]);
+        for x in [
+            [0.0, 0.0, 0.0],
+            [3.999, 2.999, 4.999],
+            [0.2, 1.7, 2.5],
+            [3.9, 0.1, 4.5],
+        ] {
+            let x = Vector::<3>::from(x);
+            for a in 0..3 {
+                let mut s = 0.0;
+                for_each_face_weight(&g, a, &x, |_, w| s += w);
+                assert!((s - 1.0).abs() < 1e-12, "axis {a} at {x:?}: {s}");
+            }
+        }
+    }
+
+    #[test]
+    fn closest_in_cell_respects_margin() {
+        let g = Grid::new([4, 4]);
+        let q = Vector::<2>::new(3.7, 0.2);
+        let p = g.closest_in_cell(&q, [1, 0], 0.01);
+        assert_eq!(p, Vector::<2>::new(1.99, 0.2));
+        assert_eq!(g.moore_neighbors([0, 0]).count(), 3);
+        assert_eq!(Grid::new([4, 4, 4]).moore_neighbors([1, 1, 1]).count(), 26);
+    }
+}

@@ -1,0 +1,196 @@
+//! The volume measure of paper eq. volume, invariant checks and stage timings.
+
+use crate::grid::{Grid, Vector};
+use crate::sim::markings::{CellKind, Markings};
+use std::time::Duration;
+
+/// Total fluid volume `V = sum_c V_c` in cells (paper eq. volume):
+/// `V_c = 0` for non-fluid cells (depth > 0), `min(1, |gamma_c| / mu)` for cells at depth -1
+/// or 0, and 1 for deeper fluid cells. Solid cells count as pure solid, whatever they hold.
+pub fn volume_cells(markings: &Markings, mu: u32) -> f64 {
+    let mut v = 0.0;
+    for c in 0..markings.kind.len() {
+        if markings.kind[c] != CellKind::Fluid {
+            continue;
+        }
+        let d = markings.depth[c];
+        v += if d >= -1 {
+            (markings.count[c] as f64 / mu as f64).min(1.0)
+        } else {
+            1.0
+        };
+    }
+    v
+}
+
+/// The simulation's stages, for timings (one slot each).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stage {
+    Emit,
+    ParticlesToGrid,
+    Forces,
+    Pressure,
+    GridToParticles,
+    Advect,
+    Correct,
+    Markings,
+}
+
+impl Stage {
+    pub const ALL: [Stage; 8] = [
+        Stage::Emit,
+        Stage::ParticlesToGrid,
+        Stage::Forces,
+        Stage::Pressure,
+        Stage::GridToParticles,
+        Stage::Advect,
+        Stage::Correct,
+        Stage::Markings,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Stage::Emit => "emit",
+            Stage::ParticlesToGrid => "p2g",
+            Stage::Forces => "forces",
+            Stage::Pressure => "pressure",
+            Stage::GridToParticles => "g2p",
+            Stage::Advect => "advect",
+            Stage::Correct => "correct",
+            Stage::Markings => "markings",
+        }
+    }
+}
+
+/// Wall time of each stage in one step.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct StageTimes(pub [Duration; Stage::ALL.len()]);
+
+impl StageTimes {
+    pub fn get(&self, s: Stage) -> Duration {
+        self.0[s as usize]
+    }
+
+    pub fn add(&mut self, s: Stage, d: Duration) {
+        self.0[s as usize] += d;
+    }
+
+    pub fn total(&self) -> Duration {
+        self.0.iter().sum()
+    }
+
+    /// Runs `f` and charges its wall time to `stage`.
+    pub fn time<T>(&mut self, stage: Stage, f: impl FnOnce() -> T) -> T {
+        let t0 = std::time::Instant::now();
+        let out = f();
+        self.add(stage, t0.elapsed());
+        out
+    }
+}
+
+/// A broken invariant: a bug, reported with what and where.
+#[derive(Debug, Clone, PartialEq)]
+pub struct InvariantViolation(pub String);
+
+impl std::error::Error for InvariantViolation {}
+
+impl std::fmt::Display for InvariantViolation {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+/// Checks the invariants every method keeps, in O(particles): the particle count equals
+/// `expected_count`, every position and velocity is finite and inside the domain, and no
+/// particle sits in a solid cell.
+pub fn check_particles<const D: usize>(
+    grid: &Grid<D>,
+    pos: &[Vector<D>],
+    vel: &[Vector<D>],
+    solid: &[bool],
+    expected_count: usize,
+) -> Result<(), InvariantViolation> {
+    if pos.len() != expected_count || vel.len() != expected_count {
+        return Err(InvariantViolation(format!(
+            "particle count {} (velocities {}) differs from the {} seeded or emitted",
+            pos.len(),
+            vel.len(),
+            expected_count
+        )));
+    }
+    for (j, (x, v)) in pos.iter().zip(vel).enumerate() {
+        if !x.iter().all(|c| c.is_finite()) || !v.iter().all(|c| c.is_finite()) {
+            return Err(InvariantViolation(format!(
+                "particle {j} is not finite: x = {:?}, v = {:?}",
+                x.as_slice(),
+                v.as_slice()
+            )));
+        }
+        match grid.cell_of(x) {
+            None => {
+                return Err(InvariantViolation(format!(
+                    "particle {j} left the domain: x = {:?}",
+                    x.as_slice()
+                )))
+            }
+            Some(c) if solid[grid.cell_index(c)] => {
+                return Err(InvariantViolation(format!(
+                    "particle {j} is inside solid cell {c:?}"
+                )))
+            }
+            Some(_) => {}
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn volume_counts_near_surface_cells_by_fill_and_deep_cells_as_full() {
+        // 6x6 tank, fluid in the bottom 4 rows; one deep cell holds a single particle (a
+        // bubble: counts 1), one surface cell holds 2 of mu = 4, one holds 6 (overflow: 1).
+        let g = Grid::new([6, 6]);
+        let mu = 4;
+        let mut pos = vec![];
+        for c in 0..g.num_cells() {
+            let cc = g.cell_coords(c);
+            if cc[1] >= 4 {
+                continue;
+            }
+            let n = match cc {
+                [0, 0] => 1,
+                [2, 3] => 2,
+                [3, 3] => 6,
+                _ => mu,
+            };
+            for k in 0..n {
+                pos.push(Vector::<2>::new(
+                    cc[0] as f64 + 0.1 + 0.1 * k as f64,
+                    cc[1] as f64 + 0.5,
+                ));
+            }
+        }
+        let m = Markings::compute(&g, &pos, &vec![false; 36]);
+        assert_eq!(m.depth[g.cell_index([0, 0])], -3);
+        let v = volume_cells(&m, mu);
+        assert!((v - (24.0 - 0.5)).abs() < 1e-12, "{v}");
+    }
+
+    #[test]
+    fn invariants_catch_solid_and_nan() {
+        let g = Grid::new([4, 4, 4]);
+        let mut solid = vec![false; 64];
+        solid[g.cell_index([1, 1, 1])] = true;
+        let ok = vec![Vector::<3>::new(0.5, 0.5, 0.5)];
+        let z = vec![Vector::<3>::zeros()];
+        assert!(check_particles(&g, &ok, &z, &solid, 1).is_ok());
+        assert!(check_particles(&g, &ok, &z, &solid, 2).is_err());
+        let bad = vec![Vector::<3>::new(1.5, 1.5, 1.5)];
+        assert!(check_particles(&g, &bad, &z, &solid, 1).is_err());
+        let nan = vec![Vector::<3>::new(f64::NAN, 0.5, 0.5)];
+        assert!(check_particles(&g, &nan, &z, &solid, 1).is_err());
+    }
+}

@@ -1,0 +1,340 @@
+//! Rerun recordings: the only module that imports `rerun`.
+//!
+//! World units are cells. In 2D the world is drawn as an image (x right, rows down), so
+//! positions are logged as `(x, ny - y)`: gravity points down the screen and each particle lies
+//! over its cell of the `world/grid/markings` image. In 3D, y is up (`RIGHT_HAND_Y_UP`).
+//! Entity paths are listed in the README and in [`ENTITY_PATHS`].
+
+use crate::metrics::Stage;
+use crate::scene::Scene;
+use crate::sim::markings::MarkingClass;
+use crate::sim::{Simulation, StepReport};
+use anyhow::{anyhow, Result};
+use rerun::blueprint::{
+    Blueprint, Horizontal, Spatial2DView, Spatial3DView, TextDocumentView, TextLogView,
+    TimeSeriesView, Vertical,
+};
+use rerun::RecordingStream;
+use std::cell::Cell;
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+/// Every entity a run logs (the ones under `metrics/` with their leaves).
+pub const ENTITY_PATHS: &[&str] = &[
+    "scene",
+    "world",
+    "world/domain",
+    "world/particles",
+    "world/grid/markings",
+    "metrics/volume_percent",
+    "metrics/particles",
+    "metrics/dt",
+    "metrics/max_speed",
+    "metrics/pcg/iterations",
+    "metrics/pcg/residual",
+    "metrics/time/<stage>",
+    "log",
+];
+
+/// Writes one run to an `.rrd` file.
+pub struct Recorder {
+    rec: RecordingStream,
+    dims: Vec<usize>,
+    max_speed: f64,
+    last_flush: Cell<Instant>,
+}
+
+fn blueprint(dim: usize) -> Blueprint {
+    let world: rerun::blueprint::ContainerLike = if dim == 2 {
+        Spatial2DView::new("world").with_origin("world").into()
+    } else {
+        Spatial3DView::new("world").with_origin("world").into()
+    };
+    Blueprint::new(
+        Horizontal::new([
+            world,
+            Vertical::new([
+                TimeSeriesView::new("volume %")
+                    .with_origin("metrics/volume_percent")
+                    .into(),
+                TimeSeriesView::new("stage times (ms)")
+                    .with_origin("metrics/time")
+                    .into(),
+                TimeSeriesView::new("pressure solve")
+                    .with_origin("metrics/pcg")
+                    .into(),
+                TextLogView::new("log").with_origin("log").into(),
+                TextDocumentView::new("scene").with_origin("scene").into(),
+            ])
+            .into(),
+        ])
+        .with_column_shares([2.0, 1.0]),
+    )
+}
+
+/// Colour ramp for speeds: dark blue at rest, through cyan, to white at the speed bound.
+fn speed_color(speed: f64, max: f64) -> [u8; 3] {
+    let s = (speed / max).clamp(0.0, 1.0);
+    let lerp = |a: f64, b: f64, t: f64| (a + (b - a) * t) as u8;
+    if s < 0.5 {
+        let t = s * 2.0;
+        [
+            lerp(20.0, 40.0, t),
+            lerp(60.0, 200.0, t),
+            lerp(160.0, 255.0, t),
+        ]
+    } else {
+        let t = (s - 0.5) * 2.0;
+        [lerp(40.0, 255.0, t), lerp(200.0, 255.0, t), 255]
+    }
+}
+
+fn class_color(c: MarkingClass) -> rerun::Rgba32 {
+    match c {
+        MarkingClass::Empty => rerun::Rgba32::from_unmultiplied_rgba(0, 0, 0, 0),
+        MarkingClass::Surface => rerun::Rgba32::from_unmultiplied_rgba(60, 180, 75, 140),
+        MarkingClass::Inner => rerun::Rgba32::from_unmultiplied_rgba(30, 70, 160, 110),
+        MarkingClass::Bubble => rerun::Rgba32::from_unmultiplied_rgba(230, 50, 50, 160),
+        MarkingClass::Solid => rerun::Rgba32::from_unmultiplied_rgba(128, 128, 128, 255),
+    }
+}
+
+impl Recorder {
+    /// Opens `path` for writing; fails (naming the path) before anything is simulated.
+    pub fn create(path: &Path, scene: &Scene) -> Result<Self> {
+        let rec = rerun::RecordingStreamBuilder::new("cellflip")
+            .recording_name(scene.name())
+            .enabled(true)
+            .send_properties(false)
+            .with_blueprint(blueprint(scene.dim()))
+            .save(path)
+            .map_err(|e| anyhow!("cannot write recording '{}': {e}", path.display()))?;
+        rec.set_log_time_enabled(false);
+        let header = format!(
+            "# {}\n\n{}\n\n- source: {}\n- method: {}\n- seed: {}\n- program: cellflip {}\n\n```toml\n{}```\n",
+            scene.name(),
+            scene.file.description,
+            scene.source,
+            scene.method.name(),
+            scene.file.simulation.seed,
+            env!("CARGO_PKG_VERSION"),
+            scene.resolved_toml()
+        );
+        rec.log_static("scene", &rerun::TextDocument::from_markdown(header))?;
+        Ok(Self {
+            rec,
+            dims: scene.dims.clone(),
+            max_speed: scene.file.simulation.max_speed / scene.cell_size_m,
+            last_flush: Cell::new(Instant::now()),
+        })
+    }
+
+    /// Static data: the class colours, the domain, the view coordinates.
+    pub fn log_setup<const D: usize>(&self, sim: &Simulation<D>) {
+        let classes: Vec<(u16, &str, rerun::Rgba32)> = MarkingClass::ALL
+            .iter()
+            .map(|c| (*c as u16, c.label(), class_color(*c)))
+            .collect();
+        let d = &self.dims;
+        let result = (|| -> rerun::RecordingStreamResult<()> {
+            self.rec
+                .log_static("world", &rerun::AnnotationContext::new(classes))?;
+            if D == 2 {
+                self.rec.log_static(
+                    "world/domain",
+                    &rerun::Boxes2D::from_mins_and_sizes(
+                        [(0.0f32, 0.0)],
+                        [(d[0] as f32, d[1] as f32)],
+                    )
+                    .with_colors([[200u8, 200, 200]]),
+                )?;
+            } else {
+                self.rec
+                    .log_static("world", &rerun::ViewCoordinates::RIGHT_HAND_Y_UP())?;
+                let half = (d[0] as f32 / 2.0, d[1] as f32 / 2.0, d[2] as f32 / 2.0);
+                self.rec.log_static(
+                    "world/domain",
+                    &rerun::Boxes3D::from_centers_and_half_sizes([half], [half])
+                        .with_colors([[200u8, 200, 200]])
+                        .with_fill_mode(rerun::FillMode::MajorWireframe),
+                )?;
+            }
+            self.rec.log_static(
+                "log",
+                &rerun::TextLog::new(format!(
+                    "{} particles on {:?} cells, mu = {}",
+                    sim.particles.len(),
+                    sim.grid.dims,
+                    sim.config.mu()
+                ))
+                .with_level(rerun::TextLogLevel::INFO),
+            )
+        })();
+        self.report(result);
+    }
+
+    fn set_time<const D: usize>(&self, sim: &Simulation<D>) {
+        self.rec.set_time_sequence("step", sim.steps as i64);
+        self.rec.set_duration_secs("sim_time", sim.time_secs);
+    }
+
+    /// The state after a step: particles and markings when `full`, metrics when `rep` is given.
+    pub fn log_step<const D: usize>(
+        &self,
+        sim: &Simulation<D>,
+        rep: Option<&StepReport>,
+        full: bool,
+    ) {
+        self.set_time(sim);
+        let mu = sim.config.mu();
+        let result = (|| -> rerun::RecordingStreamResult<()> {
+            if full {
+                let colors: Vec<[u8; 3]> = sim
+                    .particles
+                    .vel
+                    .iter()
+                    .map(|v| speed_color(v.norm(), self.max_speed))
+                    .collect();
+                let marks = &sim.markings;
+                if D == 2 {
+                    let ny = self.dims[1] as f32;
+                    let pos: Vec<[f32; 2]> = sim
+                        .particles
+                        .pos
+                        .iter()
+                        .map(|x| [x[0] as f32, ny - x[1] as f32])
+                        .collect();
+                    self.rec.log(
+                        "world/particles",
+                        &rerun::Points2D::new(pos)
+                            .with_colors(colors)
+                            .with_radii([0.12f32])
+                            .with_draw_order(10.0),
+                    )?;
+                    let (w, h) = (self.dims[0], self.dims[1]);
+                    let mut img = vec![0u8; w * h];
+                    for (c, px) in (0..w * h).map(|c| (c, sim.grid.cell_coords(c))) {
+                        let row = h - 1 - px[1];
+                        img[row * w + px[0]] = marks.class(c, mu) as u8;
+                    }
+                    self.rec.log(
+                        "world/grid/markings",
+                        &rerun::SegmentationImage::new(
+                            img,
+                            rerun::ImageFormat::segmentation(
+                                [w as u32, h as u32],
+                                rerun::ChannelDatatype::U8,
+                            ),
+                        )
+                        .with_draw_order(0.0),
+                    )?;
+                } else {
+                    let pos: Vec<[f32; 3]> = sim
+                        .particles
+                        .pos
+                        .iter()
+                        .map(|x| [x[0] as f32, x[1] as f32, x[2] as f32])
+                        .collect();
+                    self.rec.log(
+                        "world/particles",
+                        &rerun::Points3D::new(pos)
+                            .with_colors(colors)
+                            .with_radii([0.15f32]),
+                    )?;
+                    let cells: Vec<(usize, MarkingClass)> = (0..marks.kind.len())
+                        .map(|c| (c, marks.class(c, mu)))
+                        .filter(|(_, k)| *k != MarkingClass::Empty && *k != MarkingClass::Inner)
+                        .collect();
+                    let centers: Vec<[f32; 3]> = cells
+                        .iter()
+                        .map(|(c, _)| {
+                            let x = sim.grid.center(sim.grid.cell_coords(*c));
+                            [x[0] as f32, x[1] as f32, x[2] as f32]
+                        })
+                        .collect();
+                    let ids: Vec<rerun::components::ClassId> = cells
+                        .iter()
+                        .map(|(_, k)| rerun::components::ClassId::from(*k as u16))
+                        .collect();
+                    self.rec.log(
+                        "world/grid/markings",
+                        &rerun::Points3D::new(centers)
+                            .with_class_ids(ids)
+                            .with_radii([0.3f32]),
+                    )?;
+                }
+            }
+            if let Some(rep) = rep {
+                let h = sim.config.cell_size_m;
+                let scalar = |path: &str, v: f64| self.rec.log(path, &rerun::Scalars::single(v));
+                scalar("metrics/volume_percent", rep.volume_percent)?;
+                scalar("metrics/particles", sim.particles.len() as f64)?;
+                scalar("metrics/dt", rep.dt_secs)?;
+                scalar("metrics/max_speed", rep.max_speed * h)?;
+                scalar("metrics/pcg/iterations", rep.pcg.iterations as f64)?;
+                scalar("metrics/pcg/residual", rep.pcg.residual)?;
+                for s in Stage::ALL {
+                    scalar(
+                        &format!("metrics/time/{}", s.name()),
+                        rep.times.get(s).as_secs_f64() * 1e3,
+                    )?;
+                }
+                if rep.dt_shortened {
+                    self.rec.log(
+                        "log",
+                        &rerun::TextLog::new(format!(
+                            "step {}: time step shortened to {:.3e} s after the projection (max speed {:.3} m/s)",
+                            sim.steps,
+                            rep.dt_secs,
+                            rep.max_speed * h
+                        ))
+                        .with_level(rerun::TextLogLevel::DEBUG),
+                    )?;
+                }
+            }
+            Ok(())
+        })();
+        self.report(result);
+        self.flush_now_and_then();
+    }
+
+    fn text<const D: usize>(&self, sim: &Simulation<D>, level: &'static str, msg: &str) {
+        self.set_time(sim);
+        let r = self
+            .rec
+            .log("log", &rerun::TextLog::new(msg).with_level(level));
+        self.report(r);
+    }
+
+    pub fn warn<const D: usize>(&self, sim: &Simulation<D>, msg: &str) {
+        self.text(sim, rerun::TextLogLevel::WARN, msg);
+    }
+
+    pub fn error<const D: usize>(&self, sim: &Simulation<D>, msg: &str) {
+        self.text(sim, rerun::TextLogLevel::ERROR, msg);
+    }
+
+    /// A failed log call is not worth stopping a simulation for; say so once on stderr.
+    fn report(&self, r: rerun::RecordingStreamResult<()>) {
+        if let Err(e) = r {
+            eprintln!("warning: recording: {e}");
+        }
+    }
+
+    /// Bounds what a crash can lose: everything logged more than two seconds ago is on disk.
+    fn flush_now_and_then(&self) {
+        if self.last_flush.get().elapsed() > Duration::from_secs(2) {
+            if let Err(e) = self.rec.flush_blocking() {
+                eprintln!("warning: recording: {e}");
+            }
+            self.last_flush.set(Instant::now());
+        }
+    }
+
+    /// Flushes everything and writes the file's footer.
+    pub fn finish(self) -> Result<()> {
+        self.rec.flush_blocking().map_err(|e| anyhow!("{e}"))?;
+        drop(self.rec);
+        Ok(())
+    }
+}

@@ -1,0 +1,229 @@
+//! Running a scene: the step loop with its progress bar, recording, Ctrl-C handling and the
+//! summary at the end.
+
+use crate::cli::RunArgs;
+use crate::metrics::{Stage, StageTimes};
+use crate::record::Recorder;
+use crate::scene::{Overrides, Scene};
+use crate::sim::{Simulation, StepReport};
+use anyhow::{bail, Context, Result};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+static INTERRUPTED: AtomicBool = AtomicBool::new(false);
+
+/// When a run ends.
+#[derive(Clone, Copy, Debug)]
+pub enum Limit {
+    Steps(u64),
+    SimSeconds(f64),
+}
+
+/// What a run did, for the summary.
+#[derive(Clone, Debug, Default)]
+pub struct Summary {
+    pub steps: u64,
+    pub sim_secs: f64,
+    pub wall: Duration,
+    pub stages: StageTimes,
+    pub volume_min: f64,
+    pub volume_max: f64,
+    pub particles: usize,
+    pub emitted: usize,
+    pub pcg_iterations: u64,
+    pub pcg_iterations_max: usize,
+    pub dt_shortened: u64,
+    pub interrupted: bool,
+}
+
+impl Summary {
+    fn new(volume: f64) -> Self {
+        Self {
+            volume_min: volume,
+            volume_max: volume,
+            ..Default::default()
+        }
+    }
+
+    fn add(&mut self, rep: &StepReport) {
+        self.steps += 1;
+        for s in Stage::ALL {
+            self.stages.add(s, rep.times.get(s));
+        }
+        self.volume_min = self.volume_min.min(rep.volume_percent);
+        self.volume_max = self.volume_max.max(rep.volume_percent);
+        self.pcg_iterations += rep.pcg.iterations as u64;
+        self.pcg_iterations_max = self.pcg_iterations_max.max(rep.pcg.iterations);
+        self.emitted += rep.emitted;
+        self.dt_shortened += rep.dt_shortened as u64;
+    }
+}
+
+/// `cellflip run`.
+pub fn run(args: &RunArgs) -> Result<()> {
+    let overrides = Overrides {
+        method: args.method.clone(),
+        duration: args.duration,
+        cells: args.res,
+        ppc: args.ppc,
+        seed: args.seed,
+    };
+    let scene = Scene::load(&args.scene, &overrides)?;
+    let limit = match args.steps {
+        Some(0) => bail!("--steps: must be at least 1"),
+        Some(n) => Limit::Steps(n),
+        None => Limit::SimSeconds(scene.duration_secs()),
+    };
+    let out = if args.no_record {
+        None
+    } else if let Some(p) = &args.out {
+        Some(p.clone())
+    } else {
+        let dir = PathBuf::from("recordings");
+        std::fs::create_dir_all(&dir)
+            .with_context(|| format!("cannot create directory '{}'", dir.display()))?;
+        Some(dir.join(format!("{}.rrd", scene.name())))
+    };
+    let _ = ctrlc::set_handler(|| INTERRUPTED.store(true, Ordering::SeqCst));
+    match scene.dim() {
+        2 => run_dim::<2>(&scene, limit, out.as_deref(), args),
+        3 => run_dim::<3>(&scene, limit, out.as_deref(), args),
+        d => unreachable!("scene checks the dimension, got {d}"),
+    }
+}
+
+fn run_dim<const D: usize>(
+    scene: &Scene,
+    limit: Limit,
+    out: Option<&Path>,
+    args: &RunArgs,
+) -> Result<()> {
+    let recorder = out.map(|p| Recorder::create(p, scene)).transpose()?;
+    let mut sim = Simulation::<D>::new(scene.config::<D>());
+    if let Some(r) = &recorder {
+        r.log_setup(&sim);
+        r.log_step(&sim, None, true);
+    }
+    let t0 = Instant::now();
+    let bar = progress_bar(limit);
+    let mut summary = Summary::new(sim.volume_percent());
+    let result = loop {
+        let done = match limit {
+            Limit::Steps(n) => sim.steps >= n,
+            Limit::SimSeconds(t) => sim.time_secs >= t,
+        };
+        if done {
+            break Ok(());
+        }
+        if INTERRUPTED.load(Ordering::SeqCst) {
+            summary.interrupted = true;
+            if let Some(r) = &recorder {
+                r.warn(&sim, "run stopped by Ctrl-C");
+            }
+            break Ok(());
+        }
+        match sim.step() {
+            Ok(rep) => {
+                summary.add(&rep);
+                if let Some(r) = &recorder {
+                    let full = sim.steps % args.record_every == 0;
+                    r.log_step(&sim, Some(&rep), full);
+                }
+            }
+            Err(e) => {
+                let msg = format!("step {}: invariant broken: {e}", sim.steps + 1);
+                if let Some(r) = &recorder {
+                    r.error(&sim, &msg);
+                }
+                break Err(anyhow::anyhow!(msg));
+            }
+        }
+        if !args.quiet && t0.elapsed() > Duration::from_secs(1) && bar.is_hidden() {
+            bar.set_draw_target(ProgressDrawTarget::stderr());
+        }
+        bar.set_position(match limit {
+            Limit::Steps(_) => sim.steps,
+            Limit::SimSeconds(_) => (sim.time_secs * 1000.0) as u64,
+        });
+        bar.set_message(format!(
+            "step {}  t = {:.3} s  volume {:.1}%",
+            sim.steps,
+            sim.time_secs,
+            sim.volume_percent()
+        ));
+    };
+    bar.finish_and_clear();
+    summary.wall = t0.elapsed();
+    summary.sim_secs = sim.time_secs;
+    summary.particles = sim.particles.len();
+    if let Some(r) = recorder {
+        r.finish()
+            .with_context(|| format!("cannot finish the recording '{}'", out.unwrap().display()))?;
+    }
+    if !args.quiet {
+        print_summary(scene, &summary, out);
+    }
+    result
+}
+
+fn progress_bar(limit: Limit) -> ProgressBar {
+    let (len, unit) = match limit {
+        Limit::Steps(n) => (n, "steps"),
+        Limit::SimSeconds(t) => ((t * 1000.0).ceil() as u64, "ms"),
+    };
+    let bar = ProgressBar::with_draw_target(Some(len), ProgressDrawTarget::hidden());
+    let style = ProgressStyle::with_template(&format!(
+        "{{bar:30}} {{pos}}/{{len}} {unit}  {{msg}}  ETA {{eta}}"
+    ))
+    .expect("a valid progress template");
+    bar.set_style(style);
+    bar
+}
+
+fn print_summary(scene: &Scene, s: &Summary, out: Option<&Path>) {
+    let per_step = |d: Duration| d.as_secs_f64() * 1e3 / s.steps.max(1) as f64;
+    println!(
+        "{} ({}D, {}): {} steps, {:.3} s simulated in {:.2} s wall ({:.2} ms/step){}",
+        scene.name(),
+        scene.dim(),
+        scene.method.name(),
+        s.steps,
+        s.sim_secs,
+        s.wall.as_secs_f64(),
+        per_step(s.wall),
+        if s.interrupted {
+            " [stopped by Ctrl-C]"
+        } else {
+            ""
+        }
+    );
+    println!(
+        "particles {} ({} emitted); volume {:.2}% .. {:.2}% of V*",
+        s.particles, s.emitted, s.volume_min, s.volume_max
+    );
+    println!(
+        "pressure: {:.1} PCG iterations per step (max {}); steps shortened after projection: {}",
+        s.pcg_iterations as f64 / s.steps.max(1) as f64,
+        s.pcg_iterations_max,
+        s.dt_shortened
+    );
+    println!("{:<10} {:>10} {:>12}", "stage", "total s", "ms/step");
+    for st in Stage::ALL {
+        let d = s.stages.get(st);
+        println!(
+            "{:<10} {:>10.3} {:>12.3}",
+            st.name(),
+            d.as_secs_f64(),
+            per_step(d)
+        );
+    }
+    if let Some(p) = out {
+        println!(
+            "recording: {}  (open with: rerun {})",
+            p.display(),
+            p.display()
+        );
+    }
+}

@@ -1,0 +1,553 @@
+//! Scene files: TOML as written -> checked -> [`SimConfig`] in grid units.
+//!
+//! Scene files speak SI (metres, seconds, m/s^2) and cells per axis; everything below this
+//! module works in grid units. All checks of user input live here, and every error names the
+//! file, the key and the reason.
+
+use crate::grid::Vector;
+use crate::particles::Region;
+use crate::sim::emit::Emitter;
+use crate::sim::{Method, SimConfig};
+use anyhow::{anyhow, bail, Context, Result};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// The built-in scenes, embedded from `scenes/`.
+pub const BUILT_IN: &[(&str, &str)] = &[
+    ("dam-2d", include_str!("../scenes/dam-2d.toml")),
+    ("dam-1ppc-2d", include_str!("../scenes/dam-1ppc-2d.toml")),
+    ("dam-3d", include_str!("../scenes/dam-3d.toml")),
+    ("drop-2d", include_str!("../scenes/drop-2d.toml")),
+    ("drop-3d", include_str!("../scenes/drop-3d.toml")),
+    (
+        "hydrostatic-2d",
+        include_str!("../scenes/hydrostatic-2d.toml"),
+    ),
+    (
+        "martin-moyce-2d",
+        include_str!("../scenes/martin-moyce-2d.toml"),
+    ),
+];
+
+/// A scene file as written.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneFile {
+    pub name: String,
+    #[serde(default)]
+    pub description: String,
+    /// 2 or 3.
+    pub dim: usize,
+    pub domain: DomainFile,
+    #[serde(default)]
+    pub simulation: SimulationFile,
+    /// Regions filled with fluid at the start.
+    #[serde(default)]
+    pub fluid: Vec<RegionFile>,
+    /// Static solid regions (cells whose centre is inside are solid).
+    #[serde(default)]
+    pub solid: Vec<RegionFile>,
+    #[serde(default)]
+    pub emitter: Vec<EmitterFile>,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct DomainFile {
+    /// Extent of the tank in metres, one entry per axis; the tank spans `[0, size]`.
+    pub size: Vec<f64>,
+    /// Cells along the longest axis; the others get the same cell size.
+    pub cells: usize,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SimulationFile {
+    pub method: String,
+    /// Simulated time in seconds.
+    pub duration: f64,
+    /// Particles per cell, `mu`; must be `k^dim` for a whole `k`.
+    pub ppc: usize,
+    /// Seeding jitter, a fraction of the sub-cell spacing in [0, 0.5).
+    pub jitter: f64,
+    /// m/s^2 per axis; defaults to 9.81 down axis 1 (y is up, as in the paper).
+    pub gravity: Option<Vec<f64>>,
+    /// FLIP share of the FLIP/PIC velocity blend, in [0, 1].
+    pub flip_ratio: f64,
+    /// Largest motion per step in cells, in (0, 1].
+    pub cfl: f64,
+    /// Largest time step in seconds.
+    pub max_dt: f64,
+    /// Bound on the fluid speed, m/s.
+    pub max_speed: f64,
+    /// Relative tolerance of the pressure solve.
+    pub pressure_tolerance: f64,
+    pub seed: u64,
+}
+
+impl Default for SimulationFile {
+    fn default() -> Self {
+        Self {
+            method: "flip".into(),
+            duration: 2.0,
+            ppc: 4,
+            jitter: 0.1,
+            gravity: None,
+            flip_ratio: 0.9,
+            cfl: 1.0,
+            max_dt: 0.01,
+            max_speed: 10.0,
+            pressure_tolerance: 1e-9,
+            seed: 1,
+        }
+    }
+}
+
+/// A box (`min`, `max`) or a ball (`center`, `radius`), in metres.
+#[derive(Clone, Debug, Default, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct RegionFile {
+    /// "box" or "ball".
+    pub shape: String,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub min: Option<Vec<f64>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max: Option<Vec<f64>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub center: Option<Vec<f64>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub radius: Option<f64>,
+}
+
+/// A box that injects particles at `velocity` from `start` to `stop` seconds.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct EmitterFile {
+    pub min: Vec<f64>,
+    pub max: Vec<f64>,
+    /// m/s.
+    pub velocity: Vec<f64>,
+    #[serde(default)]
+    pub start: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub stop: Option<f64>,
+    /// Stop when the scene holds `until_fill * mu * cells` particles (0.5: half the tank).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub until_fill: Option<f64>,
+}
+
+/// Command-line overrides of scene values.
+#[derive(Clone, Debug, Default)]
+pub struct Overrides {
+    pub method: Option<String>,
+    pub duration: Option<f64>,
+    pub cells: Option<usize>,
+    pub ppc: Option<usize>,
+    pub seed: Option<u64>,
+}
+
+/// A scene ready to run: its source, the file with overrides applied, and its checked values.
+#[derive(Clone, Debug)]
+pub struct Scene {
+    /// Where it came from: `built-in:NAME` or the file path.
+    pub source: String,
+    pub file: SceneFile,
+    pub dims: Vec<usize>,
+    pub cell_size_m: f64,
+    pub method: Method,
+}
+
+impl Scene {
+    pub fn name(&self) -> &str {
+        &self.file.name
+    }
+
+    pub fn dim(&self) -> usize {
+        self.file.dim
+    }
+
+    pub fn duration_secs(&self) -> f64 {
+        self.file.simulation.duration
+    }
+
+    /// The scene as run, as TOML (defaults and overrides filled in).
+    pub fn resolved_toml(&self) -> String {
+        toml::to_string_pretty(&self.file).expect("a scene file always serialises")
+    }
+
+    /// Loads a built-in scene by name, or a scene file by path.
+    pub fn load(name_or_path: &str, overrides: &Overrides) -> Result<Scene> {
+        let (source, text) =
+            if let Some((_, text)) = BUILT_IN.iter().find(|(n, _)| *n == name_or_path) {
+                (format!("built-in scene '{name_or_path}'"), text.to_string())
+            } else if name_or_path.ends_with(".toml") || Path::new(name_or_path).exists() {
+                let text = std::fs::read_to_string(name_or_path)
+                    .with_context(|| format!("cannot read scene file '{name_or_path}'"))?;
+                (format!("scene file '{name_or_path}'"), text)
+            } else {
+                let names: Vec<&str> = BUILT_IN.iter().map(|(n, _)| *n).collect();
+                bail!(
+                "unknown scene '{name_or_path}': not a built-in scene ({}) and not a .toml file",
+                names.join(", ")
+            );
+            };
+        Self::parse(&source, &text, overrides)
+    }
+
+    /// Parses and checks scene text; `source` names it in errors.
+    pub fn parse(source: &str, text: &str, overrides: &Overrides) -> Result<Scene> {
+        let mut file: SceneFile = toml::from_str(text).map_err(|e| anyhow!("{source}: {e}"))?;
+        let o = overrides;
+        let sim = &mut file.simulation;
+        if let Some(m) = &o.method {
+            sim.method = m.clone();
+        }
+        if let Some(d) = o.duration {
+            sim.duration = d;
+        }
+        if let Some(p) = o.ppc {
+            sim.ppc = p;
+        }
+        if let Some(s) = o.seed {
+            sim.seed = s;
+        }
+        if let Some(c) = o.cells {
+            file.domain.cells = c;
+        }
+        if sim.gravity.is_none() {
+            let mut g = vec![0.0; file.dim];
+            if file.dim > 1 {
+                g[1] = -9.81;
+            }
+            sim.gravity = Some(g);
+        }
+        check(source, file)
+    }
+
+    /// The configuration in grid units.
+    pub fn config<const D: usize>(&self) -> SimConfig<D> {
+        assert_eq!(D, self.dim(), "scene dimension");
+        let h = self.cell_size_m;
+        let s = &self.file.simulation;
+        let vec = |v: &[f64]| Vector::<D>::from_fn(|k, _| v[k] / h);
+        let region = |r: &RegionFile| match r.shape.as_str() {
+            "box" => Region::Box {
+                min: vec(r.min.as_deref().unwrap()),
+                max: vec(r.max.as_deref().unwrap()),
+            },
+            _ => Region::Ball {
+                center: vec(r.center.as_deref().unwrap()),
+                radius: r.radius.unwrap() / h,
+            },
+        };
+        let dims: [usize; D] = std::array::from_fn(|k| self.dims[k]);
+        let per_axis = ppc_per_axis(s.ppc, D).unwrap();
+        let cells: usize = dims.iter().product();
+        SimConfig {
+            dims,
+            cell_size_m: h,
+            method: self.method,
+            per_axis,
+            jitter: s.jitter,
+            gravity: vec(s.gravity.as_deref().unwrap()),
+            flip_ratio: s.flip_ratio,
+            cfl: s.cfl,
+            max_dt_secs: s.max_dt,
+            max_speed: s.max_speed / h,
+            pressure_tolerance: s.pressure_tolerance,
+            seed: s.seed,
+            fluid: self.file.fluid.iter().map(region).collect(),
+            solids: self.file.solid.iter().map(region).collect(),
+            emitters: self
+                .file
+                .emitter
+                .iter()
+                .map(|e| Emitter {
+                    region: Region::Box {
+                        min: vec(&e.min),
+                        max: vec(&e.max),
+                    },
+                    velocity: vec(&e.velocity),
+                    start_secs: e.start,
+                    stop_secs: e.stop.unwrap_or(f64::INFINITY),
+                    until_particles: e
+                        .until_fill
+                        .map(|f| (f * (s.ppc * cells) as f64).round() as usize),
+                })
+                .collect(),
+        }
+    }
+}
+
+/// `k` with `k^dim = ppc`, if there is one.
+fn ppc_per_axis(ppc: usize, dim: usize) -> Option<usize> {
+    (1..=ppc).find(|k| k.pow(dim as u32) == ppc)
+}
+
+fn check(source: &str, file: SceneFile) -> Result<Scene> {
+    let err = |key: &str, why: String| anyhow!("{source}: key '{key}': {why}");
+    let dim = file.dim;
+    if dim != 2 && dim != 3 {
+        return Err(err("dim", format!("must be 2 or 3, got {dim}")));
+    }
+    let len = |key: &str, v: &[f64]| -> Result<()> {
+        if v.len() != dim {
+            return Err(err(
+                key,
+                format!("needs {dim} numbers (dim = {dim}), got {}", v.len()),
+            ));
+        }
+        if let Some(x) = v.iter().find(|x| !x.is_finite()) {
+            return Err(err(key, format!("must be finite, got {x}")));
+        }
+        Ok(())
+    };
+    let d = &file.domain;
+    len("domain.size", &d.size)?;
+    if let Some(x) = d.size.iter().find(|x| **x <= 0.0) {
+        return Err(err(
+            "domain.size",
+            format!("every extent must be positive, got {x}"),
+        ));
+    }
+    if d.cells < 4 {
+        return Err(err(
+            "domain.cells",
+            format!("needs at least 4 cells per axis, got {}", d.cells),
+        ));
+    }
+    let longest = d.size.iter().cloned().fold(0.0, f64::max);
+    let h = longest / d.cells as f64;
+    let mut dims = vec![];
+    for (k, &s) in d.size.iter().enumerate() {
+        let n = s / h;
+        let rounded = n.round();
+        if (n - rounded).abs() > 1e-6 * n.max(1.0) {
+            return Err(err(
+                "domain.size",
+                format!(
+                    "axis {k}: extent {s} m is not a whole number of cells of {h} m ({n:.4} cells)"
+                ),
+            ));
+        }
+        if rounded < 4.0 {
+            return Err(err(
+                "domain.cells",
+                format!("axis {k} gets {rounded} cells; at least 4 per axis are needed"),
+            ));
+        }
+        dims.push(rounded as usize);
+    }
+    let total: usize = dims.iter().product();
+    if total > 200_000_000 {
+        return Err(err(
+            "domain.cells",
+            format!("{total} cells is more than this program can hold"),
+        ));
+    }
+    let s = &file.simulation;
+    let method = Method::from_name(&s.method).ok_or_else(|| {
+        let names: Vec<&str> = Method::ALL.iter().map(|m| m.name()).collect();
+        err(
+            "simulation.method",
+            format!(
+                "unknown method '{}' (known: {})",
+                s.method,
+                names.join(", ")
+            ),
+        )
+    })?;
+    if !(s.duration.is_finite() && s.duration > 0.0) {
+        return Err(err(
+            "simulation.duration",
+            format!("must be a positive number of seconds, got {}", s.duration),
+        ));
+    }
+    if s.ppc == 0 {
+        return Err(err(
+            "simulation.ppc",
+            "must be at least 1 particle per cell, got 0".into(),
+        ));
+    }
+    if ppc_per_axis(s.ppc, dim).is_none() {
+        return Err(err(
+            "simulation.ppc",
+            format!(
+                "must be k^{dim} for a whole k (e.g. 1, {}, {}), got {}",
+                2usize.pow(dim as u32),
+                3usize.pow(dim as u32),
+                s.ppc
+            ),
+        ));
+    }
+    if !(0.0..0.5).contains(&s.jitter) {
+        return Err(err(
+            "simulation.jitter",
+            format!("must be in [0, 0.5), got {}", s.jitter),
+        ));
+    }
+    len("simulation.gravity", s.gravity.as_deref().unwrap())?;
+    if !(0.0..=1.0).contains(&s.flip_ratio) {
+        return Err(err(
+            "simulation.flip_ratio",
+            format!("must be in [0, 1], got {}", s.flip_ratio),
+        ));
+    }
+    if !(s.cfl > 0.0 && s.cfl <= 1.0) {
+        return Err(err(
+            "simulation.cfl",
+            format!("must be in (0, 1] cells per step, got {}", s.cfl),
+        ));
+    }
+    if !(s.max_dt.is_finite() && s.max_dt > 0.0) {
+        return Err(err(
+            "simulation.max_dt",
+            format!("must be a positive number of seconds, got {}", s.max_dt),
+        ));
+    }
+    if !(s.max_speed.is_finite() && s.max_speed > 0.0) {
+        return Err(err(
+            "simulation.max_speed",
+            format!("must be a positive speed in m/s, got {}", s.max_speed),
+        ));
+    }
+    if !(s.pressure_tolerance > 0.0 && s.pressure_tolerance < 1.0) {
+        return Err(err(
+            "simulation.pressure_tolerance",
+            format!("must be in (0, 1), got {}", s.pressure_tolerance),
+        ));
+    }
+    let inside = |key: &str, p: &[f64]| -> Result<()> {
+        len(key, p)?;
+        for k in 0..dim {
+            if p[k] < 0.0 || p[k] > d.size[k] {
+                return Err(err(
+                    key,
+                    format!(
+                        "axis {k}: {} lies outside the domain [0, {}]",
+                        p[k], d.size[k]
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    };
+    let region = |key: String, r: &RegionFile| -> Result<()> {
+        match r.shape.as_str() {
+            "box" => {
+                let (Some(min), Some(max)) = (&r.min, &r.max) else {
+                    return Err(err(&key, "a box needs 'min' and 'max'".into()));
+                };
+                if r.center.is_some() || r.radius.is_some() {
+                    return Err(err(
+                        &key,
+                        "a box takes 'min' and 'max', not 'center' or 'radius'".into(),
+                    ));
+                }
+                inside(&format!("{key}.min"), min)?;
+                inside(&format!("{key}.max"), max)?;
+                if (0..dim).any(|k| min[k] >= max[k]) {
+                    return Err(err(
+                        &key,
+                        format!("'min' {min:?} must be below 'max' {max:?} on every axis"),
+                    ));
+                }
+            }
+            "ball" => {
+                let (Some(c), Some(rad)) = (&r.center, r.radius) else {
+                    return Err(err(&key, "a ball needs 'center' and 'radius'".into()));
+                };
+                if r.min.is_some() || r.max.is_some() {
+                    return Err(err(
+                        &key,
+                        "a ball takes 'center' and 'radius', not 'min' or 'max'".into(),
+                    ));
+                }
+                len(&format!("{key}.center"), c)?;
+                if !(rad.is_finite() && rad > 0.0) {
+                    return Err(err(
+                        &format!("{key}.radius"),
+                        format!("must be positive, got {rad}"),
+                    ));
+                }
+                for k in 0..dim {
+                    if c[k] - rad < 0.0 || c[k] + rad > d.size[k] {
+                        return Err(err(&key, format!("the ball leaves the domain on axis {k}")));
+                    }
+                }
+            }
+            other => {
+                return Err(err(
+                    &format!("{key}.shape"),
+                    format!("must be \"box\" or \"ball\", got \"{other}\""),
+                ))
+            }
+        }
+        Ok(())
+    };
+    if file.fluid.is_empty() && file.emitter.is_empty() {
+        return Err(err("fluid", "the scene has no fluid and no emitter".into()));
+    }
+    for (i, r) in file.fluid.iter().enumerate() {
+        region(format!("fluid[{i}]"), r)?;
+    }
+    for (i, r) in file.solid.iter().enumerate() {
+        region(format!("solid[{i}]"), r)?;
+    }
+    for (i, e) in file.emitter.iter().enumerate() {
+        let key = format!("emitter[{i}]");
+        inside(&format!("{key}.min"), &e.min)?;
+        inside(&format!("{key}.max"), &e.max)?;
+        len(&format!("{key}.velocity"), &e.velocity)?;
+        if !(e.start.is_finite() && e.start >= 0.0) {
+            return Err(err(
+                &format!("{key}.start"),
+                format!("must be a time >= 0 s, got {}", e.start),
+            ));
+        }
+        if let Some(stop) = e.stop {
+            if !(stop > e.start) {
+                return Err(err(
+                    &format!("{key}.stop"),
+                    format!("must be after start ({} s), got {stop}", e.start),
+                ));
+            }
+        }
+        if let Some(f) = e.until_fill {
+            if !(f > 0.0 && f <= 1.0) {
+                return Err(err(
+                    &format!("{key}.until_fill"),
+                    format!("must be in (0, 1], got {f}"),
+                ));
+            }
+        }
+    }
+    Ok(Scene {
+        source: source.to_string(),
+        cell_size_m: h,
+        dims,
+        method,
+        file,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_built_in_scene_parses_and_converts() {
+        for (name, _) in BUILT_IN {
+            let s = Scene::load(name, &Overrides::default()).unwrap();
+            assert_eq!(s.name(), *name);
+            match s.dim() {
+                2 => assert_eq!(s.config::<2>().dims.len(), 2),
+                _ => assert_eq!(s.config::<3>().dims.len(), 3),
+            }
+            // The resolved TOML parses back to the same scene.
+            let again =
+                Scene::parse("resolved", &s.resolved_toml(), &Overrides::default()).unwrap();
+            assert_eq!(again.dims, s.dims);
+        }
+    }
+}

@@ -1,0 +1,205 @@
+//! Cell markings (paper sec. 4 and 6): empty / fluid / solid, the surface and inner cells of
+//! def. surface, bubbles (def. bubble) and the depth of def. depth.
+
+use crate::grid::{Cell, Grid, Vector};
+use std::collections::VecDeque;
+
+/// What occupies a cell.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CellKind {
+    Empty,
+    Fluid,
+    Solid,
+}
+
+/// Class ids used in recordings (one byte per cell).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
+pub enum MarkingClass {
+    Empty = 0,
+    Surface = 1,
+    Inner = 2,
+    /// An inner cell holding fewer than `mu` particles (def. bubble).
+    Bubble = 3,
+    Solid = 4,
+}
+
+impl MarkingClass {
+    pub const ALL: [MarkingClass; 5] = [
+        MarkingClass::Empty,
+        MarkingClass::Surface,
+        MarkingClass::Inner,
+        MarkingClass::Bubble,
+        MarkingClass::Solid,
+    ];
+
+    pub fn label(self) -> &'static str {
+        match self {
+            MarkingClass::Empty => "empty",
+            MarkingClass::Surface => "surface",
+            MarkingClass::Inner => "inner",
+            MarkingClass::Bubble => "bubble",
+            MarkingClass::Solid => "solid",
+        }
+    }
+}
+
+/// Depth assigned to non-fluid cells (def. depth: "an arbitrary positive number").
+pub const DEPTH_NOT_FLUID: i32 = 1;
+
+/// The markings of every cell, derived from particle positions and solids.
+#[derive(Clone, Debug, Default)]
+pub struct Markings {
+    pub kind: Vec<CellKind>,
+    /// Particles per cell, `|gamma_c|`.
+    pub count: Vec<u32>,
+    /// Fluid cells with a non-fluid Moore neighbour inside the domain (def. surface).
+    pub surface: Vec<bool>,
+    /// Signed discrete distance from the surface (def. depth): 0 on the surface, -1, -2, ...
+    /// inwards, [`DEPTH_NOT_FLUID`] elsewhere.
+    pub depth: Vec<i32>,
+}
+
+impl Markings {
+    /// Marks cells from particle positions (`gamma_c` is the set of particles in `c`) and the
+    /// solid mask. A cell is fluid when it holds a particle and is not solid. Static solids,
+    /// like the domain walls, do not make their fluid neighbours surface (paper sec. 4.1).
+    pub fn compute<const D: usize>(
+        grid: &Grid<D>,
+        positions: &[Vector<D>],
+        solid: &[bool],
+    ) -> Self {
+        let n = grid.num_cells();
+        let mut count = vec![0u32; n];
+        for x in positions {
+            count[grid.cell_index_of(x)] += 1;
+        }
+        let kind: Vec<CellKind> = (0..n)
+            .map(|c| {
+                if solid[c] {
+                    CellKind::Solid
+                } else if count[c] > 0 {
+                    CellKind::Fluid
+                } else {
+                    CellKind::Empty
+                }
+            })
+            .collect();
+        let surface: Vec<bool> = (0..n)
+            .map(|c| {
+                kind[c] == CellKind::Fluid
+                    && grid
+                        .moore_neighbors(grid.cell_coords(c))
+                        .any(|m| kind[grid.cell_index(m)] == CellKind::Empty)
+            })
+            .collect();
+        let depth = depth(grid, &kind, &surface);
+        Self {
+            kind,
+            count,
+            surface,
+            depth,
+        }
+    }
+
+    pub fn is_fluid(&self, c: usize) -> bool {
+        self.kind[c] == CellKind::Fluid
+    }
+
+    pub fn class(&self, c: usize, mu: u32) -> MarkingClass {
+        match self.kind[c] {
+            CellKind::Empty => MarkingClass::Empty,
+            CellKind::Solid => MarkingClass::Solid,
+            CellKind::Fluid if self.surface[c] => MarkingClass::Surface,
+            CellKind::Fluid if self.count[c] < mu => MarkingClass::Bubble,
+            CellKind::Fluid => MarkingClass::Inner,
+        }
+    }
+
+    pub fn fluid_cells(&self) -> usize {
+        self.kind.iter().filter(|k| **k == CellKind::Fluid).count()
+    }
+}
+
+/// Breadth-first depth over the von Neumann neighbourhood from the surface cells (def. depth).
+/// Fluid cells that no surface reaches (a closed, completely full container) get `i32::MIN`.
+fn depth<const D: usize>(grid: &Grid<D>, kind: &[CellKind], surface: &[bool]) -> Vec<i32> {
+    let mut depth: Vec<i32> = kind
+        .iter()
+        .map(|k| {
+            if *k == CellKind::Fluid {
+                i32::MIN
+            } else {
+                DEPTH_NOT_FLUID
+            }
+        })
+        .collect();
+    let mut queue: VecDeque<usize> = VecDeque::new();
+    for c in 0..kind.len() {
+        if surface[c] {
+            depth[c] = 0;
+            queue.push_back(c);
+        }
+    }
+    while let Some(c) = queue.pop_front() {
+        let cc: Cell<D> = grid.cell_coords(c);
+        for a in 0..D {
+            for dir in [-1, 1] {
+                if let Some(nb) = grid.neighbor(cc, a, dir) {
+                    let n = grid.cell_index(nb);
+                    if kind[n] == CellKind::Fluid && depth[n] == i32::MIN {
+                        depth[n] = depth[c] - 1;
+                        queue.push_back(n);
+                    }
+                }
+            }
+        }
+    }
+    depth
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn block_of_fluid_has_surface_ring_and_depth_2d() {
+        // A 5x4 block of fluid in the corner of an 8x8 tank: the tank walls do not count as
+        // surface, so only the top and right sides of the block are surface.
+        let g = Grid::new([8, 8]);
+        let mut pos = vec![];
+        for i in 0..5 {
+            for j in 0..4 {
+                pos.push(Vector::<2>::new(i as f64 + 0.5, j as f64 + 0.5));
+            }
+        }
+        let m = Markings::compute(&g, &pos, &vec![false; 64]);
+        assert_eq!(m.fluid_cells(), 20);
+        assert!(m.surface[g.cell_index([4, 0])]);
+        assert!(m.surface[g.cell_index([0, 3])]);
+        assert!(!m.surface[g.cell_index([0, 0])]);
+        assert!(!m.surface[g.cell_index([3, 2])]);
+        assert_eq!(m.depth[g.cell_index([3, 2])], -1);
+        assert_eq!(m.depth[g.cell_index([2, 1])], -2);
+        assert_eq!(m.depth[g.cell_index([0, 0])], -3);
+        assert_eq!(m.depth[g.cell_index([6, 6])], DEPTH_NOT_FLUID);
+    }
+
+    #[test]
+    fn diagonal_empty_neighbour_makes_surface_3d() {
+        // Moore neighbourhood: a fluid cell whose only empty neighbour is diagonal is surface.
+        let g = Grid::new([3, 3, 3]);
+        let mut pos = vec![];
+        for c in 0..27 {
+            if c != g.cell_index([2, 2, 2]) {
+                pos.push(g.center(g.cell_coords(c)));
+            }
+        }
+        let m = Markings::compute(&g, &pos, &vec![false; 27]);
+        assert!(m.surface[g.cell_index([1, 1, 1])]);
+        assert!(!m.surface[g.cell_index([0, 0, 0])]);
+        assert_eq!(m.depth[g.cell_index([0, 0, 0])], -3);
+        assert_eq!(m.class(g.cell_index([0, 0, 0]), 2), MarkingClass::Bubble);
+        assert_eq!(m.class(g.cell_index([0, 0, 0]), 1), MarkingClass::Inner);
+    }
+}

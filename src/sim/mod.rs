@@ -1,0 +1,297 @@
+//! One time step of the fluid methods, generic over the dimension (paper alg. flip).
+//!
+//! Step order: emit -> particles to grid (+ extrapolation) -> gravity and solid boundary ->
+//! pressure projection -> extrapolation and speed limit -> time step check -> grid to particles
+//! (FLIP/PIC blend) -> advection -> correction (method-specific) -> markings and volume.
+
+pub mod advect;
+pub mod emit;
+pub mod markings;
+pub mod pressure;
+pub mod transfer;
+
+use crate::grid::{Grid, MacField, Vector};
+use crate::metrics::{self, InvariantViolation, Stage, StageTimes};
+use crate::particles::{self, Particles, Region};
+use crate::solvers::pcg::{PcgSettings, PcgStats};
+use emit::Emitter;
+use markings::Markings;
+use rand::rngs::StdRng;
+use rand::SeedableRng;
+
+/// The fluid methods a scene can run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Method {
+    /// PIC/FLIP with no position correction (Zhu and Bridson 2005).
+    Flip,
+}
+
+impl Method {
+    pub const ALL: [Method; 1] = [Method::Flip];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Flip => "flip",
+        }
+    }
+
+    pub fn from_name(s: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|m| m.name() == s)
+    }
+}
+
+/// Everything a simulation needs, in grid units (cells, seconds, cells per second).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SimConfig<const D: usize> {
+    pub dims: [usize; D],
+    /// Cell size in metres (only to report results in SI).
+    pub cell_size_m: f64,
+    pub method: Method,
+    /// Particles per cell along each axis, `k`; `mu = k^D`.
+    pub per_axis: usize,
+    /// Seeding jitter as a fraction of the sub-cell spacing, in [0, 0.5).
+    pub jitter: f64,
+    /// Gravity, cells per second squared.
+    pub gravity: Vector<D>,
+    /// Weight of the FLIP update in the FLIP/PIC blend (1 = pure FLIP, 0 = PIC).
+    pub flip_ratio: f64,
+    /// Largest motion per step, in cells (at most 1, sec. grid_move).
+    pub cfl: f64,
+    pub max_dt_secs: f64,
+    /// Bound on each face velocity component, cells per second.
+    pub max_speed: f64,
+    /// Relative max-norm tolerance of the pressure solve.
+    pub pressure_tolerance: f64,
+    pub seed: u64,
+    pub fluid: Vec<Region<D>>,
+    pub solids: Vec<Region<D>>,
+    pub emitters: Vec<Emitter<D>>,
+}
+
+impl<const D: usize> SimConfig<D> {
+    pub fn mu(&self) -> u32 {
+        self.per_axis.pow(D as u32) as u32
+    }
+}
+
+/// What one step did.
+#[derive(Clone, Debug, Default)]
+pub struct StepReport {
+    pub dt_secs: f64,
+    /// The step had to be shortened after the projection to keep motion within `cfl` cells.
+    pub dt_shortened: bool,
+    pub times: StageTimes,
+    pub pcg: PcgStats,
+    /// Largest face velocity component after the projection, cells per second.
+    pub max_speed: f64,
+    pub emitted: usize,
+    pub volume_percent: f64,
+}
+
+/// The state of a running simulation.
+pub struct Simulation<const D: usize> {
+    pub config: SimConfig<D>,
+    pub grid: Grid<D>,
+    pub particles: Particles<D>,
+    /// Grid velocity after the last projection, cells per second.
+    pub velocity: MacField<D>,
+    pub solid: Vec<bool>,
+    /// Velocity of each solid cell (zero for walls and static solids).
+    pub solid_vel: Vec<Vector<D>>,
+    pub markings: Markings,
+    pub time_secs: f64,
+    pub steps: u64,
+    /// Particles seeded at the start plus all emitted since.
+    pub total_particles: usize,
+    /// `V*`: initial volume plus emitted volume, in cells.
+    pub target_volume: f64,
+    rng: StdRng,
+}
+
+impl<const D: usize> Simulation<D> {
+    pub fn new(config: SimConfig<D>) -> Self {
+        let grid = Grid::new(config.dims);
+        let n = grid.num_cells();
+        let mut solid = vec![false; n];
+        for r in &config.solids {
+            r.cells(&grid).for_each(|c| solid[c] = true);
+        }
+        let mut rng = StdRng::seed_from_u64(config.seed);
+        let particles = particles::seed(
+            &grid,
+            &config.fluid,
+            &solid,
+            config.per_axis,
+            config.jitter,
+            &mut rng,
+        );
+        let markings = Markings::compute(&grid, &particles.pos, &solid);
+        let total = particles.len();
+        Self {
+            target_volume: total as f64 / config.mu() as f64,
+            velocity: MacField::zeros(&grid),
+            solid_vel: vec![Vector::zeros(); n],
+            markings,
+            time_secs: 0.0,
+            steps: 0,
+            total_particles: total,
+            grid,
+            particles,
+            solid,
+            config,
+            rng,
+        }
+    }
+
+    /// The volume measure of eq. volume as a percentage of `V*`.
+    pub fn volume_percent(&self) -> f64 {
+        if self.target_volume == 0.0 {
+            return 100.0;
+        }
+        100.0 * metrics::volume_cells(&self.markings, self.config.mu()) / self.target_volume
+    }
+
+    /// The time step for the coming step: at most `max_dt`, and small enough that the current
+    /// particle speed plus one step of gravity moves nothing more than `cfl` cells:
+    /// `(v + g dt) dt <= cfl`. The projection can still raise the speed; [`Self::step`] then
+    /// shortens the step.
+    fn planned_dt(&self) -> f64 {
+        let c = &self.config;
+        let v = self
+            .particles
+            .vel
+            .iter()
+            .map(|v| v.amax())
+            .fold(0.0f64, f64::max)
+            .min(c.max_speed);
+        let g = c.gravity.amax();
+        let dt = if g > 0.0 {
+            (-v + (v * v + 4.0 * g * c.cfl).sqrt()) / (2.0 * g)
+        } else if v > 0.0 {
+            c.cfl / v
+        } else {
+            f64::INFINITY
+        };
+        dt.min(c.max_dt_secs)
+    }
+
+    /// Advances the simulation by one step.
+    pub fn step(&mut self) -> Result<StepReport, InvariantViolation> {
+        let mut rep = StepReport::default();
+        let mut dt = self.planned_dt();
+        let grid = &self.grid;
+        let c = &self.config;
+
+        let emitted = rep.times.time(Stage::Emit, || {
+            let mut added = 0;
+            for e in &c.emitters {
+                added += e.emit(
+                    grid,
+                    self.time_secs,
+                    &self.markings.count,
+                    &self.solid,
+                    c.per_axis,
+                    c.jitter,
+                    &mut self.particles,
+                    &mut self.rng,
+                );
+            }
+            added
+        });
+        if emitted > 0 {
+            self.markings = Markings::compute(grid, &self.particles.pos, &self.solid);
+            self.total_particles += emitted;
+            self.target_volume += emitted as f64 / c.mu() as f64;
+        }
+        rep.emitted = emitted;
+
+        let (mut u, mut known) = rep.times.time(Stage::ParticlesToGrid, || {
+            let (mut u, mut known) =
+                transfer::particles_to_grid(grid, &self.particles.pos, &self.particles.vel);
+            transfer::extrapolate(grid, &mut u, &mut known, 2);
+            (u, known)
+        });
+        let u_old = u.clone();
+
+        rep.times.time(Stage::Forces, || {
+            for a in 0..D {
+                let g = c.gravity[a] * dt;
+                if g != 0.0 {
+                    u.comp[a].iter_mut().for_each(|v| *v += g);
+                }
+            }
+            pressure::apply_solid_boundary(grid, &self.solid, &self.solid_vel, &mut u);
+        });
+
+        rep.pcg = rep.times.time(Stage::Pressure, || {
+            let settings = PcgSettings {
+                tolerance: c.pressure_tolerance,
+                ..Default::default()
+            };
+            let stats = pressure::project(
+                grid,
+                &self.markings.kind,
+                &self.solid,
+                &self.solid_vel,
+                &mut u,
+                &settings,
+            );
+            known = pressure::known_after_projection(grid, &self.markings.kind, &self.solid);
+            transfer::extrapolate(grid, &mut u, &mut known, 2);
+            for comp in u.comp.iter_mut() {
+                comp.iter_mut()
+                    .for_each(|v| *v = v.clamp(-c.max_speed, c.max_speed));
+            }
+            stats
+        });
+        rep.max_speed = u.max_abs();
+        if rep.max_speed * dt > c.cfl {
+            dt = c.cfl / rep.max_speed;
+            rep.dt_shortened = true;
+        }
+
+        rep.times.time(Stage::GridToParticles, || {
+            transfer::grid_to_particles(
+                grid,
+                &u,
+                &u_old,
+                c.flip_ratio,
+                &self.particles.pos,
+                &mut self.particles.vel,
+            );
+            for v in self.particles.vel.iter_mut() {
+                let s = v.norm();
+                if s > c.max_speed {
+                    *v *= c.max_speed / s;
+                }
+            }
+        });
+        rep.times.time(Stage::Advect, || {
+            advect::advect_particles(grid, &u, &self.solid, dt, &mut self.particles.pos);
+        });
+        rep.times.time(Stage::Correct, || match c.method {
+            Method::Flip => {}
+        });
+        rep.times.time(Stage::Markings, || {
+            self.markings = Markings::compute(grid, &self.particles.pos, &self.solid);
+        });
+        self.velocity = u;
+        self.time_secs += dt;
+        self.steps += 1;
+        rep.dt_secs = dt;
+        rep.volume_percent = self.volume_percent();
+        self.check_invariants()?;
+        Ok(rep)
+    }
+
+    /// The invariants every method keeps, checked after every step (O(particles)).
+    pub fn check_invariants(&self) -> Result<(), InvariantViolation> {
+        metrics::check_particles(
+            &self.grid,
+            &self.particles.pos,
+            &self.particles.vel,
+            &self.solid,
+            self.total_particles,
+        )
+    }
+}

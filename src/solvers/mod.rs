@@ -1,0 +1,3 @@
+//! General numerics with no fluid knowledge.
+
+pub mod pcg;

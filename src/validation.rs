@@ -1,0 +1,189 @@
+//! Validation against measurements nobody here wrote: the Martin & Moyce (1952) dam break
+//! (surge front and residual column height) and water at rest. Used by the tests and by
+//! `cellflip validate`, so the README's figures and the tests come from the same code.
+
+use crate::scene::{Overrides, Scene};
+use crate::sim::Simulation;
+use anyhow::{anyhow, Context, Result};
+
+/// Surge front, `T = t sqrt(2 g / a)`, `Z = x / a` (Martin & Moyce 1952, table 2).
+pub const SURGE_FRONT_CSV: &str = include_str!("../validation/martin_moyce_1952.csv");
+/// Residual column height, `tau = t sqrt(g / a)`, `H = y / (2 a)`.
+pub const COLUMN_HEIGHT_CSV: &str = include_str!("../validation/martin_moyce_1952_height.csv");
+
+/// Column width of the experiment and of scene `martin-moyce-2d`, metres.
+pub const COLUMN_WIDTH_M: f64 = 0.05715;
+const G: f64 = 9.81;
+
+/// Parses a two-column CSV with `#` comments and a header line.
+pub fn parse_csv(text: &str) -> Result<Vec<(f64, f64)>> {
+    text.lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty() && !l.starts_with('#'))
+        .skip(1)
+        .map(|l| {
+            let mut it = l.split(',').map(|v| v.trim().parse::<f64>());
+            match (it.next(), it.next()) {
+                (Some(Ok(a)), Some(Ok(b))) => Ok((a, b)),
+                _ => Err(anyhow!("bad CSV line '{l}'")),
+            }
+        })
+        .collect()
+}
+
+/// Linear interpolation in a time series sorted by time.
+fn interpolate(series: &[(f64, f64)], t: f64) -> f64 {
+    let i = series.partition_point(|(ti, _)| *ti < t);
+    if i == 0 {
+        return series[0].1;
+    }
+    if i == series.len() {
+        return series[i - 1].1;
+    }
+    let (t0, v0) = series[i - 1];
+    let (t1, v1) = series[i];
+    v0 + (v1 - v0) * (t - t0) / (t1 - t0)
+}
+
+/// One row of a comparison with experiment.
+#[derive(Clone, Debug)]
+pub struct Row {
+    pub time: f64,
+    pub measured: f64,
+    pub simulated: f64,
+}
+
+/// The result of simulating Martin & Moyce's experiment.
+#[derive(Clone, Debug)]
+pub struct MartinMoyce {
+    pub front: Vec<Row>,
+    pub height: Vec<Row>,
+    /// Shift added to the simulated T before comparing (the experiment's start is uncertain).
+    pub shift_t: f64,
+    pub steps: u64,
+    pub cells_per_a: f64,
+}
+
+impl MartinMoyce {
+    /// Mean of `|Z_sim - Z| / Z` over the table's points.
+    pub fn front_mean_relative_error(&self) -> f64 {
+        mean_rel(&self.front)
+    }
+
+    pub fn height_mean_relative_error(&self) -> f64 {
+        mean_rel(&self.height)
+    }
+}
+
+fn mean_rel(rows: &[Row]) -> f64 {
+    rows.iter()
+        .map(|r| (r.simulated - r.measured).abs() / r.measured)
+        .sum::<f64>()
+        / rows.len() as f64
+}
+
+/// Runs scene `martin-moyce-2d` (with `overrides`) until the last tabulated time and compares
+/// the surge front (furthest particle within a quarter column width of the floor) and the
+/// column height at the back wall (highest particle in the first cell column) with experiment.
+pub fn martin_moyce(overrides: &Overrides, shift_t: f64) -> Result<MartinMoyce> {
+    let scene = Scene::load("martin-moyce-2d", overrides)?;
+    let front_data = parse_csv(SURGE_FRONT_CSV).context("martin_moyce_1952.csv")?;
+    let height_data = parse_csv(COLUMN_HEIGHT_CSV).context("martin_moyce_1952_height.csv")?;
+    let mut sim = Simulation::<2>::new(scene.config::<2>());
+    let h = sim.config.cell_size_m;
+    let a = COLUMN_WIDTH_M;
+    let t_front = (2.0 * G / a).sqrt();
+    let t_height = (G / a).sqrt();
+    let t_end =
+        (front_data.last().unwrap().0 / t_front).max(height_data.last().unwrap().0 / t_height);
+    let observe = |sim: &Simulation<2>| {
+        let floor = 0.25 * a / h;
+        let front = sim
+            .particles
+            .pos
+            .iter()
+            .filter(|x| x[1] < floor)
+            .map(|x| x[0])
+            .fold(0.0, f64::max);
+        let column = sim
+            .particles
+            .pos
+            .iter()
+            .filter(|x| x[0] < 1.0)
+            .map(|x| x[1])
+            .fold(0.0, f64::max);
+        (sim.time_secs, front * h, column * h)
+    };
+    let mut series = vec![observe(&sim)];
+    while sim.time_secs < t_end {
+        sim.step()
+            .map_err(|e| anyhow!("martin-moyce-2d step {}: {e}", sim.steps + 1))?;
+        series.push(observe(&sim));
+    }
+    let fronts: Vec<(f64, f64)> = series
+        .iter()
+        .map(|(t, f, _)| (t * t_front + shift_t, f / a))
+        .collect();
+    let heights: Vec<(f64, f64)> = series
+        .iter()
+        .map(|(t, _, c)| (t * t_height + shift_t / 2f64.sqrt(), c / (2.0 * a)))
+        .collect();
+    let rows = |data: &[(f64, f64)], sim_series: &[(f64, f64)]| -> Vec<Row> {
+        data.iter()
+            .map(|&(t, m)| Row {
+                time: t,
+                measured: m,
+                simulated: interpolate(sim_series, t),
+            })
+            .collect()
+    };
+    Ok(MartinMoyce {
+        front: rows(&front_data, &fronts),
+        height: rows(&height_data, &heights),
+        shift_t,
+        steps: sim.steps,
+        cells_per_a: a / h,
+    })
+}
+
+/// Water at rest after `steps` steps: the largest particle speed as a fraction of
+/// `sqrt(g H)` and the volume range in percent.
+#[derive(Clone, Debug)]
+pub struct Hydrostatic {
+    pub speed_fraction: f64,
+    pub volume_min: f64,
+    pub volume_max: f64,
+}
+
+pub fn hydrostatic(steps: u64) -> Result<Hydrostatic> {
+    let scene = Scene::load("hydrostatic-2d", &Overrides::default())?;
+    let mut sim = Simulation::<2>::new(scene.config::<2>());
+    let depth_m = sim
+        .particles
+        .pos
+        .iter()
+        .map(|x| x[1])
+        .fold(0.0, f64::max)
+        .ceil()
+        * sim.config.cell_size_m;
+    let (mut vmin, mut vmax) = (sim.volume_percent(), sim.volume_percent());
+    for _ in 0..steps {
+        let rep = sim
+            .step()
+            .map_err(|e| anyhow!("hydrostatic-2d step {}: {e}", sim.steps + 1))?;
+        vmin = vmin.min(rep.volume_percent);
+        vmax = vmax.max(rep.volume_percent);
+    }
+    let vmax_speed = sim
+        .particles
+        .vel
+        .iter()
+        .map(|v| v.norm())
+        .fold(0.0, f64::max)
+        * sim.config.cell_size_m;
+    Ok(Hydrostatic {
+        speed_fraction: vmax_speed / (G * depth_m).sqrt(),
+        volume_min: vmin,
+        volume_max: vmax,
+    })
+}

@@ -1,0 +1,248 @@
+//! The command line as a user meets it: listing, bad input (a clear error naming the file,
+//! the key and the reason; non-zero exit; no panic; no output file) and a recording that reads
+//! back with the documented entities.
+
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn cellflip(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_cellflip"))
+        .args(args)
+        .env_remove("RERUN")
+        .output()
+        .expect("the binary runs")
+}
+
+fn scratch_dir(test: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("cellflip-test-{}-{test}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+const GOOD: &str = r#"
+name = "tiny"
+dim = 2
+[domain]
+size = [1.0, 1.0]
+cells = 8
+[simulation]
+duration = 0.05
+[[fluid]]
+shape = "box"
+min = [0.0, 0.0]
+max = [0.5, 0.5]
+"#;
+
+/// Runs `cellflip run` on `text` and checks it fails cleanly, mentioning every `needle`.
+fn rejects(test: &str, text: &str, needles: &[&str]) {
+    let dir = scratch_dir(test);
+    let file = dir.join("scene.toml");
+    std::fs::write(&file, text).unwrap();
+    let out = dir.join("out.rrd");
+    let o = cellflip(&[
+        "run",
+        file.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "-q",
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "{test}: accepted");
+    assert!(!err.contains("panicked"), "{test}: panic: {err}");
+    assert!(
+        err.contains("scene.toml"),
+        "{test}: the file is not named: {err}"
+    );
+    for n in needles {
+        assert!(err.contains(n), "{test}: '{n}' missing from: {err}");
+    }
+    assert!(!out.exists(), "{test}: wrote output on bad input");
+}
+
+#[test]
+fn good_scene_file_runs() {
+    let dir = scratch_dir("good");
+    let file = dir.join("scene.toml");
+    std::fs::write(&file, GOOD).unwrap();
+    let o = cellflip(&["run", file.to_str().unwrap(), "--no-record"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let summary = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        summary.contains("steps") && summary.contains("volume"),
+        "{summary}"
+    );
+}
+
+#[test]
+fn malformed_toml_is_rejected() {
+    rejects(
+        "malformed",
+        "name = \"x\"\ndim = 2\n[domain\n",
+        &["TOML", "line"],
+    );
+}
+
+#[test]
+fn unknown_key_is_rejected() {
+    let text = GOOD.replace("duration = 0.05", "duration = 0.05\nviscosity = 1.0");
+    rejects("unknown-key", &text, &["viscosity"]);
+}
+
+#[test]
+fn too_few_cells_are_rejected() {
+    rejects(
+        "cells",
+        &GOOD.replace("cells = 8", "cells = 3"),
+        &["domain.cells", "at least 4"],
+    );
+}
+
+#[test]
+fn zero_ppc_is_rejected() {
+    let text = GOOD.replace("duration = 0.05", "duration = 0.05\nppc = 0");
+    rejects("ppc", &text, &["simulation.ppc", "at least 1"]);
+}
+
+#[test]
+fn negative_duration_is_rejected() {
+    rejects(
+        "duration",
+        &GOOD.replace("duration = 0.05", "duration = -1.0"),
+        &["simulation.duration", "positive"],
+    );
+}
+
+#[test]
+fn fluid_outside_the_domain_is_rejected() {
+    rejects(
+        "outside",
+        &GOOD.replace("max = [0.5, 0.5]", "max = [0.5, 1.5]"),
+        &["fluid[0].max", "outside the domain"],
+    );
+}
+
+#[test]
+fn unknown_scene_name_is_rejected() {
+    let o = cellflip(&["run", "no-such-scene", "--no-record"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("unknown scene 'no-such-scene'") && err.contains("dam-2d"),
+        "{err}"
+    );
+}
+
+#[test]
+fn unwritable_out_is_rejected() {
+    let o = cellflip(&[
+        "run",
+        "hydrostatic-2d",
+        "--steps",
+        "2",
+        "--out",
+        "/nonexistent-dir/x.rrd",
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(err.contains("/nonexistent-dir/x.rrd"), "{err}");
+}
+
+#[test]
+fn list_names_every_built_in_scene() {
+    let o = cellflip(&["list"]);
+    assert!(o.status.success());
+    let text = String::from_utf8_lossy(&o.stdout);
+    for (name, _) in cellflip::scene::BUILT_IN {
+        assert!(
+            text.lines().any(|l| l.starts_with(name)),
+            "{name} missing from:\n{text}"
+        );
+    }
+}
+
+fn logged_entities(path: &Path) -> BTreeSet<String> {
+    use rerun::external::re_log_encoding::DecoderApp;
+    use rerun::log::{Chunk, LogMsg};
+    let reader = std::io::BufReader::new(std::fs::File::open(path).unwrap());
+    let mut out = BTreeSet::new();
+    for msg in DecoderApp::decode_lazy(reader) {
+        if let LogMsg::ArrowMsg(store, arrow) = msg.unwrap() {
+            if store.kind() == rerun::StoreKind::Recording {
+                out.insert(
+                    Chunk::from_arrow_msg(&arrow)
+                        .unwrap()
+                        .entity_path()
+                        .to_string(),
+                );
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn recordings_read_back_with_the_documented_entities_2d_and_3d() {
+    let dir = scratch_dir("record");
+    for (scene, extra) in [("hydrostatic-2d", vec![]), ("drop-3d", vec!["--res", "12"])] {
+        let out = dir.join(format!("{scene}.rrd"));
+        let mut args = vec![
+            "run",
+            scene,
+            "--steps",
+            "3",
+            "-q",
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        args.extend(extra);
+        let o = cellflip(&args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let got = logged_entities(&out);
+        for e in cellflip::record::ENTITY_PATHS {
+            let e = e.replace("<stage>", "pressure");
+            assert!(
+                got.contains(&format!("/{e}")),
+                "{scene}: /{e} missing from {got:?}"
+            );
+        }
+    }
+}
+
+#[test]
+fn ctrl_c_stops_the_run_and_leaves_a_valid_recording() {
+    let dir = scratch_dir("ctrlc");
+    let out = dir.join("dam.rrd");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_cellflip"))
+        .args([
+            "run",
+            "dam-2d",
+            "--duration",
+            "1000",
+            "-q",
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .spawn()
+        .unwrap();
+    // Wait until the run has written something, then interrupt it.
+    let t0 = std::time::Instant::now();
+    while std::fs::metadata(&out).map(|m| m.len()).unwrap_or(0) < 50_000 {
+        assert!(t0.elapsed().as_secs() < 60, "the run wrote nothing");
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    let kill = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(kill.success());
+    let status = child.wait().unwrap();
+    assert!(status.success(), "{status:?}");
+    let got = logged_entities(&out);
+    assert!(
+        got.contains("/world/particles") && got.contains("/log"),
+        "{got:?}"
+    );
+}
