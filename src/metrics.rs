@@ -173,7 +173,7 @@ mod tests {
                 ));
             }
         }
-        let m = Markings::compute(&g, &pos, &vec![false; 36]);
+        let m = Markings::compute(&g, &pos, &[false; 36]);
         assert_eq!(m.depth[g.cell_index([0, 0])], -3);
         let v = volume_cells(&m, mu);
         assert!((v - (24.0 - 0.5)).abs() < 1e-12, "{v}");

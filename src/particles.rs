@@ -132,7 +132,14 @@ mod tests {
         };
         let run = |s| {
             let mut rng = rand::rngs::StdRng::seed_from_u64(s);
-            seed(&g, &[r.clone()], &vec![false; 100], 2, 0.3, &mut rng)
+            seed(
+                &g,
+                std::slice::from_ref(&r),
+                &[false; 100],
+                2,
+                0.3,
+                &mut rng,
+            )
         };
         assert_eq!(run(1), run(1));
         assert_ne!(run(1), run(2));

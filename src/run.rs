@@ -128,7 +128,7 @@ fn run_dim<const D: usize>(
             Ok(rep) => {
                 summary.add(&rep);
                 if let Some(r) = &recorder {
-                    let full = sim.steps % args.record_every == 0;
+                    let full = sim.steps.is_multiple_of(args.record_every);
                     r.log_step(&sim, Some(&rep), full);
                 }
             }

@@ -506,7 +506,7 @@ fn check(source: &str, file: SceneFile) -> Result<Scene> {
             ));
         }
         if let Some(stop) = e.stop {
-            if !(stop > e.start) {
+            if stop.is_nan() || stop <= e.start {
                 return Err(err(
                     &format!("{key}.stop"),
                     format!("must be after start ({} s), got {stop}", e.start),

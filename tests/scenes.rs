@@ -92,3 +92,19 @@ fn same_seed_gives_bit_identical_particles() {
     );
     assert_eq!(d3a.particles, d3b.particles);
 }
+
+#[test]
+fn thread_count_does_not_change_the_result() {
+    let overrides = Overrides {
+        cells: Some(20),
+        ..Default::default()
+    };
+    let with_threads = |n| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build()
+            .unwrap();
+        pool.install(|| run::<3>("dam-3d", &overrides, 15).particles)
+    };
+    assert_eq!(with_threads(1), with_threads(3));
+}

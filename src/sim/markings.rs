@@ -173,7 +173,7 @@ mod tests {
                 pos.push(Vector::<2>::new(i as f64 + 0.5, j as f64 + 0.5));
             }
         }
-        let m = Markings::compute(&g, &pos, &vec![false; 64]);
+        let m = Markings::compute(&g, &pos, &[false; 64]);
         assert_eq!(m.fluid_cells(), 20);
         assert!(m.surface[g.cell_index([4, 0])]);
         assert!(m.surface[g.cell_index([0, 3])]);
@@ -195,7 +195,7 @@ mod tests {
                 pos.push(g.center(g.cell_coords(c)));
             }
         }
-        let m = Markings::compute(&g, &pos, &vec![false; 27]);
+        let m = Markings::compute(&g, &pos, &[false; 27]);
         assert!(m.surface[g.cell_index([1, 1, 1])]);
         assert!(!m.surface[g.cell_index([0, 0, 0])]);
         assert_eq!(m.depth[g.cell_index([0, 0, 0])], -3);
