@@ -56,7 +56,8 @@ pub fn particles_to_grid<const D: usize>(
 }
 
 /// Extrapolates face values into unknown faces, `layers` rings deep: each ring takes the
-/// average of its known axis neighbours (in the same component) from the previous ring.
+/// average of its known axis neighbours (in the same component) from the previous ring. Only
+/// the frontier of the known region is visited, so sparse fluid costs little.
 pub fn extrapolate<const D: usize>(
     grid: &Grid<D>,
     field: &mut MacField<D>,
@@ -65,34 +66,53 @@ pub fn extrapolate<const D: usize>(
 ) {
     for (a, (u, k)) in field.comp.iter_mut().zip(known.iter_mut()).enumerate() {
         let fd = grid.face_dims(a);
+        // Calls `f` with the index of each axis neighbour of face `i`.
+        let neighbors = |i: usize, f: &mut dyn FnMut(usize)| {
+            let c = grid.face_coords(a, i);
+            for ax in 0..D {
+                let st = grid.face_stride(a, ax);
+                if c[ax] > 0 {
+                    f(i - st);
+                }
+                if c[ax] + 1 < fd[ax] {
+                    f(i + st);
+                }
+            }
+        };
+        let mut frontier: Vec<usize> = (0..u.len()).filter(|&i| k[i]).collect();
+        let mut queued = vec![false; u.len()];
         for _ in 0..layers {
-            let updates: Vec<(usize, f64)> = (0..u.len())
-                .into_par_iter()
-                .filter(|&i| !k[i])
-                .filter_map(|i| {
-                    let f = grid.face_coords(a, i);
-                    let (mut s, mut n) = (0.0, 0);
-                    for ax in 0..D {
-                        let st = grid.face_stride(a, ax);
-                        if f[ax] > 0 && k[i - st] {
-                            s += u[i - st];
-                            n += 1;
-                        }
-                        if f[ax] + 1 < fd[ax] && k[i + st] {
-                            s += u[i + st];
-                            n += 1;
-                        }
+            let mut ring = vec![];
+            for &i in &frontier {
+                neighbors(i, &mut |n| {
+                    if !k[n] && !queued[n] {
+                        queued[n] = true;
+                        ring.push(n);
                     }
-                    (n > 0).then(|| (i, s / n as f64))
-                })
-                .collect();
-            if updates.is_empty() {
+                });
+            }
+            if ring.is_empty() {
                 break;
             }
-            for (i, v) in updates {
+            ring.sort_unstable();
+            let values: Vec<f64> = ring
+                .iter()
+                .map(|&i| {
+                    let (mut s, mut n) = (0.0, 0);
+                    neighbors(i, &mut |j| {
+                        if k[j] {
+                            s += u[j];
+                            n += 1;
+                        }
+                    });
+                    s / n as f64
+                })
+                .collect();
+            for (&i, v) in ring.iter().zip(values) {
                 u[i] = v;
                 k[i] = true;
             }
+            frontier = ring;
         }
     }
 }
