@@ -48,21 +48,17 @@ fn validate(args: &ValidateArgs) -> Result<()> {
         "\nmartin-moyce-2d: {:.0} cells per column width, {} steps, time shift {} in T",
         mm.cells_per_a, mm.steps, mm.shift_t
     );
-    println!("{:>6} {:>8} {:>8}", "T", "Z exp", "Z sim");
-    for r in &mm.front {
-        println!("{:>6.2} {:>8.2} {:>8.2}", r.time, r.measured, r.simulated);
-    }
-    println!(
-        "surge front: mean relative error {:.1}%",
-        100.0 * mm.front_mean_relative_error()
-    );
-    println!("\n{:>6} {:>8} {:>8}", "tau", "H exp", "H sim");
-    for r in &mm.height {
-        println!("{:>6.2} {:>8.2} {:>8.2}", r.time, r.measured, r.simulated);
-    }
-    println!(
-        "column height: mean relative error {:.1}%",
-        100.0 * mm.height_mean_relative_error()
-    );
+    print_comparison(("T", "Z exp", "Z sim"), &mm.front, "surge front");
+    println!();
+    print_comparison(("tau", "H exp", "H sim"), &mm.height, "column height");
     Ok(())
+}
+
+fn print_comparison(header: (&str, &str, &str), rows: &[validation::Row], what: &str) {
+    println!("{:>6} {:>8} {:>8}", header.0, header.1, header.2);
+    for r in rows {
+        println!("{:>6.2} {:>8.2} {:>8.2}", r.time, r.measured, r.simulated);
+    }
+    let e = validation::mean_relative_error(rows);
+    println!("{what}: mean relative error {:.1}%", 100.0 * e);
 }

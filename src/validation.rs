@@ -67,15 +67,16 @@ pub struct MartinMoyce {
 impl MartinMoyce {
     /// Mean of `|Z_sim - Z| / Z` over the table's points.
     pub fn front_mean_relative_error(&self) -> f64 {
-        mean_rel(&self.front)
+        mean_relative_error(&self.front)
     }
 
     pub fn height_mean_relative_error(&self) -> f64 {
-        mean_rel(&self.height)
+        mean_relative_error(&self.height)
     }
 }
 
-fn mean_rel(rows: &[Row]) -> f64 {
+/// Mean of `|simulated - measured| / measured` over `rows`.
+pub fn mean_relative_error(rows: &[Row]) -> f64 {
     rows.iter()
         .map(|r| (r.simulated - r.measured).abs() / r.measured)
         .sum::<f64>()

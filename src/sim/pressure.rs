@@ -211,6 +211,29 @@ mod tests {
     use super::*;
     use rand::{Rng, SeedableRng};
 
+    /// Projects `u` and checks that the solve converged and every fluid cell is divergence-free
+    /// to 1e-6 max|u| / h. Returns max|u|.
+    fn project_and_check<const D: usize>(
+        g: &Grid<D>,
+        kind: &[CellKind],
+        solid: &[bool],
+        solid_vel: &[Vector<D>],
+        u: &mut MacField<D>,
+    ) -> f64 {
+        let stats = project(g, kind, solid, solid_vel, u, &PcgSettings::default());
+        assert!(stats.converged, "{stats:?}");
+        let umax = u.max_abs();
+        let worst = (0..g.num_cells())
+            .filter(|&c| kind[c] == CellKind::Fluid)
+            .map(|c| divergence(g, u, c).abs())
+            .fold(0.0, f64::max);
+        assert!(
+            worst <= 1e-6 * umax,
+            "max |div u| = {worst}, max |u| = {umax}"
+        );
+        umax
+    }
+
     /// Random fluid/empty/solid layout and random velocities; after projection every fluid cell
     /// is divergence-free to 1e-6 max|u| / h, and solid faces keep the solid velocity.
     fn projection_is_divergence_free<const D: usize>(dims: [usize; D], seed: u64) {
@@ -239,24 +262,7 @@ mod tests {
         }
         apply_solid_boundary(&g, &solid, &solid_vel, &mut u);
         let before = u.clone();
-        let stats = project(
-            &g,
-            &kind,
-            &solid,
-            &solid_vel,
-            &mut u,
-            &PcgSettings::default(),
-        );
-        assert!(stats.converged, "{stats:?}");
-        let umax = u.max_abs();
-        let worst = (0..n)
-            .filter(|&c| kind[c] == CellKind::Fluid)
-            .map(|c| divergence(&g, &u, c).abs())
-            .fold(0.0, f64::max);
-        assert!(
-            worst <= 1e-6 * umax,
-            "max |div u| = {worst}, max |u| = {umax}"
-        );
+        let umax = project_and_check(&g, &kind, &solid, &solid_vel, &mut u);
         let mut bc = before.clone();
         apply_solid_boundary(&g, &solid, &solid_vel, &mut bc);
         for a in 0..D {
@@ -302,22 +308,8 @@ mod tests {
             .collect();
         let mut u = MacField::zeros(&g);
         apply_solid_boundary(&g, &solid, &solid_vel, &mut u);
-        let stats = project(
-            &g,
-            &kind,
-            &solid,
-            &solid_vel,
-            &mut u,
-            &PcgSettings::default(),
-        );
-        assert!(stats.converged, "{stats:?}");
-        let umax = u.max_abs();
+        let umax = project_and_check(&g, &kind, &solid, &solid_vel, &mut u);
         assert!(umax >= 2.0);
-        let worst = (0..n)
-            .filter(|&c| kind[c] == CellKind::Fluid)
-            .map(|c| divergence(&g, &u, c).abs())
-            .fold(0.0, f64::max);
-        assert!(worst <= 1e-6 * umax, "max |div u| = {worst}");
         // The fluid right below the block moves down with it.
         let mut below = [0; D];
         for k in 0..D {
