@@ -45,7 +45,7 @@ pub struct RunArgs {
     #[arg(long, conflicts_with = "duration")]
     pub steps: Option<u64>,
     /// Simulated seconds to run (overrides the scene's `simulation.duration`).
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     pub duration: Option<f64>,
     /// Cells along the longest axis (overrides `domain.cells`).
     #[arg(long)]
