@@ -56,6 +56,18 @@ pub struct RunArgs {
     /// Random seed (overrides `simulation.seed`).
     #[arg(long)]
     pub seed: Option<u64>,
+    /// Solver of the ccp correction: flow (exact min-cost flow) or simplex (the LP reference).
+    #[arg(long)]
+    pub solver: Option<String>,
+    /// Candidate moves of the correction: von-neumann (paper) or moore.
+    #[arg(long)]
+    pub directions: Option<String>,
+    /// Solve every correction with both solvers and report their largest objective difference.
+    #[arg(long)]
+    pub cross_check: bool,
+    /// Write the correction problem of step N as free-format MPS next to the recording.
+    #[arg(long, value_name = "N")]
+    pub export_lp: Option<u64>,
     /// Where to write the recording [default: recordings/<scene>.rrd].
     #[arg(long, conflicts_with = "no_record")]
     pub out: Option<PathBuf>,

@@ -144,6 +144,42 @@ pub fn check_particles<const D: usize>(
     Ok(())
 }
 
+/// The guarantees of the correction step (paper eq. problem3), checked from the final positions
+/// alone: no cell holds more than `mu` (or than it held before, if that was more), an inner cell
+/// of the previous markings holds at least what it held, and no solid cell holds anything.
+pub fn check_cell_counts<const D: usize>(
+    grid: &Grid<D>,
+    pos: &[Vector<D>],
+    previous: &Markings,
+    solid: &[bool],
+    mu: u32,
+) -> Result<(), InvariantViolation> {
+    let mut count = vec![0u32; grid.num_cells()];
+    for x in pos {
+        count[grid.cell_index_of(x)] += 1;
+    }
+    for (c, &n) in count.iter().enumerate() {
+        let prev = previous.count[c];
+        let cell = grid.cell_coords(c);
+        if n > mu.max(prev) {
+            return Err(InvariantViolation(format!(
+                "cell {cell:?} holds {n} particles after the correction (mu = {mu}, before: {prev})"
+            )));
+        }
+        if previous.is_fluid(c) && !previous.surface[c] && n < prev {
+            return Err(InvariantViolation(format!(
+                "inner cell {cell:?} lost particles in the correction: {prev} -> {n}"
+            )));
+        }
+        if solid[c] && n > 0 {
+            return Err(InvariantViolation(format!(
+                "solid cell {cell:?} holds {n} particles"
+            )));
+        }
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -5,6 +5,7 @@
 //! over its cell of the `world/grid/markings` image. In 3D, y is up (`RIGHT_HAND_Y_UP`).
 //! Entity paths are listed in the README and in [`ENTITY_PATHS`].
 
+use crate::grid::Vector;
 use crate::metrics::Stage;
 use crate::scene::Scene;
 use crate::sim::markings::MarkingClass;
@@ -36,6 +37,16 @@ pub const ENTITY_PATHS: &[&str] = &[
     "log",
 ];
 
+/// What method `ccp` logs besides [`ENTITY_PATHS`].
+pub const CORRECTION_ENTITY_PATHS: &[&str] = &[
+    "world/corrector/moves",
+    "metrics/correction/objective",
+    "metrics/correction/moved",
+    "metrics/correction/overfull_before",
+    "metrics/correction/solver_ms",
+    "metrics/correction/augmentations",
+];
+
 /// Writes one run to an `.rrd` file.
 pub struct Recorder {
     rec: RecordingStream,
@@ -62,6 +73,9 @@ fn blueprint(dim: usize) -> Blueprint {
                     .into(),
                 TimeSeriesView::new("pressure solve")
                     .with_origin("metrics/pcg")
+                    .into(),
+                TimeSeriesView::new("correction")
+                    .with_origin("metrics/correction")
                     .into(),
                 TextLogView::new("log").with_origin("log").into(),
                 TextDocumentView::new("scene").with_origin("scene").into(),
@@ -182,7 +196,7 @@ impl Recorder {
     pub fn log_step<const D: usize>(
         &self,
         sim: &Simulation<D>,
-        rep: Option<&StepReport>,
+        rep: Option<&StepReport<D>>,
         full: bool,
     ) {
         self.set_time(sim);
@@ -279,6 +293,39 @@ impl Recorder {
                         rep.times.get(s).as_secs_f64() * 1e3,
                     )?;
                 }
+                if let Some(c) = &rep.correction {
+                    scalar("metrics/correction/objective", c.objective)?;
+                    scalar("metrics/correction/moved", c.moved as f64)?;
+                    scalar(
+                        "metrics/correction/overfull_before",
+                        c.overfull_before as f64,
+                    )?;
+                    scalar(
+                        "metrics/correction/solver_ms",
+                        c.solver_time.as_secs_f64() * 1e3,
+                    )?;
+                    scalar("metrics/correction/augmentations", c.augmentations as f64)?;
+                    match &c.cross_check {
+                        Some(Ok(d)) => scalar("metrics/correction/cross_check", *d)?,
+                        Some(Err(e)) => self.rec.log(
+                            "log",
+                            &rerun::TextLog::new(format!(
+                                "step {}: cross-check solver failed: {e}",
+                                sim.steps
+                            ))
+                            .with_level(rerun::TextLogLevel::WARN),
+                        )?,
+                        None => {}
+                    }
+                    if let Some(f) = &c.fallback {
+                        self.rec.log(
+                            "log",
+                            &rerun::TextLog::new(format!("step {}: {f}", sim.steps))
+                                .with_level(rerun::TextLogLevel::WARN),
+                        )?;
+                    }
+                    self.log_moves(&c.moves)?;
+                }
                 if rep.dt_shortened {
                     self.rec.log(
                         "log",
@@ -296,6 +343,45 @@ impl Recorder {
         })();
         self.report(result);
         self.flush_now_and_then();
+    }
+
+    /// Arrows from `x_hat` to `x` for the particles the correction sent to another cell (an
+    /// empty batch clears the previous step's arrows).
+    fn log_moves<const D: usize>(
+        &self,
+        moves: &[(Vector<D>, Vector<D>)],
+    ) -> rerun::RecordingStreamResult<()> {
+        let color = [[255u8, 80, 200]];
+        if D == 2 {
+            let ny = self.dims[1] as f32;
+            let origins: Vec<[f32; 2]> = moves
+                .iter()
+                .map(|(a, _)| [a[0] as f32, ny - a[1] as f32])
+                .collect();
+            let vectors: Vec<[f32; 2]> = moves
+                .iter()
+                .map(|(a, b)| [(b[0] - a[0]) as f32, (a[1] - b[1]) as f32])
+                .collect();
+            self.rec.log(
+                "world/corrector/moves",
+                &rerun::Arrows2D::from_vectors(vectors)
+                    .with_origins(origins)
+                    .with_colors(color)
+                    .with_radii([0.04f32])
+                    .with_draw_order(20.0),
+            )
+        } else {
+            let f = |v: &Vector<D>| [v[0] as f32, v[1] as f32, v[2] as f32];
+            let origins: Vec<[f32; 3]> = moves.iter().map(|(a, _)| f(a)).collect();
+            let vectors: Vec<[f32; 3]> = moves.iter().map(|(a, b)| f(&(b - a))).collect();
+            self.rec.log(
+                "world/corrector/moves",
+                &rerun::Arrows3D::from_vectors(vectors)
+                    .with_origins(origins)
+                    .with_colors(color)
+                    .with_radii([0.05f32]),
+            )
+        }
     }
 
     fn text<const D: usize>(&self, sim: &Simulation<D>, level: &'static str, msg: &str) {

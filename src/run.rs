@@ -5,7 +5,7 @@ use crate::cli::RunArgs;
 use crate::metrics::{Stage, StageTimes};
 use crate::record::Recorder;
 use crate::scene::{Overrides, Scene};
-use crate::sim::{Simulation, StepReport};
+use crate::sim::{Method, Simulation, StepReport};
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::path::{Path, PathBuf};
@@ -36,6 +36,13 @@ pub struct Summary {
     pub pcg_iterations_max: usize,
     pub dt_shortened: u64,
     pub interrupted: bool,
+    /// Correction step (method ccp): particles sent to another cell, the most over-full cells
+    /// before one correction, solver fallbacks, and the largest cross-check difference.
+    pub corrections: u64,
+    pub moved: u64,
+    pub overfull_max: usize,
+    pub fallbacks: u64,
+    pub cross_check_max: Option<f64>,
 }
 
 impl Summary {
@@ -47,7 +54,7 @@ impl Summary {
         }
     }
 
-    fn add(&mut self, rep: &StepReport) {
+    fn add<const D: usize>(&mut self, rep: &StepReport<D>) {
         self.steps += 1;
         for s in Stage::ALL {
             self.stages.add(s, rep.times.get(s));
@@ -58,6 +65,15 @@ impl Summary {
         self.pcg_iterations_max = self.pcg_iterations_max.max(rep.pcg.iterations);
         self.emitted += rep.emitted;
         self.dt_shortened += rep.dt_shortened as u64;
+        if let Some(c) = &rep.correction {
+            self.corrections += 1;
+            self.moved += c.moved as u64;
+            self.overfull_max = self.overfull_max.max(c.overfull_before);
+            self.fallbacks += c.fallback.is_some() as u64;
+            if let Some(Ok(d)) = c.cross_check {
+                self.cross_check_max = Some(self.cross_check_max.unwrap_or(0.0).max(d));
+            }
+        }
     }
 }
 
@@ -69,6 +85,8 @@ pub fn run(args: &RunArgs) -> Result<()> {
         cells: args.res,
         ppc: args.ppc,
         seed: args.seed,
+        solver: args.solver.clone(),
+        directions: args.directions.clone(),
     };
     let scene = Scene::load(&args.scene, &overrides)?;
     let limit = match args.steps {
@@ -100,8 +118,17 @@ fn run_dim<const D: usize>(
     out: Option<&Path>,
     args: &RunArgs,
 ) -> Result<()> {
+    if args.export_lp.is_some() && scene.method != Method::Ccp {
+        bail!(
+            "--export-lp: method '{}' has no correction problem (use --method ccp)",
+            scene.method.name()
+        );
+    }
     let recorder = out.map(|p| Recorder::create(p, scene)).transpose()?;
-    let mut sim = Simulation::<D>::new(scene.config::<D>());
+    let mut config = scene.config::<D>();
+    config.correction.cross_check = args.cross_check;
+    let mut sim = Simulation::<D>::new(config);
+    sim.export_problem_at_step = args.export_lp;
     if let Some(r) = &recorder {
         r.log_setup(&sim);
         r.log_step(&sim, None, true);
@@ -127,6 +154,19 @@ fn run_dim<const D: usize>(
         match sim.step() {
             Ok(rep) => {
                 summary.add(&rep);
+                if let Some(mps) = rep.correction.as_ref().and_then(|c| c.mps.as_ref()) {
+                    let path = mps_path(scene, out, sim.steps);
+                    if let Err(e) = std::fs::write(&path, mps) {
+                        break Err(anyhow::anyhow!("cannot write '{}': {e}", path.display()));
+                    }
+                    if !args.quiet {
+                        eprintln!(
+                            "wrote the correction problem of step {} to {}",
+                            sim.steps,
+                            path.display()
+                        );
+                    }
+                }
                 if let Some(r) = &recorder {
                     let full = sim.steps.is_multiple_of(args.record_every);
                     r.log_step(&sim, Some(&rep), full);
@@ -166,6 +206,15 @@ fn run_dim<const D: usize>(
         print_summary(scene, &summary, out);
     }
     result
+}
+
+/// Where `--export-lp` writes: beside the recording, or in `recordings/` without one.
+fn mps_path(scene: &Scene, out: Option<&Path>, step: u64) -> PathBuf {
+    let name = format!("{}-step{step}.mps", scene.name());
+    match out {
+        Some(p) => p.with_file_name(name),
+        None => Path::new("recordings").join(name),
+    }
 }
 
 fn progress_bar(limit: Limit) -> ProgressBar {
@@ -209,6 +258,17 @@ fn print_summary(scene: &Scene, s: &Summary, out: Option<&Path>) {
         s.pcg_iterations_max,
         s.dt_shortened
     );
+    if s.corrections > 0 {
+        println!(
+            "correction: {} particles sent to another cell in all; up to {} over-full cells before one correction; {} solver fallbacks{}",
+            s.moved,
+            s.overfull_max,
+            s.fallbacks,
+            s.cross_check_max
+                .map(|d| format!("; flow vs simplex objectives differ by at most {d:.2e} (relative)"))
+                .unwrap_or_default()
+        );
+    }
     println!("{:<10} {:>10} {:>12}", "stage", "total s", "ms/step");
     for st in Stage::ALL {
         let d = s.stages.get(st);

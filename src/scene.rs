@@ -6,6 +6,8 @@
 
 use crate::grid::Vector;
 use crate::particles::Region;
+use crate::sim::correct::problem::Directions;
+use crate::sim::correct::{CorrectionSettings, Solver};
 use crate::sim::emit::Emitter;
 use crate::sim::{Method, SimConfig};
 use anyhow::{anyhow, bail, Context, Result};
@@ -83,6 +85,10 @@ pub struct SimulationFile {
     /// Relative tolerance of the pressure solve.
     pub pressure_tolerance: f64,
     pub seed: u64,
+    /// Solver of the correction step (method ccp): "flow" or "simplex".
+    pub solver: String,
+    /// Candidate moves of the correction: "von-neumann" (5 in 2D, 7 in 3D) or "moore" (9, 27).
+    pub directions: String,
 }
 
 impl Default for SimulationFile {
@@ -99,6 +105,8 @@ impl Default for SimulationFile {
             max_speed: 10.0,
             pressure_tolerance: 1e-9,
             seed: 1,
+            solver: "flow".into(),
+            directions: "von-neumann".into(),
         }
     }
 }
@@ -144,6 +152,8 @@ pub struct Overrides {
     pub cells: Option<usize>,
     pub ppc: Option<usize>,
     pub seed: Option<u64>,
+    pub solver: Option<String>,
+    pub directions: Option<String>,
 }
 
 /// A scene ready to run: its source, the file with overrides applied, and its checked values.
@@ -155,6 +165,7 @@ pub struct Scene {
     pub dims: Vec<usize>,
     pub cell_size_m: f64,
     pub method: Method,
+    pub correction: CorrectionSettings,
 }
 
 impl Scene {
@@ -210,6 +221,12 @@ impl Scene {
         }
         if let Some(s) = o.seed {
             sim.seed = s;
+        }
+        if let Some(s) = &o.solver {
+            sim.solver = s.clone();
+        }
+        if let Some(d) = &o.directions {
+            sim.directions = d.clone();
         }
         if let Some(c) = o.cells {
             file.domain.cells = c;
@@ -275,6 +292,7 @@ impl Scene {
                         .map(|f| (f * (s.ppc * cells) as f64).round() as usize),
                 })
                 .collect(),
+            correction: self.correction,
         }
     }
 }
@@ -357,6 +375,27 @@ fn check(source: &str, file: SceneFile) -> Result<Scene> {
             ),
         )
     })?;
+    let solver = Solver::from_name(&s.solver).ok_or_else(|| {
+        let names: Vec<&str> = Solver::ALL.iter().map(|m| m.name()).collect();
+        err(
+            "simulation.solver",
+            format!(
+                "unknown solver '{}' (known: {})",
+                s.solver,
+                names.join(", ")
+            ),
+        )
+    })?;
+    let directions = match s.directions.as_str() {
+        "von-neumann" => Directions::VonNeumann,
+        "moore" => Directions::Moore,
+        other => {
+            return Err(err(
+                "simulation.directions",
+                format!("unknown directions '{other}' (known: von-neumann, moore)"),
+            ))
+        }
+    };
     if !(s.duration.is_finite() && s.duration > 0.0) {
         return Err(err(
             "simulation.duration",
@@ -527,6 +566,11 @@ fn check(source: &str, file: SceneFile) -> Result<Scene> {
         cell_size_m: h,
         dims,
         method,
+        correction: CorrectionSettings {
+            solver,
+            directions,
+            cross_check: false,
+        },
         file,
     })
 }

@@ -212,6 +212,38 @@ fn recordings_read_back_with_the_documented_entities_2d_and_3d() {
 }
 
 #[test]
+fn ccp_recordings_carry_the_corrector_and_export_the_lp() {
+    let dir = scratch_dir("ccp");
+    let out = dir.join("dam.rrd");
+    let o = cellflip(&[
+        "run",
+        "dam-2d",
+        "--steps",
+        "4",
+        "-q",
+        "--export-lp",
+        "3",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let got = logged_entities(&out);
+    for e in cellflip::record::CORRECTION_ENTITY_PATHS {
+        assert!(got.contains(&format!("/{e}")), "/{e} missing from {got:?}");
+    }
+    let mps = std::fs::read_to_string(dir.join("dam-2d-step3.mps")).unwrap();
+    assert!(
+        mps.starts_with("* optimal objective ")
+            && mps.contains("\nROWS\n")
+            && mps.ends_with("ENDATA\n")
+    );
+    // Asking for an LP from a method without one is an error, before anything runs.
+    let o = cellflip(&["run", "hydrostatic-2d", "--export-lp", "1", "--no-record"]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--export-lp"));
+}
+
+#[test]
 fn ctrl_c_stops_the_run_and_leaves_a_valid_recording() {
     let dir = scratch_dir("ctrlc");
     let out = dir.join("dam.rrd");

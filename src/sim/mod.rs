@@ -5,6 +5,7 @@
 //! (FLIP/PIC blend) -> advection -> correction (method-specific) -> markings and volume.
 
 pub mod advect;
+pub mod correct;
 pub mod emit;
 pub mod markings;
 pub mod pressure;
@@ -14,6 +15,7 @@ use crate::grid::{Grid, MacField, Vector};
 use crate::metrics::{self, InvariantViolation, Stage, StageTimes};
 use crate::particles::{self, Particles, Region};
 use crate::solvers::pcg::{PcgSettings, PcgStats};
+use correct::{CorrectionReport, CorrectionSettings};
 use emit::Emitter;
 use markings::Markings;
 use rand::rngs::StdRng;
@@ -24,14 +26,17 @@ use rand::SeedableRng;
 pub enum Method {
     /// PIC/FLIP with no position correction (Zhu and Bridson 2005).
     Flip,
+    /// Cell-constrained particles: FLIP plus the paper's correction step (sec. 4-5).
+    Ccp,
 }
 
 impl Method {
-    pub const ALL: [Method; 1] = [Method::Flip];
+    pub const ALL: [Method; 2] = [Method::Flip, Method::Ccp];
 
     pub fn name(self) -> &'static str {
         match self {
             Method::Flip => "flip",
+            Method::Ccp => "ccp",
         }
     }
 
@@ -66,6 +71,8 @@ pub struct SimConfig<const D: usize> {
     pub fluid: Vec<Region<D>>,
     pub solids: Vec<Region<D>>,
     pub emitters: Vec<Emitter<D>>,
+    /// Solver and directions of the correction step (method `ccp`).
+    pub correction: CorrectionSettings,
 }
 
 impl<const D: usize> SimConfig<D> {
@@ -76,7 +83,7 @@ impl<const D: usize> SimConfig<D> {
 
 /// What one step did.
 #[derive(Clone, Debug, Default)]
-pub struct StepReport {
+pub struct StepReport<const D: usize> {
     pub dt_secs: f64,
     /// The step had to be shortened after the projection to keep motion within `cfl` cells.
     pub dt_shortened: bool,
@@ -86,6 +93,8 @@ pub struct StepReport {
     pub max_speed: f64,
     pub emitted: usize,
     pub volume_percent: f64,
+    /// The correction step, for methods that have one.
+    pub correction: Option<CorrectionReport<D>>,
 }
 
 /// The state of a running simulation.
@@ -101,6 +110,8 @@ pub struct Simulation<const D: usize> {
     pub markings: Markings,
     pub time_secs: f64,
     pub steps: u64,
+    /// Write the correction problem of this step as MPS into its report.
+    pub export_problem_at_step: Option<u64>,
     /// Particles seeded at the start plus all emitted since.
     pub total_particles: usize,
     /// `V*`: initial volume plus emitted volume, in cells.
@@ -134,6 +145,7 @@ impl<const D: usize> Simulation<D> {
             markings,
             time_secs: 0.0,
             steps: 0,
+            export_problem_at_step: None,
             total_particles: total,
             grid,
             particles,
@@ -176,7 +188,7 @@ impl<const D: usize> Simulation<D> {
     }
 
     /// Advances the simulation by one step.
-    pub fn step(&mut self) -> Result<StepReport, InvariantViolation> {
+    pub fn step(&mut self) -> Result<StepReport<D>, InvariantViolation> {
         let mut rep = StepReport::default();
         let mut dt = self.planned_dt();
         let grid = &self.grid;
@@ -266,12 +278,35 @@ impl<const D: usize> Simulation<D> {
                 }
             }
         });
+        let x_bar = (c.method == Method::Ccp).then(|| self.particles.pos.clone());
         rep.times.time(Stage::Advect, || {
             advect::advect_particles(grid, &u, &self.solid, dt, &mut self.particles.pos);
         });
-        rep.times.time(Stage::Correct, || match c.method {
-            Method::Flip => {}
-        });
+        if let Some(x_bar) = x_bar {
+            let want_mps = self.export_problem_at_step == Some(self.steps + 1);
+            let report = rep.times.time(Stage::Correct, || {
+                correct::correct(
+                    grid,
+                    &x_bar,
+                    &mut self.particles.pos,
+                    &self.markings,
+                    &self.solid,
+                    c.mu(),
+                    &c.correction,
+                    want_mps,
+                )
+            });
+            let report =
+                report.map_err(|e| InvariantViolation(format!("correction problem: {e}")))?;
+            metrics::check_cell_counts(
+                grid,
+                &self.particles.pos,
+                &self.markings,
+                &self.solid,
+                c.mu(),
+            )?;
+            rep.correction = Some(report);
+        }
         rep.times.time(Stage::Markings, || {
             self.markings = Markings::compute(grid, &self.particles.pos, &self.solid);
         });

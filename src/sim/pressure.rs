@@ -262,7 +262,7 @@ mod tests {
         }
         apply_solid_boundary(&g, &solid, &solid_vel, &mut u);
         let before = u.clone();
-        let umax = project_and_check(&g, &kind, &solid, &solid_vel, &mut u);
+        project_and_check(&g, &kind, &solid, &solid_vel, &mut u);
         let mut bc = before.clone();
         apply_solid_boundary(&g, &solid, &solid_vel, &mut bc);
         for a in 0..D {

@@ -1,3 +1,5 @@
 //! General numerics with no fluid knowledge.
 
+pub mod lp;
+pub mod min_cost_flow;
 pub mod pcg;

@@ -1,0 +1,176 @@
+//! The paper's correction step (sec. 4-5, alg. flip line 6): after advection, move particles
+//! so that no cell holds more than `mu` (inner cells keep at least what they had, solids hold
+//! nothing) with the least total squared displacement, eq. problem3.
+//!
+//! The problem is built once ([`problem::build`]) and solved exactly, by the min-cost-flow
+//! solver (default) or by the simplex on the LP relaxation; both read the same data.
+
+pub mod problem;
+
+use crate::grid::{Grid, Vector};
+use crate::sim::markings::Markings;
+use crate::solvers::{lp, min_cost_flow};
+use problem::{BuildError, CorrectionProblem, Directions};
+use std::time::{Duration, Instant};
+
+/// Which solver corrects the positions.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Solver {
+    /// Exact min-cost flow by successive shortest paths ([`min_cost_flow`]).
+    Flow,
+    /// The LP relaxation by microlp's simplex ([`lp`]): the reference, slow on large problems.
+    Simplex,
+}
+
+impl Solver {
+    pub const ALL: [Solver; 2] = [Solver::Flow, Solver::Simplex];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Solver::Flow => "flow",
+            Solver::Simplex => "simplex",
+        }
+    }
+
+    pub fn from_name(s: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|m| m.name() == s)
+    }
+
+    fn solve(self, p: &min_cost_flow::BoundedAssignment) -> Result<(Vec<u32>, usize), String> {
+        match self {
+            Solver::Flow => min_cost_flow::solve(p)
+                .map(|(c, s)| (c, s.augmentations))
+                .map_err(|e| e.to_string()),
+            Solver::Simplex => lp::solve(p).map(|c| (c, 0)).map_err(|e| e.to_string()),
+        }
+    }
+}
+
+/// How the correction is set up.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CorrectionSettings {
+    pub solver: Solver,
+    pub directions: Directions,
+    /// Also solve with the other solver and report the objectives' relative difference.
+    pub cross_check: bool,
+}
+
+impl Default for CorrectionSettings {
+    fn default() -> Self {
+        Self {
+            solver: Solver::Flow,
+            directions: Directions::VonNeumann,
+            cross_check: false,
+        }
+    }
+}
+
+/// What one correction did.
+#[derive(Clone, Debug, Default)]
+pub struct CorrectionReport<const D: usize> {
+    /// `sum sigma_obj` of the final positions.
+    pub objective: f64,
+    /// Particles that end in another cell than the one their advected position is in.
+    pub moved: usize,
+    /// Cells holding more than `mu` particles after advection, before the correction.
+    pub overfull_before: usize,
+    pub solver_time: Duration,
+    /// Augmenting paths of the flow solver.
+    pub augmentations: usize,
+    /// Set when the solver failed and every particle stayed in its previous cell.
+    pub fallback: Option<String>,
+    /// `|objective(other solver) - objective| / max(1, |objective|)`, with `cross_check`.
+    pub cross_check: Option<Result<f64, String>>,
+    /// `(x_hat, x)` of the moved particles.
+    pub moves: Vec<(Vector<D>, Vector<D>)>,
+    /// The problem as free-format MPS, when asked for.
+    pub mps: Option<String>,
+}
+
+/// Corrects `pos` (the advected positions `x_hat` on entry, `x` on return) given the previous
+/// positions `x_bar` and markings. A solver failure keeps every particle in its previous cell
+/// (always feasible) and says why in the report; a problem that cannot be built is a bug and
+/// comes back as an error.
+#[allow(clippy::too_many_arguments)]
+pub fn correct<const D: usize>(
+    grid: &Grid<D>,
+    x_bar: &[Vector<D>],
+    pos: &mut [Vector<D>],
+    previous: &Markings,
+    solid: &[bool],
+    mu: u32,
+    settings: &CorrectionSettings,
+    want_mps: bool,
+) -> Result<CorrectionReport<D>, BuildError> {
+    let problem = problem::build(grid, x_bar, pos, previous, solid, mu, settings.directions)?;
+    let mut rep = CorrectionReport {
+        overfull_before: overfull_cells(grid, pos, mu),
+        ..Default::default()
+    };
+    let t0 = Instant::now();
+    let solved = settings.solver.solve(&problem.assignment);
+    rep.solver_time = t0.elapsed();
+    let choice = match solved {
+        Ok((choice, augmentations)) => {
+            rep.augmentations = augmentations;
+            choice
+        }
+        Err(e) => {
+            rep.fallback = Some(format!(
+                "{} solver failed ({e}); particles keep their cells",
+                settings.solver.name()
+            ));
+            problem.stay.clone()
+        }
+    };
+    rep.objective = problem.assignment.objective(&choice);
+    if settings.cross_check {
+        let other = match settings.solver {
+            Solver::Flow => Solver::Simplex,
+            Solver::Simplex => Solver::Flow,
+        };
+        rep.cross_check = Some(other.solve(&problem.assignment).and_then(|(c, _)| {
+            problem.assignment.check(&c)?;
+            let o = problem.assignment.objective(&c);
+            Ok((o - rep.objective).abs() / rep.objective.abs().max(1.0))
+        }));
+    }
+    if want_mps {
+        rep.mps = Some(lp::to_mps(
+            &problem.assignment,
+            "cellflip-correction",
+            &[format!(
+                "optimal objective {:.17e} ({} solver)",
+                rep.objective,
+                settings.solver.name()
+            )],
+        ));
+    }
+    apply(grid, &problem, &choice, pos, &mut rep);
+    Ok(rep)
+}
+
+fn overfull_cells<const D: usize>(grid: &Grid<D>, pos: &[Vector<D>], mu: u32) -> usize {
+    let mut count = vec![0u32; grid.num_cells()];
+    for x in pos {
+        count[grid.cell_index_of(x)] += 1;
+    }
+    count.iter().filter(|&&n| n > mu).count()
+}
+
+fn apply<const D: usize>(
+    grid: &Grid<D>,
+    problem: &CorrectionProblem<D>,
+    choice: &[u32],
+    pos: &mut [Vector<D>],
+    rep: &mut CorrectionReport<D>,
+) {
+    for (x, &k) in pos.iter_mut().zip(choice) {
+        let new = problem.cand_pos[k as usize];
+        if grid.cell_index_of(&new) != grid.cell_index_of(x) {
+            rep.moved += 1;
+            rep.moves.push((*x, new));
+        }
+        *x = new;
+    }
+}

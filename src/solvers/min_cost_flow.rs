@@ -1,0 +1,500 @@
+//! An exact min-cost-flow solver for bounded assignment problems: every item picks exactly one
+//! of its candidate bins, each candidate has a cost, and each bin's load must stay within
+//! `[lower, upper]`. This is the network form of the paper's eq. problem3 (its matrix is totally
+//! unimodular, prop. LPrelax), solved without any simplex.
+//!
+//! The network: items -> bins (unit arcs with the candidate costs) -> a sink `t` (one arc per
+//! bin with flow bounds `[lower, upper]`). The solver starts from the cheapest candidate of
+//! every item, which is optimal when bounds are ignored, and then repairs only the bins in
+//! conflict by successive shortest paths (Ahuja, Magnanti, Orlin, *Network Flows*, sec. 9.7):
+//!
+//! 1. every over-full bin sends its excess, one unit at a time, along a shortest path in the
+//!    residual network to the nearest bin below its lower bound or to `t` (through any bin
+//!    with room);
+//! 2. every bin still below its lower bound then receives units from `t` (through any bin
+//!    above its lower bound) along shortest paths found by a reverse search.
+//!
+//! A path moves a chain of items, each to another of its candidates. Node potentials keep all
+//! reduced costs non-negative, so Dijkstra's algorithm applies and the result is optimal; each
+//! search starts at one bin in conflict and stops at the nearest target, so the work grows with
+//! the conflicts, not with the number of items. Ties break by node index: results are
+//! deterministic.
+
+use std::cmp::Ordering;
+use std::collections::BinaryHeap;
+use std::ops::Range;
+
+/// Items choosing one candidate bin each, with per-bin load bounds.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct BoundedAssignment {
+    /// The candidates of item `i` are `item_start[i]..item_start[i + 1]`.
+    pub item_start: Vec<usize>,
+    /// Bin of each candidate.
+    pub cand_bin: Vec<u32>,
+    /// Cost of each candidate.
+    pub cand_cost: Vec<f64>,
+    /// Least load of each bin.
+    pub lower: Vec<u32>,
+    /// Largest load of each bin.
+    pub upper: Vec<u32>,
+}
+
+impl BoundedAssignment {
+    pub fn items(&self) -> usize {
+        self.item_start.len().saturating_sub(1)
+    }
+
+    pub fn bins(&self) -> usize {
+        self.lower.len()
+    }
+
+    pub fn candidates(&self, item: usize) -> Range<usize> {
+        self.item_start[item]..self.item_start[item + 1]
+    }
+
+    /// Total cost of a choice (one global candidate index per item).
+    pub fn objective(&self, choice: &[u32]) -> f64 {
+        choice.iter().map(|&k| self.cand_cost[k as usize]).sum()
+    }
+
+    /// Checks that `choice` picks one of each item's own candidates and keeps every bin within
+    /// its bounds.
+    pub fn check(&self, choice: &[u32]) -> Result<(), String> {
+        if choice.len() != self.items() {
+            return Err(format!(
+                "{} choices for {} items",
+                choice.len(),
+                self.items()
+            ));
+        }
+        let mut load = vec![0u32; self.bins()];
+        for (i, &k) in choice.iter().enumerate() {
+            if !self.candidates(i).contains(&(k as usize)) {
+                return Err(format!("item {i} picked candidate {k}, not one of its own"));
+            }
+            load[self.cand_bin[k as usize] as usize] += 1;
+        }
+        for (b, &l) in load.iter().enumerate() {
+            if l < self.lower[b] || l > self.upper[b] {
+                return Err(format!(
+                    "bin {b} holds {l}, outside [{}, {}]",
+                    self.lower[b], self.upper[b]
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// What a solve did.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FlowStats {
+    /// Units sent along augmenting paths.
+    pub augmentations: usize,
+    /// Nodes settled by all the searches together.
+    pub nodes_settled: usize,
+    /// Bins over their upper bound at the start.
+    pub overfull_bins: usize,
+    /// Bins under their lower bound at the start.
+    pub underfull_bins: usize,
+}
+
+/// The problem has no feasible assignment: a search from `bin` found no way to repair it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Infeasible {
+    pub bin: usize,
+}
+
+impl std::fmt::Display for Infeasible {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "no feasible assignment: bin {} cannot be repaired",
+            self.bin
+        )
+    }
+}
+
+impl std::error::Error for Infeasible {}
+
+/// Heap entry ordered by smallest distance, then smallest node.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Entry(f64, u32);
+
+impl Eq for Entry {}
+
+impl Ord for Entry {
+    fn cmp(&self, other: &Self) -> Ordering {
+        other
+            .0
+            .total_cmp(&self.0)
+            .then_with(|| other.1.cmp(&self.1))
+    }
+}
+
+impl PartialOrd for Entry {
+    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+const NONE: u32 = u32::MAX;
+
+/// Solver state: the current assignment, the sink flows and the node potentials.
+struct Network<'a> {
+    p: &'a BoundedAssignment,
+    /// Item of each candidate.
+    cand_item: Vec<u32>,
+    /// Candidates into each bin: `bin_cands[bin_start[b]..bin_start[b + 1]]`.
+    bin_start: Vec<usize>,
+    bin_cands: Vec<u32>,
+    choice: Vec<u32>,
+    load: Vec<u32>,
+    /// Flow on the arc bin -> t, kept within `[lower, upper]`.
+    sink_flow: Vec<u32>,
+    /// Node potentials; node `bins()` is the sink `t`.
+    potential: Vec<f64>,
+    // Search scratch, valid where `stamp == search`.
+    search: u32,
+    stamp: Vec<u32>,
+    settled: Vec<bool>,
+    dist: Vec<f64>,
+    /// Forward search: the node a node was reached from. Reverse search: the node it leads to.
+    link_node: Vec<u32>,
+    /// The candidate moved along that link (`NONE` for an arc to or from `t`).
+    link_cand: Vec<u32>,
+    heap: BinaryHeap<Entry>,
+    visited: Vec<u32>,
+    stats: FlowStats,
+}
+
+impl<'a> Network<'a> {
+    fn new(p: &'a BoundedAssignment) -> Self {
+        let bins = p.bins();
+        let mut cand_item = vec![0u32; p.cand_bin.len()];
+        let mut choice = Vec::with_capacity(p.items());
+        for i in 0..p.items() {
+            let r = p.candidates(i);
+            cand_item[r.clone()].iter_mut().for_each(|x| *x = i as u32);
+            // The cheapest candidate; ties go to the first.
+            let best = r
+                .clone()
+                .min_by(|&a, &b| p.cand_cost[a].total_cmp(&p.cand_cost[b]).then(a.cmp(&b)))
+                .expect("every item has a candidate");
+            choice.push(best as u32);
+        }
+        let mut bin_start = vec![0usize; bins + 1];
+        for &b in &p.cand_bin {
+            bin_start[b as usize + 1] += 1;
+        }
+        for b in 0..bins {
+            bin_start[b + 1] += bin_start[b];
+        }
+        let mut fill = bin_start.clone();
+        let mut bin_cands = vec![0u32; p.cand_bin.len()];
+        for (k, &b) in p.cand_bin.iter().enumerate() {
+            bin_cands[fill[b as usize]] = k as u32;
+            fill[b as usize] += 1;
+        }
+        let mut load = vec![0u32; bins];
+        for &k in &choice {
+            load[p.cand_bin[k as usize] as usize] += 1;
+        }
+        let sink_flow = (0..bins)
+            .map(|b| load[b].clamp(p.lower[b], p.upper[b]))
+            .collect();
+        let nodes = bins + 1;
+        Self {
+            p,
+            cand_item,
+            bin_start,
+            bin_cands,
+            choice,
+            load,
+            sink_flow,
+            potential: vec![0.0; nodes],
+            search: 0,
+            stamp: vec![0; nodes],
+            settled: vec![false; nodes],
+            dist: vec![0.0; nodes],
+            link_node: vec![NONE; nodes],
+            link_cand: vec![NONE; nodes],
+            heap: BinaryHeap::new(),
+            visited: vec![],
+            stats: FlowStats::default(),
+        }
+    }
+
+    fn sink(&self) -> u32 {
+        self.p.bins() as u32
+    }
+
+    fn begin_search(&mut self, start: u32) {
+        self.search += 1;
+        self.heap.clear();
+        self.visited.clear();
+        self.touch(start, 0.0, NONE, NONE);
+    }
+
+    fn touch(&mut self, v: u32, d: f64, node: u32, cand: u32) {
+        let i = v as usize;
+        if self.stamp[i] != self.search {
+            self.stamp[i] = self.search;
+            self.settled[i] = false;
+        } else if self.settled[i] || self.dist[i] <= d {
+            return;
+        }
+        self.dist[i] = d;
+        self.link_node[i] = node;
+        self.link_cand[i] = cand;
+        self.heap.push(Entry(d, v));
+    }
+
+    /// Pops the nearest unsettled node and settles it.
+    fn pop(&mut self) -> Option<(f64, u32)> {
+        while let Some(Entry(d, v)) = self.heap.pop() {
+            let i = v as usize;
+            if self.settled[i] || d > self.dist[i] {
+                continue;
+            }
+            self.settled[i] = true;
+            self.visited.push(v);
+            self.stats.nodes_settled += 1;
+            return Some((d, v));
+        }
+        None
+    }
+
+    /// The reduced cost of moving the item of candidate `from` to candidate `to`.
+    fn reduced(&self, from: usize, to: usize) -> f64 {
+        let p = self.p;
+        let (a, b) = (p.cand_bin[from] as usize, p.cand_bin[to] as usize);
+        (p.cand_cost[to] - p.cand_cost[from] - self.potential[a] + self.potential[b]).max(0.0)
+    }
+
+    /// Potentials after a forward search that reached its target at distance `reach`:
+    /// `pi(v) -= min(d(v), reach)`, up to a common shift that reduced costs ignore.
+    fn lift_after_forward(&mut self, reach: f64) {
+        for &v in &self.visited {
+            let v = v as usize;
+            self.potential[v] += reach - self.dist[v];
+        }
+    }
+
+    /// Potentials after a reverse search: `pi(v) += min(r(v), reach)`, up to a common shift.
+    fn lift_after_reverse(&mut self, reach: f64) {
+        for &v in &self.visited {
+            let v = v as usize;
+            self.potential[v] -= reach - self.dist[v];
+        }
+    }
+
+    /// Sends one unit of the excess of over-full bin `s` to the nearest bin under its lower
+    /// bound, or to the sink through a bin with room.
+    fn push_excess(&mut self, s: u32) -> Result<(), Infeasible> {
+        let t = self.sink();
+        self.begin_search(s);
+        let target = loop {
+            let Some((d, v)) = self.pop() else {
+                return Err(Infeasible { bin: s as usize });
+            };
+            let vi = v as usize;
+            if v == t || (v != s && self.load[vi] < self.p.lower[vi]) {
+                break (d, v);
+            }
+            // Items now in `v` moving to another of their candidates.
+            for idx in self.bin_start[vi]..self.bin_start[vi + 1] {
+                let k = self.bin_cands[idx] as usize;
+                let item = self.cand_item[k] as usize;
+                if self.choice[item] as usize != k {
+                    continue;
+                }
+                for k2 in self.p.candidates(item) {
+                    if k2 != k {
+                        let rc = self.reduced(k, k2);
+                        self.touch(self.p.cand_bin[k2], d + rc, v, k2 as u32);
+                    }
+                }
+            }
+            if self.sink_flow[vi] < self.p.upper[vi] {
+                let rc = (self.potential[t as usize] - self.potential[vi]).max(0.0);
+                self.touch(t, d + rc, v, NONE);
+            }
+        };
+        self.lift_after_forward(target.0);
+        // Walk back from the target, moving one item per link.
+        let mut x = target.1;
+        if x == t {
+            let c = self.link_node[t as usize];
+            self.sink_flow[c as usize] += 1;
+            x = c;
+        }
+        while x != s {
+            let k2 = self.link_cand[x as usize] as usize;
+            let w = self.link_node[x as usize];
+            self.move_item(k2, w, x);
+            x = w;
+        }
+        self.stats.augmentations += 1;
+        Ok(())
+    }
+
+    /// Brings one unit from the sink to bin `s`, which is under its lower bound, along the
+    /// shortest path into `s` (a reverse search).
+    fn pull_deficit(&mut self, s: u32) -> Result<(), Infeasible> {
+        let t = self.sink();
+        self.begin_search(s);
+        let reach = loop {
+            let Some((r, v)) = self.pop() else {
+                return Err(Infeasible { bin: s as usize });
+            };
+            if v == t {
+                break r;
+            }
+            let vi = v as usize;
+            // Items elsewhere that have `v` as a candidate could move into it.
+            for idx in self.bin_start[vi]..self.bin_start[vi + 1] {
+                let k2 = self.bin_cands[idx] as usize;
+                let item = self.cand_item[k2] as usize;
+                let k = self.choice[item] as usize;
+                if k != k2 {
+                    let rc = self.reduced(k, k2);
+                    self.touch(self.p.cand_bin[k], r + rc, v, k2 as u32);
+                }
+            }
+            if self.sink_flow[vi] > self.p.lower[vi] {
+                let rc = (self.potential[vi] - self.potential[t as usize]).max(0.0);
+                self.touch(t, r + rc, v, NONE);
+            }
+        };
+        self.lift_after_reverse(reach);
+        // Walk forward from the sink: t -> c, then one item per link until `s`.
+        let mut x = self.link_node[t as usize];
+        self.sink_flow[x as usize] -= 1;
+        while x != s {
+            let k2 = self.link_cand[x as usize] as usize;
+            let next = self.link_node[x as usize];
+            self.move_item(k2, x, next);
+            x = next;
+        }
+        self.stats.augmentations += 1;
+        Ok(())
+    }
+
+    fn move_item(&mut self, to_cand: usize, from: u32, to: u32) {
+        let item = self.cand_item[to_cand] as usize;
+        debug_assert_eq!(self.p.cand_bin[self.choice[item] as usize], from);
+        debug_assert_eq!(self.p.cand_bin[to_cand], to);
+        self.choice[item] = to_cand as u32;
+        self.load[from as usize] -= 1;
+        self.load[to as usize] += 1;
+    }
+}
+
+/// Solves a bounded assignment problem exactly. Returns the chosen candidate (a global
+/// candidate index) of every item.
+pub fn solve(p: &BoundedAssignment) -> Result<(Vec<u32>, FlowStats), Infeasible> {
+    let mut net = Network::new(p);
+    let bins = p.bins();
+    net.stats.overfull_bins = (0..bins).filter(|&b| net.load[b] > p.upper[b]).count();
+    net.stats.underfull_bins = (0..bins).filter(|&b| net.load[b] < p.lower[b]).count();
+    for b in 0..bins {
+        while net.load[b] > net.sink_flow[b] {
+            net.push_excess(b as u32)?;
+        }
+    }
+    for b in 0..bins {
+        while net.load[b] < net.sink_flow[b] {
+            net.pull_deficit(b as u32)?;
+        }
+    }
+    Ok((net.choice, net.stats))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Builds a problem from per-item lists of (bin, cost).
+    fn problem(items: &[&[(u32, f64)]], lower: &[u32], upper: &[u32]) -> BoundedAssignment {
+        let mut p = BoundedAssignment {
+            item_start: vec![0],
+            lower: lower.to_vec(),
+            upper: upper.to_vec(),
+            ..Default::default()
+        };
+        for cands in items {
+            for &(b, c) in *cands {
+                p.cand_bin.push(b);
+                p.cand_cost.push(c);
+            }
+            p.item_start.push(p.cand_bin.len());
+        }
+        p
+    }
+
+    #[test]
+    fn unconstrained_items_take_their_cheapest_bin() {
+        let p = problem(
+            &[&[(0, 1.0), (1, 0.5)], &[(1, 2.0), (0, 3.0)]],
+            &[0, 0],
+            &[2, 2],
+        );
+        let (choice, stats) = solve(&p).unwrap();
+        assert_eq!(choice, vec![1, 2]);
+        assert_eq!(stats.augmentations, 0);
+    }
+
+    #[test]
+    fn overfull_bin_sends_the_cheapest_item_away_through_a_chain() {
+        // Both items want bin 0 (capacity 1). Moving item 1 to bin 1 costs 5; moving item 0 to
+        // bin 1 costs 10, but bin 1 is full unless item 2 moves on to bin 2 at cost 1: the
+        // optimum moves item 1 (extra cost 5) rather than item 0 plus item 2 (extra 10 + 1).
+        let p = problem(
+            &[
+                &[(0, 0.0), (1, 10.0)],
+                &[(0, 0.0), (1, 5.0)],
+                &[(1, 0.0), (2, 1.0)],
+            ],
+            &[0, 0, 0],
+            &[1, 2, 1],
+        );
+        let (choice, stats) = solve(&p).unwrap();
+        p.check(&choice).unwrap();
+        assert_eq!(p.objective(&choice), 5.0);
+        assert_eq!(stats.overfull_bins, 1);
+        // With bin 1 capped at 1 the chain is forced: item 1 -> bin 1, item 2 -> bin 2.
+        let q = problem(
+            &[
+                &[(0, 0.0), (1, 10.0)],
+                &[(0, 0.0), (1, 5.0)],
+                &[(1, 0.0), (2, 1.0)],
+            ],
+            &[0, 0, 0],
+            &[1, 1, 1],
+        );
+        let (choice, _) = solve(&q).unwrap();
+        q.check(&choice).unwrap();
+        assert_eq!(q.objective(&choice), 6.0);
+    }
+
+    #[test]
+    fn lower_bound_pulls_an_item_back() {
+        // Bin 0 must keep 1 item; the item prefers bin 1, the other item can fill bin 0 at 2.
+        let p = problem(
+            &[&[(0, 1.0), (1, 0.0)], &[(1, 0.0), (0, 2.0)]],
+            &[1, 0],
+            &[1, 2],
+        );
+        let (choice, stats) = solve(&p).unwrap();
+        p.check(&choice).unwrap();
+        assert_eq!(p.objective(&choice), 1.0);
+        assert_eq!(stats.underfull_bins, 1);
+    }
+
+    #[test]
+    fn infeasible_problems_are_reported() {
+        let p = problem(&[&[(0, 0.0)], &[(0, 0.0)]], &[0], &[1]);
+        assert_eq!(solve(&p), Err(Infeasible { bin: 0 }));
+    }
+}

@@ -1,0 +1,206 @@
+//! The correction step (paper sec. 4-5): the exact flow solver against the simplex on random
+//! instances and real steps, the guarantees of eq. problem3 in 2D and 3D, and the paper's
+//! volume claims.
+
+use cellflip::grid::{Grid, Vector};
+use cellflip::scene::{Overrides, Scene};
+use cellflip::sim::correct::problem::{self, Directions};
+use cellflip::sim::markings::Markings;
+use cellflip::sim::Simulation;
+use cellflip::solvers::{lp, min_cost_flow};
+use rand::rngs::StdRng;
+use rand::{Rng, SeedableRng};
+
+/// A random feasible instance: particles in random non-solid cells (at most `mu` per cell,
+/// many cells full so that inner cells with lower bounds appear), advected up to one cell per
+/// axis. With `lattice`, positions snap to quarter cells so that costs tie.
+fn random_instance<const D: usize>(
+    rng: &mut StdRng,
+    lattice: bool,
+) -> (Grid<D>, Vec<Vector<D>>, Vec<Vector<D>>, Vec<bool>, u32) {
+    let dims: [usize; D] = std::array::from_fn(|_| rng.random_range(3..if D == 2 { 8 } else { 5 }));
+    let g = Grid::new(dims);
+    let mu = rng.random_range(1..=8u32);
+    let solid: Vec<bool> = (0..g.num_cells())
+        .map(|_| rng.random::<f64>() < 0.1)
+        .collect();
+    let snap = |v: f64| if lattice { (v * 4.0).round() / 4.0 } else { v };
+    let mut x_bar = vec![];
+    for c in 0..g.num_cells() {
+        if solid[c] {
+            continue;
+        }
+        let n = match rng.random::<f64>() {
+            r if r < 0.45 => mu,
+            r if r < 0.75 => rng.random_range(0..=mu),
+            _ => 0,
+        };
+        let cell = g.cell_coords(c);
+        for _ in 0..n {
+            x_bar.push(Vector::<D>::from_fn(|k, _| {
+                cell[k] as f64 + rng.random_range(0.01..0.99)
+            }));
+        }
+    }
+    let x_hat = x_bar
+        .iter()
+        .map(|x| {
+            Vector::<D>::from_fn(|k, _| {
+                let v = snap(x[k] + rng.random_range(-0.99..0.99));
+                v.clamp(0.001, dims[k] as f64 - 0.001)
+            })
+        })
+        .collect();
+    (g, x_bar, x_hat, solid, mu)
+}
+
+fn agree_on_random_instances<const D: usize>(count: usize, seed: u64) {
+    let mut rng = StdRng::seed_from_u64(seed);
+    let mut constrained = 0;
+    for n in 0..count {
+        let (g, x_bar, x_hat, solid, mu) = random_instance::<D>(&mut rng, n % 2 == 0);
+        let prev = Markings::compute(&g, &x_bar, &solid);
+        let dirs = if n % 5 == 4 {
+            Directions::Moore
+        } else {
+            Directions::VonNeumann
+        };
+        let p = problem::build(&g, &x_bar, &x_hat, &prev, &solid, mu, dirs).unwrap();
+        let a = &p.assignment;
+        let (flow, stats) = min_cost_flow::solve(a).unwrap_or_else(|e| panic!("instance {n}: {e}"));
+        let simplex = lp::solve(a).unwrap_or_else(|e| panic!("instance {n}: {e}"));
+        a.check(&flow)
+            .unwrap_or_else(|e| panic!("instance {n}, flow: {e}"));
+        a.check(&simplex)
+            .unwrap_or_else(|e| panic!("instance {n}, simplex: {e}"));
+        let (of, os) = (a.objective(&flow), a.objective(&simplex));
+        assert!(
+            (of - os).abs() <= 1e-9 * os.abs().max(1.0),
+            "instance {n} ({D}D, mu {mu}): flow {of} vs simplex {os}"
+        );
+        constrained += (stats.augmentations > 0) as usize;
+    }
+    // Most instances must actually exercise the repair, or the test proves little.
+    assert!(
+        constrained > count / 2,
+        "only {constrained} of {count} instances had conflicts"
+    );
+}
+
+#[test]
+fn flow_and_simplex_agree_on_600_random_2d_instances() {
+    agree_on_random_instances::<2>(600, 11);
+}
+
+#[test]
+fn flow_and_simplex_agree_on_500_random_3d_instances() {
+    agree_on_random_instances::<3>(500, 12);
+}
+
+#[test]
+fn flow_work_grows_with_conflicts_not_particles() {
+    // 90,000 particles at rest, one per cell (mu = 1), one of them advected into a full
+    // neighbour: the repair settles a handful of cells, not the grid.
+    let g = Grid::new([300, 300]);
+    let x_bar: Vec<Vector<2>> = (0..g.num_cells())
+        .map(|c| g.center(g.cell_coords(c)))
+        .collect();
+    let mut x_hat = x_bar.clone();
+    let j = g.cell_index([150, 150]);
+    x_hat[j][0] += 0.8;
+    let solid = vec![false; g.num_cells()];
+    let prev = Markings::compute(&g, &x_bar, &solid);
+    let p = problem::build(&g, &x_bar, &x_hat, &prev, &solid, 1, Directions::VonNeumann).unwrap();
+    let (choice, stats) = min_cost_flow::solve(&p.assignment).unwrap();
+    p.assignment.check(&choice).unwrap();
+    assert_eq!(stats.overfull_bins, 1);
+    assert!(stats.nodes_settled < 50, "{stats:?}");
+    // The particle is blocked: it stays in its cell, at the wall nearest to where it wanted to go.
+    assert_eq!(g.cell_index_of(&p.cand_pos[choice[j] as usize]), j);
+}
+
+/// Runs a scene with method ccp; every step checks eq. problem3's guarantees (inside `step`).
+fn run_ccp<const D: usize>(
+    name: &str,
+    overrides: Overrides,
+    steps: u64,
+    cross_check: bool,
+) -> Vec<f64> {
+    let overrides = Overrides {
+        method: Some("ccp".into()),
+        ..overrides
+    };
+    let scene = Scene::load(name, &overrides).unwrap();
+    let mut config = scene.config::<D>();
+    config.correction.cross_check = cross_check;
+    let mut sim = Simulation::<D>::new(config);
+    let mut volumes = vec![sim.volume_percent()];
+    for _ in 0..steps {
+        let rep = sim
+            .step()
+            .unwrap_or_else(|e| panic!("{name} step {}: {e}", sim.steps + 1));
+        let c = rep.correction.expect("ccp corrects every step");
+        assert!(
+            c.fallback.is_none(),
+            "{name} step {}: {:?}",
+            sim.steps,
+            c.fallback
+        );
+        if cross_check {
+            let d = c
+                .cross_check
+                .unwrap()
+                .unwrap_or_else(|e| panic!("{name} step {}: {e}", sim.steps));
+            assert!(
+                d <= 1e-9,
+                "{name} step {}: objectives differ by {d:e}",
+                sim.steps
+            );
+        }
+        volumes.push(rep.volume_percent);
+    }
+    volumes
+}
+
+#[test]
+fn flow_and_simplex_agree_on_real_dam_and_drop_steps() {
+    run_ccp::<2>("dam-2d", Overrides::default(), 25, true);
+    run_ccp::<2>("drop-2d", Overrides::default(), 25, true);
+}
+
+#[test]
+fn volume_never_drops_below_100_percent_2d() {
+    for name in ["dam-2d", "drop-2d"] {
+        let v = run_ccp::<2>(name, Overrides::default(), 300, false);
+        let min = v.iter().cloned().fold(f64::INFINITY, f64::min);
+        assert!(min >= 100.0 - 1e-9, "{name}: volume fell to {min}%");
+    }
+}
+
+#[test]
+fn one_particle_per_cell_keeps_exactly_100_percent() {
+    let v = run_ccp::<2>("dam-1ppc-2d", Overrides::default(), 300, false);
+    for (step, x) in v.iter().enumerate() {
+        assert!((x - 100.0).abs() < 1e-9, "step {step}: {x}%");
+    }
+}
+
+#[test]
+fn volume_never_drops_below_100_percent_3d() {
+    let small = Overrides {
+        cells: Some(24),
+        ..Default::default()
+    };
+    let v = run_ccp::<3>("dam-3d", small.clone(), 60, false);
+    let min = v.iter().cloned().fold(f64::INFINITY, f64::min);
+    assert!(min >= 100.0 - 1e-9, "dam-3d: volume fell to {min}%");
+    run_ccp::<3>(
+        "drop-3d",
+        Overrides {
+            cells: Some(12),
+            ..small
+        },
+        10,
+        true,
+    );
+}
