@@ -36,21 +36,31 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         };
         let scene = Scene::load(&args.scene, &overrides)?;
         match scene.dim() {
-            2 => bench_dim::<2>(&scene, args.steps)?,
-            _ => bench_dim::<3>(&scene, args.steps)?,
+            2 => bench_dim::<2>(&scene, args)?,
+            _ => bench_dim::<3>(&scene, args)?,
         }
     }
     Ok(())
 }
 
-fn bench_dim<const D: usize>(scene: &Scene, steps: u64) -> Result<()> {
-    let mut sim = Simulation::<D>::new(scene.config::<D>());
+fn bench_dim<const D: usize>(scene: &Scene, args: &BenchArgs) -> Result<()> {
+    let mut config = scene.config::<D>();
+    config.correction.cross_check = args.cross_check;
+    let mut sim = Simulation::<D>::new(config);
     sim.step()?;
+    let mut solver_times = vec![];
+    let mut other_times = vec![];
     let mut per_stage: Vec<Vec<Duration>> = vec![vec![]; Stage::ALL.len()];
     let mut totals = vec![];
     let mut iters = vec![];
-    for _ in 0..steps {
+    for _ in 0..args.steps {
         let rep = sim.step()?;
+        if let Some(c) = &rep.correction {
+            solver_times.push(c.solver_time);
+            if let Some(t) = c.cross_check_time {
+                other_times.push(t);
+            }
+        }
         for s in Stage::ALL {
             per_stage[s as usize].push(rep.times.get(s));
         }
@@ -75,11 +85,46 @@ fn bench_dim<const D: usize>(scene: &Scene, steps: u64) -> Result<()> {
             median(per_stage[s as usize].clone()).as_secs_f64() * 1e3
         );
     }
-    println!(
-        "  {:<10} {:>12.2}",
-        "step",
-        median(totals).as_secs_f64() * 1e3
-    );
+    let step = median(totals.clone());
+    println!("  {:<10} {:>12.2}", "step", step.as_secs_f64() * 1e3);
+    let correct = &per_stage[Stage::Correct as usize];
+    if !solver_times.is_empty() {
+        let mut share: Vec<f64> = correct
+            .iter()
+            .zip(&totals)
+            .map(|(c, t)| c.as_secs_f64() / t.as_secs_f64())
+            .collect();
+        share.sort_by(f64::total_cmp);
+        let share = if other_times.is_empty() {
+            format!(
+                "; correction stage {:.1}% of the step (median of per-step shares)",
+                100.0 * share[share.len() / 2]
+            )
+        } else {
+            String::new() // the stage also timed the cross-check
+        };
+        println!(
+            "  correction: {} solver median {:.2} ms{share}",
+            scene.correction.solver.name(),
+            median(solver_times.clone()).as_secs_f64() * 1e3,
+        );
+    }
+    if !other_times.is_empty() {
+        let mut ratios: Vec<f64> = other_times
+            .iter()
+            .zip(&solver_times)
+            .map(|(o, s)| o.as_secs_f64() / s.as_secs_f64().max(1e-9))
+            .collect();
+        ratios.sort_by(f64::total_cmp);
+        println!(
+            "  same problems, other solver: median {:.2} ms; ratio other / {} median {:.0}x (min {:.0}x, max {:.0}x)",
+            median(other_times).as_secs_f64() * 1e3,
+            scene.correction.solver.name(),
+            ratios[ratios.len() / 2],
+            ratios[0],
+            ratios[ratios.len() - 1]
+        );
+    }
     if let Some(m) = peak_memory_mib() {
         println!("  peak memory (process so far): {m:.0} MiB");
     }

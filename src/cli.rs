@@ -96,4 +96,7 @@ pub struct BenchArgs {
     /// The fluid method.
     #[arg(long)]
     pub method: Option<String>,
+    /// Method ccp: also solve every correction with the other solver and compare their times.
+    #[arg(long)]
+    pub cross_check: bool,
 }

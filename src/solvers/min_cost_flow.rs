@@ -165,6 +165,9 @@ struct Network<'a> {
     link_cand: Vec<u32>,
     heap: BinaryHeap<Entry>,
     visited: Vec<u32>,
+    /// Smallest tentative distance of a target in the current search: nothing farther can lead
+    /// to a nearer target (costs are non-negative), so nothing farther is queued.
+    bound: f64,
     stats: FlowStats,
 }
 
@@ -221,6 +224,7 @@ impl<'a> Network<'a> {
             link_cand: vec![NONE; nodes],
             heap: BinaryHeap::new(),
             visited: vec![],
+            bound: f64::INFINITY,
             stats: FlowStats::default(),
         }
     }
@@ -233,10 +237,19 @@ impl<'a> Network<'a> {
         self.search += 1;
         self.heap.clear();
         self.visited.clear();
-        self.touch(start, 0.0, NONE, NONE);
+        self.bound = f64::INFINITY;
+        self.touch(start, 0.0, NONE, NONE, false);
     }
 
-    fn touch(&mut self, v: u32, d: f64, node: u32, cand: u32) {
+    /// Offers distance `d` to node `v` (reached over `node` by moving candidate `cand`);
+    /// `target` says whether `v` ends the search.
+    fn touch(&mut self, v: u32, d: f64, node: u32, cand: u32, target: bool) {
+        if d > self.bound {
+            return;
+        }
+        if target {
+            self.bound = d;
+        }
         let i = v as usize;
         if self.stamp[i] != self.search {
             self.stamp[i] = self.search;
@@ -312,13 +325,15 @@ impl<'a> Network<'a> {
                 for k2 in self.p.candidates(item) {
                     if k2 != k {
                         let rc = self.reduced(k, k2);
-                        self.touch(self.p.cand_bin[k2], d + rc, v, k2 as u32);
+                        let b = self.p.cand_bin[k2];
+                        let target = b != s && self.load[b as usize] < self.p.lower[b as usize];
+                        self.touch(b, d + rc, v, k2 as u32, target);
                     }
                 }
             }
             if self.sink_flow[vi] < self.p.upper[vi] {
                 let rc = (self.potential[t as usize] - self.potential[vi]).max(0.0);
-                self.touch(t, d + rc, v, NONE);
+                self.touch(t, d + rc, v, NONE, true);
             }
         };
         self.lift_after_forward(target.0);
@@ -359,12 +374,12 @@ impl<'a> Network<'a> {
                 let k = self.choice[item] as usize;
                 if k != k2 {
                     let rc = self.reduced(k, k2);
-                    self.touch(self.p.cand_bin[k], r + rc, v, k2 as u32);
+                    self.touch(self.p.cand_bin[k], r + rc, v, k2 as u32, false);
                 }
             }
             if self.sink_flow[vi] > self.p.lower[vi] {
                 let rc = (self.potential[vi] - self.potential[t as usize]).max(0.0);
-                self.touch(t, r + rc, v, NONE);
+                self.touch(t, r + rc, v, NONE, true);
             }
         };
         self.lift_after_reverse(reach);

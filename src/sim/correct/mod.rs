@@ -81,6 +81,8 @@ pub struct CorrectionReport<const D: usize> {
     pub fallback: Option<String>,
     /// `|objective(other solver) - objective| / max(1, |objective|)`, with `cross_check`.
     pub cross_check: Option<Result<f64, String>>,
+    /// Time the other solver took on the same problem, with `cross_check`.
+    pub cross_check_time: Option<Duration>,
     /// `(x_hat, x)` of the moved particles.
     pub moves: Vec<(Vector<D>, Vector<D>)>,
     /// The problem as free-format MPS, when asked for.
@@ -129,7 +131,10 @@ pub fn correct<const D: usize>(
             Solver::Flow => Solver::Simplex,
             Solver::Simplex => Solver::Flow,
         };
-        rep.cross_check = Some(other.solve(&problem.assignment).and_then(|(c, _)| {
+        let t1 = Instant::now();
+        let other_result = other.solve(&problem.assignment);
+        rep.cross_check_time = Some(t1.elapsed());
+        rep.cross_check = Some(other_result.and_then(|(c, _)| {
             problem.assignment.check(&c)?;
             let o = problem.assignment.objective(&c);
             Ok((o - rep.objective).abs() / rep.objective.abs().max(1.0))
