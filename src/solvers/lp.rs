@@ -9,6 +9,9 @@ use crate::solvers::min_cost_flow::BoundedAssignment;
 use microlp::{ComparisonOp, OptimizationDirection, Problem};
 use std::fmt::Write as _;
 
+/// A simplex run longer than this gives up; the caller falls back to a feasible assignment.
+pub const TIME_LIMIT: std::time::Duration = std::time::Duration::from_secs(120);
+
 /// Why the simplex gave no assignment.
 #[derive(Clone, Debug, PartialEq)]
 pub enum LpError {
@@ -48,6 +51,7 @@ fn binding_bins(p: &BoundedAssignment) -> Vec<bool> {
 /// Solves the LP relaxation and returns the chosen candidate of every item.
 pub fn solve(p: &BoundedAssignment) -> Result<Vec<u32>, LpError> {
     let mut lp = Problem::new(OptimizationDirection::Minimize);
+    lp.set_time_limit(TIME_LIMIT);
     let vars: Vec<_> = p
         .cand_cost
         .iter()
@@ -74,7 +78,12 @@ pub fn solve(p: &BoundedAssignment) -> Result<Vec<u32>, LpError> {
         .solve()
         .map_err(|e| LpError::Solver(e.to_string()))?
         .into_solution()
-        .map_err(|_| LpError::Solver("interrupted before an optimum".into()))?;
+        .map_err(|_| {
+            LpError::Solver(format!(
+                "no optimum within the {} s time limit",
+                TIME_LIMIT.as_secs()
+            ))
+        })?;
     (0..p.items())
         .map(|i| {
             let values: Vec<f64> = p
