@@ -23,9 +23,10 @@ fn median(mut v: Vec<Duration>) -> Duration {
 
 pub fn bench(args: &BenchArgs) -> Result<()> {
     println!(
-        "scene {}, {} measured steps per resolution after 1 warm-up step, {} threads",
+        "scene {}, {} measured steps per resolution after {} warm-up steps, {} threads",
         args.scene,
         args.steps,
+        args.warmup,
         rayon::current_num_threads()
     );
     for &res in &args.res {
@@ -47,7 +48,9 @@ fn bench_dim<const D: usize>(scene: &Scene, args: &BenchArgs) -> Result<()> {
     let mut config = scene.config::<D>();
     config.correction.cross_check = args.cross_check;
     let mut sim = Simulation::<D>::new(config);
-    sim.step()?;
+    for _ in 0..args.warmup {
+        sim.step()?;
+    }
     let mut solver_times = vec![];
     let mut other_times = vec![];
     let mut per_stage: Vec<Vec<Duration>> = vec![vec![]; Stage::ALL.len()];

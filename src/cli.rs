@@ -18,7 +18,7 @@ pub enum Command {
     List,
     /// Run a scene and write a Rerun recording.
     Run(RunArgs),
-    /// Measure per-stage step times and peak memory on a 3D scene.
+    /// Measure per-stage step times, peak memory and (ccp) the solvers on a scene.
     Bench(BenchArgs),
     /// Compare with experiment: Martin & Moyce's dam break and water at rest.
     Validate(ValidateArgs),
@@ -74,7 +74,7 @@ pub struct RunArgs {
     /// Do not write a recording.
     #[arg(long)]
     pub no_record: bool,
-    /// Record particles and markings every N steps (metrics are recorded every step).
+    /// Record particles, markings and correction moves every N steps (metrics: every step).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
     pub record_every: u64,
     /// No progress bar and no summary.
@@ -90,9 +90,12 @@ pub struct BenchArgs {
     /// Resolutions (cells along the longest axis), comma-separated.
     #[arg(long, value_delimiter = ',', default_values_t = [64usize, 100])]
     pub res: Vec<usize>,
-    /// Steps measured per resolution (after one warm-up step).
+    /// Steps measured per resolution.
     #[arg(long, default_value_t = 10)]
     pub steps: u64,
+    /// Steps run before measuring (at least 1).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
+    pub warmup: u64,
     /// The fluid method.
     #[arg(long)]
     pub method: Option<String>,

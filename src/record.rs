@@ -324,7 +324,9 @@ impl Recorder {
                                 .with_level(rerun::TextLogLevel::WARN),
                         )?;
                     }
-                    self.log_moves(&c.moves)?;
+                    if full {
+                        self.log_moves(&c.moves)?;
+                    }
                 }
                 if rep.dt_shortened {
                     self.rec.log(

@@ -26,10 +26,7 @@ fn random_instance<const D: usize>(
         .collect();
     let snap = |v: f64| if lattice { (v * 4.0).round() / 4.0 } else { v };
     let mut x_bar = vec![];
-    for c in 0..g.num_cells() {
-        if solid[c] {
-            continue;
-        }
+    for (c, _) in solid.iter().enumerate().filter(|(_, s)| !**s) {
         let n = match rng.random::<f64>() {
             r if r < 0.45 => mu,
             r if r < 0.75 => rng.random_range(0..=mu),
