@@ -150,6 +150,9 @@ struct Network<'a> {
     bin_cands: Vec<u32>,
     choice: Vec<u32>,
     load: Vec<u32>,
+    /// Items currently in each bin, and each item's place in its bin's list.
+    bin_items: Vec<Vec<u32>>,
+    slot: Vec<u32>,
     /// Flow on the arc bin -> t, kept within `[lower, upper]`.
     sink_flow: Vec<u32>,
     /// Node potentials; node `bins()` is the sink `t`.
@@ -200,8 +203,13 @@ impl<'a> Network<'a> {
             fill[b as usize] += 1;
         }
         let mut load = vec![0u32; bins];
-        for &k in &choice {
-            load[p.cand_bin[k as usize] as usize] += 1;
+        let mut bin_items: Vec<Vec<u32>> = vec![vec![]; bins];
+        let mut slot = vec![0u32; choice.len()];
+        for (item, &k) in choice.iter().enumerate() {
+            let b = p.cand_bin[k as usize] as usize;
+            load[b] += 1;
+            slot[item] = bin_items[b].len() as u32;
+            bin_items[b].push(item as u32);
         }
         let sink_flow = (0..bins)
             .map(|b| load[b].clamp(p.lower[b], p.upper[b]))
@@ -214,6 +222,8 @@ impl<'a> Network<'a> {
             bin_cands,
             choice,
             load,
+            bin_items,
+            slot,
             sink_flow,
             potential: vec![0.0; nodes],
             search: 0,
@@ -316,12 +326,9 @@ impl<'a> Network<'a> {
                 break (d, v);
             }
             // Items now in `v` moving to another of their candidates.
-            for idx in self.bin_start[vi]..self.bin_start[vi + 1] {
-                let k = self.bin_cands[idx] as usize;
-                let item = self.cand_item[k] as usize;
-                if self.choice[item] as usize != k {
-                    continue;
-                }
+            for idx in 0..self.bin_items[vi].len() {
+                let item = self.bin_items[vi][idx] as usize;
+                let k = self.choice[item] as usize;
                 for k2 in self.p.candidates(item) {
                     if k2 != k {
                         let rc = self.reduced(k, k2);
@@ -403,6 +410,14 @@ impl<'a> Network<'a> {
         self.choice[item] = to_cand as u32;
         self.load[from as usize] -= 1;
         self.load[to as usize] += 1;
+        let list = &mut self.bin_items[from as usize];
+        let at = self.slot[item] as usize;
+        list.swap_remove(at);
+        if let Some(&other) = list.get(at) {
+            self.slot[other as usize] = at as u32;
+        }
+        self.slot[item] = self.bin_items[to as usize].len() as u32;
+        self.bin_items[to as usize].push(item as u32);
     }
 }
 
