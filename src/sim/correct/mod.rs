@@ -110,7 +110,11 @@ pub fn correct<const D: usize>(
         ..Default::default()
     };
     let t0 = Instant::now();
-    let solved = settings.solver.solve(&problem.assignment);
+    // An answer that breaks a constraint counts as a failure of the solver.
+    let solved = settings
+        .solver
+        .solve(&problem.assignment)
+        .and_then(|(choice, aug)| problem.assignment.check(&choice).map(|()| (choice, aug)));
     rep.solver_time = t0.elapsed();
     let choice = match solved {
         Ok((choice, augmentations)) => {
