@@ -295,7 +295,7 @@ impl Recorder {
                 }
                 if let Some(c) = &rep.correction {
                     scalar("metrics/correction/objective", c.objective)?;
-                    scalar("metrics/correction/moved", c.moved as f64)?;
+                    scalar("metrics/correction/moved", c.moves.len() as f64)?;
                     scalar(
                         "metrics/correction/overfull_before",
                         c.overfull_before as f64,

@@ -67,7 +67,7 @@ impl Summary {
         self.dt_shortened += rep.dt_shortened as u64;
         if let Some(c) = &rep.correction {
             self.corrections += 1;
-            self.moved += c.moved as u64;
+            self.moved += c.moves.len() as u64;
             self.overfull_max = self.overfull_max.max(c.overfull_before);
             self.fallbacks += c.fallback.is_some() as u64;
             if let Some(Ok(d)) = c.cross_check {

@@ -113,7 +113,10 @@ fn flow_work_grows_with_conflicts_not_particles() {
     assert_eq!(stats.overfull_bins, 1);
     assert!(stats.nodes_settled < 50, "{stats:?}");
     // The particle is blocked: it stays in its cell, at the wall nearest to where it wanted to go.
-    assert_eq!(g.cell_index_of(&p.cand_pos[choice[j] as usize]), j);
+    assert_eq!(
+        g.cell_index_of(&p.position(&g, choice[j] as usize, &x_hat[j])),
+        j
+    );
 }
 
 /// Runs a scene with method ccp; every step checks eq. problem3's guarantees (inside `step`).

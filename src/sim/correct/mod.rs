@@ -11,6 +11,7 @@ use crate::grid::{Grid, Vector};
 use crate::sim::markings::Markings;
 use crate::solvers::{lp, min_cost_flow};
 use problem::{BuildError, CorrectionProblem, Directions};
+use rayon::prelude::*;
 use std::time::{Duration, Instant};
 
 /// Which solver corrects the positions.
@@ -70,8 +71,6 @@ impl Default for CorrectionSettings {
 pub struct CorrectionReport<const D: usize> {
     /// `sum sigma_obj` of the final positions.
     pub objective: f64,
-    /// Particles that end in another cell than the one their advected position is in.
-    pub moved: usize,
     /// Cells holding more than `mu` particles after advection, before the correction.
     pub overfull_before: usize,
     pub solver_time: Duration,
@@ -83,7 +82,8 @@ pub struct CorrectionReport<const D: usize> {
     pub cross_check: Option<Result<f64, String>>,
     /// Time the other solver took on the same problem, with `cross_check`.
     pub cross_check_time: Option<Duration>,
-    /// `(x_hat, x)` of the moved particles.
+    /// `(x_hat, x)` of the particles that end in another cell than the one their advected
+    /// position is in.
     pub moves: Vec<(Vector<D>, Vector<D>)>,
     /// The problem as free-format MPS, when asked for.
     pub mps: Option<String>,
@@ -174,12 +174,14 @@ fn apply<const D: usize>(
     pos: &mut [Vector<D>],
     rep: &mut CorrectionReport<D>,
 ) {
-    for (x, &k) in pos.iter_mut().zip(choice) {
-        let new = problem.cand_pos[k as usize];
-        if grid.cell_index_of(&new) != grid.cell_index_of(x) {
-            rep.moved += 1;
-            rep.moves.push((*x, new));
-        }
-        *x = new;
-    }
+    // In parallel, keeping particle order: the move of each particle sent to another cell.
+    rep.moves = pos
+        .par_iter_mut()
+        .zip(choice)
+        .filter_map(|(x, &k)| {
+            let x_hat = *x;
+            *x = problem.position(grid, k as usize, &x_hat);
+            (grid.cell_index_of(x) != grid.cell_index_of(&x_hat)).then_some((x_hat, *x))
+        })
+        .collect();
 }

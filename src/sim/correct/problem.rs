@@ -13,6 +13,7 @@ use crate::grid::{Cell, Grid, Vector};
 use crate::sim::advect::CELL_MARGIN;
 use crate::sim::markings::{CellKind, Markings};
 use crate::solvers::min_cost_flow::BoundedAssignment;
+use rayon::prelude::*;
 
 /// The candidate moves of a particle (sec. grid_move).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -62,10 +63,17 @@ pub struct CorrectionProblem<const D: usize> {
     pub assignment: BoundedAssignment,
     /// Grid cell of each bin.
     pub bin_cell: Vec<usize>,
-    /// `xi`, parallel to `assignment.cand_bin`.
-    pub cand_pos: Vec<Vector<D>>,
     /// Index of the "stay" candidate of each particle (its cell of `x_bar`).
     pub stay: Vec<u32>,
+}
+
+impl<const D: usize> CorrectionProblem<D> {
+    /// `xi` of candidate `k` for a particle advected to `x_hat`: the point of the candidate's
+    /// cell closest to `x_hat`, epsilon inside (eq. best_cell_pos).
+    pub fn position(&self, grid: &Grid<D>, k: usize, x_hat: &Vector<D>) -> Vector<D> {
+        let cell = self.bin_cell[self.assignment.cand_bin[k] as usize];
+        grid.closest_in_cell(x_hat, grid.cell_coords(cell), CELL_MARGIN)
+    }
 }
 
 /// A problem that cannot be built: a bug upstream, reported with the particle.
@@ -93,6 +101,8 @@ fn offset_cell<const D: usize>(grid: &Grid<D>, c: Cell<D>, o: &[i64; D]) -> Opti
     Some(out)
 }
 
+const DROPPED: u32 = u32::MAX;
+
 /// Builds eq. problem3 from the previous positions `x_bar`, the advected positions `x_hat`, the
 /// previous markings (with counts `|gamma_bar_c|`) and the current solid cells. An upper bound
 /// is never below the previous count, so `x_bar` is always feasible.
@@ -106,76 +116,85 @@ pub fn build<const D: usize>(
     directions: Directions,
 ) -> Result<CorrectionProblem<D>, BuildError> {
     let offsets = directions.offsets::<D>();
+    let m = offsets.len();
+    // In parallel: every particle's candidate cells (DROPPED outside the domain or in a solid)
+    // and costs, in slots of `m`; the stay move is slot 0.
+    let mut slot_cell = vec![DROPPED; x_bar.len() * m];
+    let mut slot_cost = vec![0.0; x_bar.len() * m];
+    slot_cell
+        .par_chunks_mut(m)
+        .zip(slot_cost.par_chunks_mut(m))
+        .zip(x_bar.par_iter().zip(x_hat))
+        .enumerate()
+        .try_for_each(|(j, ((cells, costs), (xb, xh)))| {
+            let err = |reason: String| BuildError {
+                particle: j,
+                reason,
+            };
+            if !xh.iter().all(|v| v.is_finite()) {
+                return Err(err(format!(
+                    "advected position {:?} is not finite",
+                    xh.as_slice()
+                )));
+            }
+            let Some(home) = grid.cell_of(xb) else {
+                return Err(err(format!(
+                    "previous position {:?} is outside the domain",
+                    xb.as_slice()
+                )));
+            };
+            if !grid.contains(xh) {
+                return Err(err(format!(
+                    "advected position {:?} is outside the domain",
+                    xh.as_slice()
+                )));
+            }
+            for (i, o) in offsets.iter().enumerate() {
+                let Some(c) = offset_cell(grid, home, o) else {
+                    continue;
+                };
+                let ci = grid.cell_index(c);
+                if !solid[ci] {
+                    cells[i] = ci as u32;
+                    costs[i] = (grid.closest_in_cell(xh, c, CELL_MARGIN) - xh).norm_squared();
+                }
+            }
+            if cells[0] == DROPPED {
+                return Err(err(format!("its previous cell {home:?} is solid")));
+            }
+            Ok(())
+        })?;
+    // In order: number the cells that candidates reach and pack the candidates.
     let mut bin_of_cell = vec![u32::MAX; grid.num_cells()];
     let mut p = CorrectionProblem {
         assignment: BoundedAssignment {
             item_start: Vec::with_capacity(x_bar.len() + 1),
-            cand_bin: Vec::with_capacity(x_bar.len() * offsets.len()),
-            cand_cost: Vec::with_capacity(x_bar.len() * offsets.len()),
+            cand_bin: Vec::with_capacity(slot_cell.len()),
+            cand_cost: Vec::with_capacity(slot_cell.len()),
             ..Default::default()
         },
         bin_cell: vec![],
-        cand_pos: Vec::with_capacity(x_bar.len() * offsets.len()),
         stay: Vec::with_capacity(x_bar.len()),
     };
     let a = &mut p.assignment;
     a.item_start.push(0);
-    for (j, (xb, xh)) in x_bar.iter().zip(x_hat).enumerate() {
-        let err = |reason: String| BuildError {
-            particle: j,
-            reason,
-        };
-        if !xh.iter().all(|v| v.is_finite()) {
-            return Err(err(format!(
-                "advected position {:?} is not finite",
-                xh.as_slice()
-            )));
-        }
-        let Some(home) = grid.cell_of(xb) else {
-            return Err(err(format!(
-                "previous position {:?} is outside the domain",
-                xb.as_slice()
-            )));
-        };
-        if !grid.contains(xh) {
-            return Err(err(format!(
-                "advected position {:?} is outside the domain",
-                xh.as_slice()
-            )));
-        }
-        let mut stay = None;
-        for o in &offsets {
-            let Some(c) = offset_cell(grid, home, o) else {
-                continue;
-            };
-            let ci = grid.cell_index(c);
-            if solid[ci] {
-                continue;
-            }
+    for (cells, costs) in slot_cell.chunks(m).zip(slot_cost.chunks(m)) {
+        p.stay.push(a.cand_bin.len() as u32);
+        for (&ci, &cost) in cells.iter().zip(costs).filter(|(c, _)| **c != DROPPED) {
+            let ci = ci as usize;
             if bin_of_cell[ci] == u32::MAX {
                 bin_of_cell[ci] = p.bin_cell.len() as u32;
                 p.bin_cell.push(ci);
                 let prev = previous.count[ci];
-                let upper = mu.max(prev);
-                let lower = match previous.kind[ci] {
+                a.upper.push(mu.max(prev));
+                a.lower.push(match previous.kind[ci] {
                     CellKind::Fluid if !previous.surface[ci] => prev,
                     _ => 0,
-                };
-                a.lower.push(lower);
-                a.upper.push(upper);
-            }
-            let xi = grid.closest_in_cell(xh, c, CELL_MARGIN);
-            if *o == [0; D] {
-                stay = Some(a.cand_bin.len() as u32);
+                });
             }
             a.cand_bin.push(bin_of_cell[ci]);
-            a.cand_cost.push((xi - xh).norm_squared());
-            p.cand_pos.push(xi);
+            a.cand_cost.push(cost);
         }
-        let Some(stay) = stay else {
-            return Err(err(format!("its previous cell {home:?} is solid")));
-        };
-        p.stay.push(stay);
         a.item_start.push(a.cand_bin.len());
     }
     Ok(p)
@@ -210,7 +229,10 @@ mod tests {
         assert_eq!(a.candidates(1).len(), 3);
         // Its stay candidate is the closest point of cell (1,1) to x_hat, epsilon inside.
         let s = p.stay[0] as usize;
-        assert!((p.cand_pos[s] - Vector::<2>::new(2.0 - CELL_MARGIN, 1.5)).norm() < 1e-12);
+        assert!(
+            (p.position(&g, s, &x_hat[0]) - Vector::<2>::new(2.0 - CELL_MARGIN, 1.5)).norm()
+                < 1e-12
+        );
         assert!((a.cand_cost[s] - (0.5 + CELL_MARGIN).powi(2)).abs() < 1e-12);
         // The +x candidate is x_hat itself, at zero cost.
         let best = a
