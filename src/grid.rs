@@ -177,12 +177,18 @@ impl<const D: usize> MacField<D> {
         }
     }
 
-    /// Largest absolute face value over all components.
+    /// Largest absolute face value over all components; NaN if any value is NaN.
     pub fn max_abs(&self) -> f64 {
         self.comp
             .iter()
             .flat_map(|c| c.iter())
-            .fold(0.0f64, |m, v| m.max(v.abs()))
+            .fold(0.0f64, |m, v| {
+                if m.is_nan() || v.is_nan() {
+                    f64::NAN
+                } else {
+                    m.max(v.abs())
+                }
+            })
     }
 
     /// Multilinear interpolation of the field at `x` (grid units).

@@ -108,3 +108,22 @@ fn thread_count_does_not_change_the_result() {
     };
     assert_eq!(with_threads(1), with_threads(3));
 }
+
+#[test]
+fn a_non_finite_state_stops_the_step_with_an_error_not_a_panic() {
+    for method in ["flip", "ccp"] {
+        let scene = Scene::load(
+            "drop-2d",
+            &Overrides {
+                method: Some(method.into()),
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let mut sim = Simulation::<2>::new(scene.config::<2>());
+        sim.step().unwrap();
+        sim.particles.vel[7][0] = f64::NAN;
+        let err = sim.step().expect_err("a NaN velocity must not pass");
+        assert!(err.0.contains("not finite"), "{method}: {err}");
+    }
+}

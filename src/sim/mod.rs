@@ -257,6 +257,12 @@ impl<const D: usize> Simulation<D> {
             stats
         });
         rep.max_speed = u.max_abs();
+        if !rep.max_speed.is_finite() {
+            return Err(InvariantViolation(format!(
+                "the grid velocity is not finite after the pressure solve ({:?})",
+                rep.pcg
+            )));
+        }
         if rep.max_speed * dt > c.cfl {
             dt = c.cfl / rep.max_speed;
             rep.dt_shortened = true;
