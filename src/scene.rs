@@ -364,38 +364,30 @@ fn check(source: &str, file: SceneFile) -> Result<Scene> {
         ));
     }
     let s = &file.simulation;
-    let method = Method::from_name(&s.method).ok_or_else(|| {
-        let names: Vec<&str> = Method::ALL.iter().map(|m| m.name()).collect();
-        err(
-            "simulation.method",
-            format!(
-                "unknown method '{}' (known: {})",
-                s.method,
-                names.join(", ")
-            ),
-        )
-    })?;
-    let solver = Solver::from_name(&s.solver).ok_or_else(|| {
-        let names: Vec<&str> = Solver::ALL.iter().map(|m| m.name()).collect();
-        err(
-            "simulation.solver",
-            format!(
-                "unknown solver '{}' (known: {})",
-                s.solver,
-                names.join(", ")
-            ),
-        )
-    })?;
-    let directions = match s.directions.as_str() {
-        "von-neumann" => Directions::VonNeumann,
-        "moore" => Directions::Moore,
-        other => {
-            return Err(err(
-                "simulation.directions",
-                format!("unknown directions '{other}' (known: von-neumann, moore)"),
-            ))
-        }
+    // A named choice: the value must be one of `options`.
+    let pick = |key: &str, value: &str, options: &[&str]| -> Result<usize> {
+        options.iter().position(|o| *o == value).ok_or_else(|| {
+            err(
+                key,
+                format!("unknown value '{value}' (known: {})", options.join(", ")),
+            )
+        })
     };
+    let method = Method::ALL[pick(
+        "simulation.method",
+        &s.method,
+        &Method::ALL.map(Method::name),
+    )?];
+    let solver = Solver::ALL[pick(
+        "simulation.solver",
+        &s.solver,
+        &Solver::ALL.map(Solver::name),
+    )?];
+    let directions = [Directions::VonNeumann, Directions::Moore][pick(
+        "simulation.directions",
+        &s.directions,
+        &["von-neumann", "moore"],
+    )?];
     if !(s.duration.is_finite() && s.duration > 0.0) {
         return Err(err(
             "simulation.duration",

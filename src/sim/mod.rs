@@ -39,10 +39,6 @@ impl Method {
             Method::Ccp => "ccp",
         }
     }
-
-    pub fn from_name(s: &str) -> Option<Self> {
-        Self::ALL.into_iter().find(|m| m.name() == s)
-    }
 }
 
 /// Everything a simulation needs, in grid units (cells, seconds, cells per second).

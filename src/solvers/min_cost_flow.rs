@@ -480,29 +480,18 @@ mod tests {
         // Both items want bin 0 (capacity 1). Moving item 1 to bin 1 costs 5; moving item 0 to
         // bin 1 costs 10, but bin 1 is full unless item 2 moves on to bin 2 at cost 1: the
         // optimum moves item 1 (extra cost 5) rather than item 0 plus item 2 (extra 10 + 1).
-        let p = problem(
-            &[
-                &[(0, 0.0), (1, 10.0)],
-                &[(0, 0.0), (1, 5.0)],
-                &[(1, 0.0), (2, 1.0)],
-            ],
-            &[0, 0, 0],
-            &[1, 2, 1],
-        );
+        let items: &[&[(u32, f64)]] = &[
+            &[(0, 0.0), (1, 10.0)],
+            &[(0, 0.0), (1, 5.0)],
+            &[(1, 0.0), (2, 1.0)],
+        ];
+        let p = problem(items, &[0, 0, 0], &[1, 2, 1]);
         let (choice, stats) = solve(&p).unwrap();
         p.check(&choice).unwrap();
         assert_eq!(p.objective(&choice), 5.0);
         assert_eq!(stats.overfull_bins, 1);
         // With bin 1 capped at 1 the chain is forced: item 1 -> bin 1, item 2 -> bin 2.
-        let q = problem(
-            &[
-                &[(0, 0.0), (1, 10.0)],
-                &[(0, 0.0), (1, 5.0)],
-                &[(1, 0.0), (2, 1.0)],
-            ],
-            &[0, 0, 0],
-            &[1, 1, 1],
-        );
+        let q = problem(items, &[0, 0, 0], &[1, 1, 1]);
         let (choice, _) = solve(&q).unwrap();
         q.check(&choice).unwrap();
         assert_eq!(q.objective(&choice), 6.0);

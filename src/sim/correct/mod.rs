@@ -33,10 +33,6 @@ impl Solver {
         }
     }
 
-    pub fn from_name(s: &str) -> Option<Self> {
-        Self::ALL.into_iter().find(|m| m.name() == s)
-    }
-
     fn solve(self, p: &min_cost_flow::BoundedAssignment) -> Result<(Vec<u32>, usize), String> {
         match self {
             Solver::Flow => min_cost_flow::solve(p)
