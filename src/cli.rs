@@ -62,7 +62,15 @@ pub struct RunArgs {
     /// Candidate moves of the correction: von-neumann (paper) or moore.
     #[arg(long)]
     pub directions: Option<String>,
-    /// Solve every correction with both solvers and report their largest objective difference.
+    /// Band method of ccp (overrides `simulation.band`): none, paths (the paper's), one-way or
+    /// full (an integer program: small grids only).
+    #[arg(long)]
+    pub band: Option<String>,
+    /// Band interface depth R; the band is R + 1 cells thick (overrides `simulation.band_r`).
+    #[arg(long, value_name = "R")]
+    pub band_r: Option<u32>,
+    /// Solve every correction with both solvers and report their largest objective difference;
+    /// with a band, run every band variant on each step's problem and record their objectives.
     #[arg(long)]
     pub cross_check: bool,
     /// Write the correction problem of step N as free-format MPS next to the recording.
@@ -99,7 +107,12 @@ pub struct BenchArgs {
     /// The fluid method.
     #[arg(long)]
     pub method: Option<String>,
-    /// Method ccp: also solve every correction with the other solver and compare their times.
+    /// Band methods to compare, comma-separated (none, paths, one-way, full); the step-time
+    /// ratio to the first is printed [default: the scene's].
+    #[arg(long, value_delimiter = ',')]
+    pub band: Vec<String>,
+    /// Method ccp: also solve every correction with the other solver and compare their times;
+    /// with a band, run all band variants on each problem and compare their objectives.
     #[arg(long)]
     pub cross_check: bool,
 }

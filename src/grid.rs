@@ -193,11 +193,14 @@ impl<const D: usize> MacField<D> {
 
     /// Multilinear interpolation of the field at `x` (grid units).
     pub fn interpolate(&self, grid: &Grid<D>, x: &Vector<D>) -> Vector<D> {
-        Vector::<D>::from_fn(|a, _| {
-            let mut v = 0.0;
-            for_each_face_weight(grid, a, x, |idx, w| v += w * self.comp[a][idx]);
-            v
-        })
+        Vector::<D>::from_fn(|a, _| self.interpolate_component(grid, a, x))
+    }
+
+    /// Multilinear interpolation of component `a` at `x`.
+    pub fn interpolate_component(&self, grid: &Grid<D>, a: usize, x: &Vector<D>) -> f64 {
+        let mut v = 0.0;
+        for_each_face_weight(grid, a, x, |idx, w| v += w * self.comp[a][idx]);
+        v
     }
 }
 

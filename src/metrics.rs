@@ -1,6 +1,7 @@
 //! The volume measure of paper eq. volume, invariant checks and stage timings.
 
 use crate::grid::{Grid, Vector};
+use crate::sim::correct::problem::cell_bounds;
 use crate::sim::markings::{CellKind, Markings};
 use std::time::Duration;
 
@@ -144,15 +145,17 @@ pub fn check_particles<const D: usize>(
     Ok(())
 }
 
-/// The guarantees of the correction step (paper eq. problem3), checked from the final positions
-/// alone: no cell holds more than `mu` (or than it held before, if that was more), an inner cell
-/// of the previous markings holds at least what it held, and no solid cell holds anything.
+/// The guarantees of the correction step (paper eq. problem3, or eq. band_con_update with the
+/// band parameter `band_r`), checked from the final positions alone: every cell's count lies
+/// within its bounds ([`cell_bounds`]: at most `mu`, or what it held if that was more; inner
+/// cells keep their count; the band's deep is unbounded) and no solid cell holds anything.
 pub fn check_cell_counts<const D: usize>(
     grid: &Grid<D>,
     pos: &[Vector<D>],
     previous: &Markings,
     solid: &[bool],
     mu: u32,
+    band_r: Option<u32>,
 ) -> Result<(), InvariantViolation> {
     let mut count = vec![0u32; grid.num_cells()];
     for x in pos {
@@ -161,12 +164,13 @@ pub fn check_cell_counts<const D: usize>(
     for (c, &n) in count.iter().enumerate() {
         let prev = previous.count[c];
         let cell = grid.cell_coords(c);
-        if n > mu.max(prev) {
+        let (lower, upper) = cell_bounds(previous, c, mu, band_r);
+        if n > upper {
             return Err(InvariantViolation(format!(
                 "cell {cell:?} holds {n} particles after the correction (mu = {mu}, before: {prev})"
             )));
         }
-        if previous.is_fluid(c) && !previous.surface[c] && n < prev {
+        if n < lower {
             return Err(InvariantViolation(format!(
                 "inner cell {cell:?} lost particles in the correction: {prev} -> {n}"
             )));

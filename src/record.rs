@@ -8,7 +8,8 @@
 use crate::grid::Vector;
 use crate::metrics::Stage;
 use crate::scene::Scene;
-use crate::sim::markings::MarkingClass;
+use crate::sim::correct::band::BandCorrection;
+use crate::sim::markings::{DepthLevel, MarkingClass, Markings};
 use crate::sim::{Simulation, StepReport};
 use anyhow::{anyhow, Result};
 use rerun::blueprint::{
@@ -47,6 +48,25 @@ pub const CORRECTION_ENTITY_PATHS: &[&str] = &[
     "metrics/correction/augmentations",
 ];
 
+/// What the band method (`--band`) logs besides the above.
+pub const BAND_ENTITY_PATHS: &[&str] = &[
+    "world/grid/depth",
+    "world/corrector/paths",
+    "metrics/band/n_in",
+    "metrics/band/n_out",
+    "metrics/band/s_in",
+    "metrics/band/s_out",
+    "metrics/band/n_move",
+    "metrics/band/paths",
+    "metrics/band/find_calls",
+    "metrics/band/path_ms",
+    "metrics/band/n_deep",
+    "metrics/band/band_particles",
+    "metrics/band/removed",
+    "metrics/band/added",
+    "metrics/band/objective/<variant>",
+];
+
 /// Writes one run to an `.rrd` file.
 pub struct Recorder {
     rec: RecordingStream,
@@ -76,6 +96,9 @@ fn blueprint(dim: usize) -> Blueprint {
                     .into(),
                 TimeSeriesView::new("correction")
                     .with_origin("metrics/correction")
+                    .into(),
+                TimeSeriesView::new("band")
+                    .with_origin("metrics/band")
                     .into(),
                 TextLogView::new("log").with_origin("log").into(),
                 TextDocumentView::new("scene").with_origin("scene").into(),
@@ -110,6 +133,35 @@ fn class_color(c: MarkingClass) -> rerun::Rgba32 {
         MarkingClass::Inner => rerun::Rgba32::from_unmultiplied_rgba(30, 70, 160, 110),
         MarkingClass::Bubble => rerun::Rgba32::from_unmultiplied_rgba(230, 50, 50, 160),
         MarkingClass::Solid => rerun::Rgba32::from_unmultiplied_rgba(128, 128, 128, 255),
+    }
+}
+
+/// The band level of a cell (not fluid for empty and solid cells).
+fn level_of(m: &Markings, c: usize, r: u32) -> DepthLevel {
+    if m.is_fluid(c) {
+        m.level(c, r)
+    } else {
+        DepthLevel::NotFluid
+    }
+}
+
+fn level_color(l: DepthLevel) -> rerun::Rgba32 {
+    match l {
+        DepthLevel::NotFluid => rerun::Rgba32::from_unmultiplied_rgba(0, 0, 0, 0),
+        DepthLevel::Surface => rerun::Rgba32::from_unmultiplied_rgba(60, 180, 75, 120),
+        DepthLevel::Band => rerun::Rgba32::from_unmultiplied_rgba(120, 190, 240, 110),
+        DepthLevel::Interface => rerun::Rgba32::from_unmultiplied_rgba(240, 200, 40, 170),
+        DepthLevel::Deep => rerun::Rgba32::from_unmultiplied_rgba(20, 40, 120, 140),
+    }
+}
+
+/// Path colour by cost: green for paths that lower the objective, red for those that raise it.
+fn cost_color(cost: f64, scale: f64) -> [u8; 3] {
+    let t = (cost / scale.max(1e-12)).clamp(-1.0, 1.0);
+    if t < 0.0 {
+        [40, (120.0 - 100.0 * t) as u8, 60]
+    } else {
+        [(120.0 + 135.0 * t) as u8, 60, 40]
     }
 }
 
@@ -153,6 +205,14 @@ impl Recorder {
         let result = (|| -> rerun::RecordingStreamResult<()> {
             self.rec
                 .log_static("world", &rerun::AnnotationContext::new(classes))?;
+            if sim.band().is_some() {
+                let levels: Vec<(u16, &str, rerun::Rgba32)> = DepthLevel::ALL
+                    .iter()
+                    .map(|l| (*l as u16, l.label(), level_color(*l)))
+                    .collect();
+                self.rec
+                    .log_static("world/grid/depth", &rerun::AnnotationContext::new(levels))?;
+            }
             if D == 2 {
                 self.rec.log_static(
                     "world/domain",
@@ -242,6 +302,24 @@ impl Recorder {
                         )
                         .with_draw_order(0.0),
                     )?;
+                    if let Some(b) = sim.band() {
+                        let mut img = vec![0u8; w * h];
+                        for (c, px) in (0..w * h).map(|c| (c, sim.grid.cell_coords(c))) {
+                            let row = h - 1 - px[1];
+                            img[row * w + px[0]] = level_of(marks, c, b.r) as u8;
+                        }
+                        self.rec.log(
+                            "world/grid/depth",
+                            &rerun::SegmentationImage::new(
+                                img,
+                                rerun::ImageFormat::segmentation(
+                                    [w as u32, h as u32],
+                                    rerun::ChannelDatatype::U8,
+                                ),
+                            )
+                            .with_draw_order(1.0),
+                        )?;
+                    }
                 } else {
                     let pos: Vec<[f32; 3]> = sim
                         .particles
@@ -276,6 +354,27 @@ impl Recorder {
                             .with_class_ids(ids)
                             .with_radii([0.3f32]),
                     )?;
+                    if let Some(b) = sim.band() {
+                        let (centers, ids): (Vec<[f32; 3]>, Vec<rerun::components::ClassId>) =
+                            (0..marks.kind.len())
+                                .filter(|&c| marks.is_fluid(c))
+                                .map(|c| {
+                                    let x = sim.grid.center(sim.grid.cell_coords(c));
+                                    (
+                                        [x[0] as f32, x[1] as f32, x[2] as f32],
+                                        rerun::components::ClassId::from(
+                                            level_of(marks, c, b.r) as u16
+                                        ),
+                                    )
+                                })
+                                .unzip();
+                        self.rec.log(
+                            "world/grid/depth",
+                            &rerun::Points3D::new(centers)
+                                .with_class_ids(ids)
+                                .with_radii([0.2f32]),
+                        )?;
+                    }
                 }
             }
             if let Some(rep) = rep {
@@ -327,6 +426,25 @@ impl Recorder {
                     if full {
                         self.log_moves(&c.moves)?;
                     }
+                    if let Some(b) = &c.band {
+                        self.log_band(sim, b, full)?;
+                    }
+                }
+                if let Some(x) = &rep.deep {
+                    scalar("metrics/band/n_deep", sim.n_deep as f64)?;
+                    scalar("metrics/band/band_particles", sim.particles.len() as f64)?;
+                    scalar("metrics/band/removed", x.removed as f64)?;
+                    scalar("metrics/band/added", x.added as f64)?;
+                    if x.unplaced > 0 {
+                        self.rec.log(
+                            "log",
+                            &rerun::TextLog::new(format!(
+                                "step {}: the band interface had no room for {} of the deep's excess particles (kept in n_deep)",
+                                sim.steps, x.unplaced
+                            ))
+                            .with_level(rerun::TextLogLevel::WARN),
+                        )?;
+                    }
                 }
                 if rep.dt_shortened {
                     self.rec.log(
@@ -345,6 +463,99 @@ impl Recorder {
         })();
         self.report(result);
         self.flush_now_and_then();
+    }
+
+    /// The band correction's scalars and, when `full`, its paths as line strips through cell
+    /// centres, coloured by cost (an empty batch clears the previous step's paths).
+    fn log_band<const D: usize>(
+        &self,
+        sim: &Simulation<D>,
+        b: &BandCorrection<D>,
+        full: bool,
+    ) -> rerun::RecordingStreamResult<()> {
+        let scalar = |path: &str, v: f64| self.rec.log(path, &rerun::Scalars::single(v));
+        scalar("metrics/band/n_in", b.n_in as f64)?;
+        scalar("metrics/band/n_out", b.n_out as f64)?;
+        scalar("metrics/band/s_in", b.s_in as f64)?;
+        scalar("metrics/band/s_out", b.s_out as f64)?;
+        scalar("metrics/band/n_move", b.n_move as f64)?;
+        scalar("metrics/band/paths", b.paths_applied as f64)?;
+        scalar("metrics/band/find_calls", b.find_calls as f64)?;
+        scalar("metrics/band/path_ms", b.second_time.as_secs_f64() * 1e3)?;
+        scalar(
+            &format!("metrics/band/objective/{}", b.variant.name()),
+            b.objective,
+        )?;
+        for (v, o) in &b.other_objectives {
+            match o {
+                Ok(o) => scalar(&format!("metrics/band/objective/{}", v.name()), *o)?,
+                Err(e) => self.rec.log(
+                    "log",
+                    &rerun::TextLog::new(format!(
+                        "step {}: band variant {} failed on this step's problem: {e}",
+                        sim.steps,
+                        v.name()
+                    ))
+                    .with_level(rerun::TextLogLevel::WARN),
+                )?,
+            }
+        }
+        if let Some(f) = &b.failure {
+            self.rec.log(
+                "log",
+                &rerun::TextLog::new(format!(
+                    "step {}: band {}: {f}",
+                    sim.steps,
+                    b.variant.name()
+                ))
+                .with_level(rerun::TextLogLevel::WARN),
+            )?;
+        }
+        if !full {
+            return Ok(());
+        }
+        let scale = b.paths.iter().map(|p| p.cost.abs()).fold(0.0, f64::max);
+        let colors: Vec<[u8; 3]> = b.paths.iter().map(|p| cost_color(p.cost, scale)).collect();
+        let labels: Vec<String> = b.paths.iter().map(|p| format!("{:.3}", p.cost)).collect();
+        if D == 2 {
+            let ny = self.dims[1] as f32;
+            let strips: Vec<Vec<[f32; 2]>> = b
+                .paths
+                .iter()
+                .map(|p| {
+                    p.cells
+                        .iter()
+                        .map(|x| [x[0] as f32, ny - x[1] as f32])
+                        .collect()
+                })
+                .collect();
+            self.rec.log(
+                "world/corrector/paths",
+                &rerun::LineStrips2D::new(strips)
+                    .with_colors(colors)
+                    .with_labels(labels)
+                    .with_radii([0.08f32])
+                    .with_draw_order(30.0),
+            )
+        } else {
+            let strips: Vec<Vec<[f32; 3]>> = b
+                .paths
+                .iter()
+                .map(|p| {
+                    p.cells
+                        .iter()
+                        .map(|x| [x[0] as f32, x[1] as f32, x[2] as f32])
+                        .collect()
+                })
+                .collect();
+            self.rec.log(
+                "world/corrector/paths",
+                &rerun::LineStrips3D::new(strips)
+                    .with_colors(colors)
+                    .with_labels(labels)
+                    .with_radii([0.08f32]),
+            )
+        }
     }
 
     /// Arrows from `x_hat` to `x` for the particles the correction sent to another cell (an

@@ -43,6 +43,18 @@ pub struct Summary {
     pub overfull_max: usize,
     pub fallbacks: u64,
     pub cross_check_max: Option<f64>,
+    /// Band method: its variant and `R`, `n_deep` at the end, the fewest and most band
+    /// particles after a step, paths applied, steps whose band correction failed, excess
+    /// particles the interface had no room for, and per other variant (cross-check) the
+    /// largest and median relative objective gap to the variant run.
+    pub band: Option<(String, u32)>,
+    pub n_deep: usize,
+    pub band_particles: (usize, usize),
+    pub band_paths: u64,
+    pub band_moves: u64,
+    pub band_failures: u64,
+    pub unplaced: u64,
+    pub band_gaps: Vec<(String, Vec<f64>)>,
 }
 
 impl Summary {
@@ -73,7 +85,34 @@ impl Summary {
             if let Some(Ok(d)) = c.cross_check {
                 self.cross_check_max = Some(self.cross_check_max.unwrap_or(0.0).max(d));
             }
+            if let Some(b) = &c.band {
+                self.band_paths += b.paths_applied as u64;
+                self.band_moves += b.n_move as u64;
+                self.band_failures += b.failure.is_some() as u64;
+                for (v, o) in &b.other_objectives {
+                    let gap = match o {
+                        Ok(o) => (o - b.objective) / b.objective.abs().max(1e-12),
+                        Err(_) => f64::NAN,
+                    };
+                    match self.band_gaps.iter_mut().find(|(n, _)| n == v.name()) {
+                        Some((_, g)) => g.push(gap),
+                        None => self.band_gaps.push((v.name().to_string(), vec![gap])),
+                    }
+                }
+            }
         }
+        if let Some(x) = &rep.deep {
+            self.unplaced += x.unplaced as u64;
+        }
+    }
+
+    /// Records the band particles after a step.
+    fn add_band_particles(&mut self, n: usize) {
+        self.band_particles = if self.steps <= 1 {
+            (n, n)
+        } else {
+            (self.band_particles.0.min(n), self.band_particles.1.max(n))
+        };
     }
 }
 
@@ -87,6 +126,8 @@ pub fn run(args: &RunArgs) -> Result<()> {
         seed: args.seed,
         solver: args.solver.clone(),
         directions: args.directions.clone(),
+        band: args.band.clone(),
+        band_r: args.band_r,
     };
     let scene = Scene::load(&args.scene, &overrides)?;
     let limit = match args.steps {
@@ -154,6 +195,9 @@ fn run_dim<const D: usize>(
         match sim.step() {
             Ok(rep) => {
                 summary.add(&rep);
+                if rep.deep.is_some() {
+                    summary.add_band_particles(sim.particles.len());
+                }
                 if let Some(mps) = rep.correction.as_ref().and_then(|c| c.mps.as_ref()) {
                     let path = mps_path(scene, out, sim.steps);
                     if let Err(e) = std::fs::write(&path, mps) {
@@ -198,6 +242,8 @@ fn run_dim<const D: usize>(
     summary.wall = t0.elapsed();
     summary.sim_secs = sim.time_secs;
     summary.particles = sim.particles.len();
+    summary.n_deep = sim.n_deep;
+    summary.band = sim.band().map(|b| (b.variant.name().to_string(), b.r));
     if let Some(r) = recorder {
         r.finish()
             .with_context(|| format!("cannot finish the recording '{}'", out.unwrap().display()))?;
@@ -268,6 +314,36 @@ fn print_summary(scene: &Scene, s: &Summary, out: Option<&Path>) {
                 .map(|d| format!("; flow vs simplex objectives differ by at most {d:.2e} (relative)"))
                 .unwrap_or_default()
         );
+    }
+    if let Some((variant, r)) = &s.band {
+        println!(
+            "band ({variant}, R = {r}): {} band particles at the end ({} .. {} after a step) and n_deep = {}: {:.1}% of the {} fluid particles held; {} particles moved across the interface along {} paths; band correction failed on {} steps; {} excess particles found no room in the interface",
+            s.particles,
+            s.band_particles.0,
+            s.band_particles.1,
+            s.n_deep,
+            100.0 * s.particles as f64 / (s.particles + s.n_deep).max(1) as f64,
+            s.particles + s.n_deep,
+            s.band_moves,
+            s.band_paths,
+            s.band_failures,
+            s.unplaced
+        );
+        for (v, gaps) in &s.band_gaps {
+            let mut g = gaps.clone();
+            let failed = g.iter().filter(|x| x.is_nan()).count();
+            g.retain(|x| !x.is_nan());
+            g.sort_by(f64::total_cmp);
+            if g.is_empty() {
+                println!("  {v} on the same problems: failed on all {failed}");
+                continue;
+            }
+            println!(
+                "  {v} on the same problems: objective {:+.3}% (median) .. {:+.3}% (max) relative to {variant}; failed on {failed}",
+                100.0 * g[g.len() / 2],
+                100.0 * g[g.len() - 1]
+            );
+        }
     }
     println!("{:<10} {:>10} {:>12}", "stage", "total s", "ms/step");
     for st in Stage::ALL {

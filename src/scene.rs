@@ -6,6 +6,8 @@
 
 use crate::grid::Vector;
 use crate::particles::Region;
+use crate::sim::band::BandSettings;
+use crate::sim::correct::band::BandVariant;
 use crate::sim::correct::problem::Directions;
 use crate::sim::correct::{CorrectionSettings, Solver};
 use crate::sim::emit::Emitter;
@@ -89,6 +91,13 @@ pub struct SimulationFile {
     pub solver: String,
     /// Candidate moves of the correction: "von-neumann" (5 in 2D, 7 in 3D) or "moore" (9, 27).
     pub directions: String,
+    /// The band method of method ccp (sec. band_method): "none", or how the band's count is
+    /// kept: "paths" (sec. push_part, the paper's choice), "one-way" (sec. band_con2) or
+    /// "full" (sec. band_con, small problems only).
+    pub band: String,
+    /// `R`: depth of the band interface; the band is `R + 1` cells thick (the paper: 3, and 6
+    /// for the dam scenes).
+    pub band_r: u32,
 }
 
 impl Default for SimulationFile {
@@ -107,6 +116,8 @@ impl Default for SimulationFile {
             seed: 1,
             solver: "flow".into(),
             directions: "von-neumann".into(),
+            band: "none".into(),
+            band_r: 3,
         }
     }
 }
@@ -154,6 +165,8 @@ pub struct Overrides {
     pub seed: Option<u64>,
     pub solver: Option<String>,
     pub directions: Option<String>,
+    pub band: Option<String>,
+    pub band_r: Option<u32>,
 }
 
 /// A scene ready to run: its source, the file with overrides applied, and its checked values.
@@ -166,6 +179,7 @@ pub struct Scene {
     pub cell_size_m: f64,
     pub method: Method,
     pub correction: CorrectionSettings,
+    pub band: Option<BandSettings>,
 }
 
 impl Scene {
@@ -227,6 +241,12 @@ impl Scene {
         }
         if let Some(d) = &o.directions {
             sim.directions = d.clone();
+        }
+        if let Some(b) = &o.band {
+            sim.band = b.clone();
+        }
+        if let Some(r) = o.band_r {
+            sim.band_r = r;
         }
         if let Some(c) = o.cells {
             file.domain.cells = c;
@@ -293,6 +313,7 @@ impl Scene {
                 })
                 .collect(),
             correction: self.correction,
+            band: self.band,
         }
     }
 }
@@ -388,6 +409,22 @@ fn check(source: &str, file: SceneFile) -> Result<Scene> {
         &s.directions,
         &["von-neumann", "moore"],
     )?];
+    let band_names: Vec<&str> = std::iter::once("none")
+        .chain(BandVariant::ALL.map(BandVariant::name))
+        .collect();
+    let band_variant = match pick("simulation.band", &s.band, &band_names)? {
+        0 => None,
+        k => Some(BandVariant::ALL[k - 1]),
+    };
+    if !(1..=10_000).contains(&s.band_r) {
+        return Err(err(
+            "simulation.band_r",
+            format!(
+                "must be at least 1 (the band interface lies R cells below the surface), got {}",
+                s.band_r
+            ),
+        ));
+    }
     if !(s.duration.is_finite() && s.duration > 0.0) {
         return Err(err(
             "simulation.duration",
@@ -563,6 +600,10 @@ fn check(source: &str, file: SceneFile) -> Result<Scene> {
             directions,
             cross_check: false,
         },
+        band: band_variant.map(|variant| BandSettings {
+            variant,
+            r: s.band_r,
+        }),
         file,
     })
 }

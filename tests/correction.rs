@@ -62,7 +62,7 @@ fn agree_on_random_instances<const D: usize>(count: usize, seed: u64) {
         } else {
             Directions::VonNeumann
         };
-        let p = problem::build(&g, &x_bar, &x_hat, &prev, &solid, mu, dirs).unwrap();
+        let p = problem::build(&g, &x_bar, &x_hat, &prev, &solid, mu, dirs, None).unwrap();
         let a = &p.assignment;
         let (flow, stats) = min_cost_flow::solve(a).unwrap_or_else(|e| panic!("instance {n}: {e}"));
         let simplex = lp::solve(a).unwrap_or_else(|e| panic!("instance {n}: {e}"));
@@ -107,7 +107,17 @@ fn flow_work_grows_with_conflicts_not_particles() {
     x_hat[j][0] += 0.8;
     let solid = vec![false; g.num_cells()];
     let prev = Markings::compute(&g, &x_bar, &solid);
-    let p = problem::build(&g, &x_bar, &x_hat, &prev, &solid, 1, Directions::VonNeumann).unwrap();
+    let p = problem::build(
+        &g,
+        &x_bar,
+        &x_hat,
+        &prev,
+        &solid,
+        1,
+        Directions::VonNeumann,
+        None,
+    )
+    .unwrap();
     let (choice, stats) = min_cost_flow::solve(&p.assignment).unwrap();
     p.assignment.check(&choice).unwrap();
     assert_eq!(stats.overfull_bins, 1);

@@ -19,13 +19,15 @@ pub struct Emitter<const D: usize> {
 
 impl<const D: usize> Emitter<D> {
     /// Tops up the emitter's non-solid cells to `mu` particles each (jittered sub-cell
-    /// samples), without exceeding `until_particles`. Returns how many were added.
+    /// samples), without the scene's particles (`particles` plus `imaginary` ones, the band
+    /// method's deep) exceeding `until_particles`. Returns how many were added.
     #[allow(clippy::too_many_arguments)]
     pub fn emit(
         &self,
         grid: &Grid<D>,
         time_secs: f64,
         count: &[u32],
+        imaginary: usize,
         solid: &[bool],
         per_axis: usize,
         jitter: f64,
@@ -36,9 +38,9 @@ impl<const D: usize> Emitter<D> {
             return 0;
         }
         let mu = per_axis.pow(D as u32);
-        let mut room = self
-            .until_particles
-            .map_or(usize::MAX, |n| n.saturating_sub(particles.len()));
+        let mut room = self.until_particles.map_or(usize::MAX, |n| {
+            n.saturating_sub(particles.len() + imaginary)
+        });
         let mut added = 0;
         for c in self.region.cells(grid) {
             if room == 0 {

@@ -1,5 +1,6 @@
 //! Cell markings (paper sec. 4 and 6): empty / fluid / solid, the surface and inner cells of
-//! def. surface, bubbles (def. bubble) and the depth of def. depth.
+//! def. surface, bubbles (def. bubble), the depth of def. depth and the band levels of
+//! sec. band_method (deep, band interface, band, surface).
 
 use crate::grid::{Cell, Grid, Vector};
 use std::collections::VecDeque;
@@ -44,6 +45,55 @@ impl MarkingClass {
     }
 }
 
+/// The band levels of sec. band_method for a band of thickness `R + 1` (fig. band), as class
+/// ids for recordings.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
+pub enum DepthLevel {
+    /// Empty or solid (depth > 0).
+    NotFluid = 0,
+    /// `beta = 0`.
+    Surface = 1,
+    /// `-R < beta < 0`.
+    Band = 2,
+    /// `beta = -R`, the band interface `C_-R`.
+    Interface = 3,
+    /// `beta < -R`, simulated on the grid only.
+    Deep = 4,
+}
+
+impl DepthLevel {
+    pub const ALL: [DepthLevel; 5] = [
+        DepthLevel::NotFluid,
+        DepthLevel::Surface,
+        DepthLevel::Band,
+        DepthLevel::Interface,
+        DepthLevel::Deep,
+    ];
+
+    /// The level of a cell at depth `beta` for band parameter `r` (R >= 1).
+    pub fn of(beta: i32, r: u32) -> Self {
+        let r = r as i32;
+        match beta {
+            b if b > 0 => DepthLevel::NotFluid,
+            0 => DepthLevel::Surface,
+            b if b > -r => DepthLevel::Band,
+            b if b == -r => DepthLevel::Interface,
+            _ => DepthLevel::Deep,
+        }
+    }
+
+    pub fn label(self) -> &'static str {
+        match self {
+            DepthLevel::NotFluid => "not fluid",
+            DepthLevel::Surface => "surface",
+            DepthLevel::Band => "band",
+            DepthLevel::Interface => "band interface",
+            DepthLevel::Deep => "deep",
+        }
+    }
+}
+
 /// Depth assigned to non-fluid cells (def. depth: "an arbitrary positive number").
 pub const DEPTH_NOT_FLUID: i32 = 1;
 
@@ -69,6 +119,17 @@ impl Markings {
         positions: &[Vector<D>],
         solid: &[bool],
     ) -> Self {
+        Self::compute_keeping(grid, positions, solid, None)
+    }
+
+    /// As [`Self::compute`], but cells flagged in `keep` are fluid even without particles: the
+    /// band method's interface and deep (sec. band_method), whose particles are imaginary.
+    pub fn compute_keeping<const D: usize>(
+        grid: &Grid<D>,
+        positions: &[Vector<D>],
+        solid: &[bool],
+        keep: Option<&[bool]>,
+    ) -> Self {
         let n = grid.num_cells();
         let mut count = vec![0u32; n];
         for x in positions {
@@ -78,7 +139,7 @@ impl Markings {
             .map(|c| {
                 if solid[c] {
                     CellKind::Solid
-                } else if count[c] > 0 {
+                } else if count[c] > 0 || keep.is_some_and(|k| k[c]) {
                     CellKind::Fluid
                 } else {
                     CellKind::Empty
@@ -114,6 +175,17 @@ impl Markings {
             CellKind::Fluid if self.count[c] < mu => MarkingClass::Bubble,
             CellKind::Fluid => MarkingClass::Inner,
         }
+    }
+
+    /// The band level of cell `c` for band parameter `r`.
+    pub fn level(&self, c: usize, r: u32) -> DepthLevel {
+        DepthLevel::of(self.depth[c], r)
+    }
+
+    /// Whether `c` is in the band interface or the deep, `C_<=-R`: the region whose particle
+    /// count the band constraint controls (eq. band_con).
+    pub fn at_or_below_interface(&self, c: usize, r: u32) -> bool {
+        self.kind[c] == CellKind::Fluid && self.depth[c] <= -(r as i32)
     }
 
     pub fn fluid_cells(&self) -> usize {

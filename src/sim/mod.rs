@@ -3,8 +3,13 @@
 //! Step order: emit -> particles to grid (+ extrapolation) -> gravity and solid boundary ->
 //! pressure projection -> extrapolation and speed limit -> time step check -> grid to particles
 //! (FLIP/PIC blend) -> advection -> correction (method-specific) -> markings and volume.
+//!
+//! Method `ccp` with a band (alg. band) adds: particle velocities only in the band, combined
+//! with the grid velocity elsewhere; semi-Lagrangian advection of the grid velocity; the band
+//! correction; and the exchange of particles with the deep after the markings.
 
 pub mod advect;
+pub mod band;
 pub mod correct;
 pub mod emit;
 pub mod markings;
@@ -15,6 +20,8 @@ use crate::grid::{Grid, MacField, Vector};
 use crate::metrics::{self, InvariantViolation, Stage, StageTimes};
 use crate::particles::{self, Particles, Region};
 use crate::solvers::pcg::{PcgSettings, PcgStats};
+use band::{BandSettings, DeepExchange};
+use correct::band::BandContext;
 use correct::{CorrectionReport, CorrectionSettings};
 use emit::Emitter;
 use markings::Markings;
@@ -69,6 +76,8 @@ pub struct SimConfig<const D: usize> {
     pub emitters: Vec<Emitter<D>>,
     /// Solver and directions of the correction step (method `ccp`).
     pub correction: CorrectionSettings,
+    /// The band method (method `ccp` only; ignored by the others).
+    pub band: Option<BandSettings>,
 }
 
 impl<const D: usize> SimConfig<D> {
@@ -91,6 +100,8 @@ pub struct StepReport<const D: usize> {
     pub volume_percent: f64,
     /// The correction step, for methods that have one.
     pub correction: Option<CorrectionReport<D>>,
+    /// The exchange with the deep, with the band method.
+    pub deep: Option<DeepExchange>,
 }
 
 /// The state of a running simulation.
@@ -112,6 +123,8 @@ pub struct Simulation<const D: usize> {
     pub total_particles: usize,
     /// `V*`: initial volume plus emitted volume, in cells.
     pub target_volume: f64,
+    /// `n_deep`: imaginary particles of the band method's deep (0 without the band).
+    pub n_deep: usize,
     rng: StdRng,
 }
 
@@ -134,7 +147,7 @@ impl<const D: usize> Simulation<D> {
         );
         let markings = Markings::compute(&grid, &particles.pos, &solid);
         let total = particles.len();
-        Self {
+        let mut sim = Self {
             target_volume: total as f64 / config.mu() as f64,
             velocity: MacField::zeros(&grid),
             solid_vel: vec![Vector::zeros(); n],
@@ -148,7 +161,45 @@ impl<const D: usize> Simulation<D> {
             solid,
             config,
             rng,
+            n_deep: 0,
+        };
+        if let Some(b) = sim.band() {
+            band::exchange_with_deep(
+                &sim.grid,
+                &mut sim.particles,
+                &mut sim.markings,
+                None,
+                b.r,
+                sim.config.mu(),
+                &mut sim.n_deep,
+                &sim.velocity,
+                &mut sim.rng,
+            );
         }
+        sim
+    }
+
+    /// The band, when the method uses one.
+    pub fn band(&self) -> Option<BandSettings> {
+        self.config
+            .band
+            .filter(|_| self.config.method == Method::Ccp)
+    }
+
+    /// Markings of the current positions; with the band, fluid cells below the surface stay
+    /// fluid without particles ([`band::kept_cells`]). Returns the band interface and deep of
+    /// the markings it replaced.
+    fn remark(&mut self) -> Option<Vec<bool>> {
+        let band = self.band();
+        let was_low = band.map(|b| band::at_or_below_interface(&self.markings, b.r));
+        let keep = band.map(|_| band::kept_cells(&self.markings));
+        self.markings = Markings::compute_keeping(
+            &self.grid,
+            &self.particles.pos,
+            &self.solid,
+            keep.as_deref(),
+        );
+        was_low
     }
 
     /// The volume measure of eq. volume as a percentage of `V*`.
@@ -190,13 +241,30 @@ impl<const D: usize> Simulation<D> {
         let grid = &self.grid;
         let c = &self.config;
 
+        let band = self.band();
         let emitted = rep.times.time(Stage::Emit, || {
+            // The band's deep holds imaginary particles: emitters see its cells as full.
+            let occupied: Vec<u32> = match band {
+                Some(b) if !c.emitters.is_empty() => (0..grid.num_cells())
+                    .map(|i| match self.markings.level(i, b.r) {
+                        markings::DepthLevel::Deep if self.markings.is_fluid(i) => c.mu(),
+                        _ => self.markings.count[i],
+                    })
+                    .collect(),
+                _ => vec![],
+            };
+            let count = if occupied.is_empty() {
+                &self.markings.count
+            } else {
+                &occupied
+            };
             let mut added = 0;
             for e in &c.emitters {
                 added += e.emit(
                     grid,
                     self.time_secs,
-                    &self.markings.count,
+                    count,
+                    self.n_deep,
                     &self.solid,
                     c.per_axis,
                     c.jitter,
@@ -207,15 +275,28 @@ impl<const D: usize> Simulation<D> {
             added
         });
         if emitted > 0 {
-            self.markings = Markings::compute(grid, &self.particles.pos, &self.solid);
+            let mu = self.config.mu();
+            self.remark();
             self.total_particles += emitted;
-            self.target_volume += emitted as f64 / c.mu() as f64;
+            self.target_volume += emitted as f64 / mu as f64;
         }
         rep.emitted = emitted;
 
+        let grid = &self.grid;
+        let c = &self.config;
         let (mut u, mut known) = rep.times.time(Stage::ParticlesToGrid, || {
             let (mut u, mut known) =
                 transfer::particles_to_grid(grid, &self.particles.pos, &self.particles.vel);
+            if let Some(b) = band {
+                transfer::combine_with_grid(
+                    grid,
+                    &mut u,
+                    &mut known,
+                    &self.velocity,
+                    &self.markings,
+                    b.r,
+                );
+            }
             transfer::extrapolate(grid, &mut u, &mut known, 2);
             (u, known)
         });
@@ -281,8 +362,9 @@ impl<const D: usize> Simulation<D> {
             }
         });
         let x_bar = (c.method == Method::Ccp).then(|| self.particles.pos.clone());
-        rep.times.time(Stage::Advect, || {
+        let advected_u = rep.times.time(Stage::Advect, || {
             advect::advect_particles(grid, &u, &self.solid, dt, &mut self.particles.pos);
+            band.map(|_| advect::advect_velocity(grid, &u, dt))
         });
         if let Some(x_bar) = x_bar {
             let want_mps = self.export_problem_at_step == Some(self.steps + 1);
@@ -295,6 +377,11 @@ impl<const D: usize> Simulation<D> {
                     &self.solid,
                     c.mu(),
                     &c.correction,
+                    band.map(|b| BandContext {
+                        r: b.r,
+                        n_deep: self.n_deep,
+                        variant: b.variant,
+                    }),
                     want_mps,
                 )
             });
@@ -306,13 +393,27 @@ impl<const D: usize> Simulation<D> {
                 &self.markings,
                 &self.solid,
                 c.mu(),
+                band.map(|b| b.r),
             )?;
             rep.correction = Some(report);
         }
-        rep.times.time(Stage::Markings, || {
-            self.markings = Markings::compute(grid, &self.particles.pos, &self.solid);
+        self.velocity = advected_u.unwrap_or(u);
+        rep.deep = rep.times.time(Stage::Markings, || {
+            let was_low = self.remark();
+            band.map(|b| {
+                band::exchange_with_deep(
+                    &self.grid,
+                    &mut self.particles,
+                    &mut self.markings,
+                    was_low.as_deref(),
+                    b.r,
+                    self.config.mu(),
+                    &mut self.n_deep,
+                    &self.velocity,
+                    &mut self.rng,
+                )
+            })
         });
-        self.velocity = u;
         self.time_secs += dt;
         self.steps += 1;
         rep.dt_secs = dt;
@@ -321,14 +422,34 @@ impl<const D: usize> Simulation<D> {
         Ok(rep)
     }
 
-    /// The invariants every method keeps, checked after every step (O(particles)).
+    /// The invariants every method keeps, checked after every step (O(particles)): with the
+    /// band, particles plus `n_deep` account for every particle seeded or emitted, and no cell
+    /// holds more than `mu`.
     pub fn check_invariants(&self) -> Result<(), InvariantViolation> {
         metrics::check_particles(
             &self.grid,
             &self.particles.pos,
             &self.particles.vel,
             &self.solid,
-            self.total_particles,
-        )
+            self.total_particles
+                .checked_sub(self.n_deep)
+                .ok_or_else(|| {
+                    InvariantViolation(format!(
+                        "n_deep = {} exceeds the {} particles ever seeded or emitted",
+                        self.n_deep, self.total_particles
+                    ))
+                })?,
+        )?;
+        if self.band().is_some() {
+            let mu = self.config.mu();
+            if let Some(c) = (0..self.grid.num_cells()).find(|&c| self.markings.count[c] > mu) {
+                return Err(InvariantViolation(format!(
+                    "cell {:?} holds {} particles after the exchange with the deep (mu = {mu})",
+                    self.grid.cell_coords(c),
+                    self.markings.count[c]
+                )));
+            }
+        }
+        Ok(())
     }
 }

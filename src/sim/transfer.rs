@@ -3,6 +3,7 @@
 //! without fluid, and grid-to-particle with a FLIP/PIC blend.
 
 use crate::grid::{for_each_face_weight, Grid, MacField, Vector};
+use crate::sim::markings::Markings;
 use rayon::prelude::*;
 
 /// Transfers particle velocities to faces: `u_f = sum_p w_fp v_p / sum_p w_fp` with the
@@ -53,6 +54,42 @@ pub fn particles_to_grid<const D: usize>(
             });
     }
     (field, known)
+}
+
+/// The band method's particle-to-grid step (alg. band, line 1): faces next to a band interface
+/// or deep cell (depth `<= -R`) take the grid velocity `grid_u` and count as known; the others
+/// keep the particle velocity where particles gave weight.
+pub fn combine_with_grid<const D: usize>(
+    grid: &Grid<D>,
+    u: &mut MacField<D>,
+    known: &mut [Vec<bool>; D],
+    grid_u: &MacField<D>,
+    markings: &Markings,
+    r: u32,
+) {
+    for a in 0..D {
+        u.comp[a]
+            .par_iter_mut()
+            .zip(known[a].par_iter_mut())
+            .enumerate()
+            .for_each(|(i, (v, k))| {
+                let f = grid.face_coords(a, i);
+                let mut below = false;
+                for side in [0usize, 1] {
+                    // The cells on the two sides of face f along axis a: f - e_a and f.
+                    if (side == 0 && f[a] == 0) || (side == 1 && f[a] == grid.dims[a]) {
+                        continue;
+                    }
+                    let mut c = f;
+                    c[a] -= 1 - side;
+                    below |= markings.at_or_below_interface(grid.cell_index(c), r);
+                }
+                if below {
+                    *v = grid_u.comp[a][i];
+                    *k = true;
+                }
+            });
+    }
 }
 
 /// Extrapolates face values into unknown faces, `layers` rings deep: each ring takes the

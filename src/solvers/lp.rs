@@ -4,6 +4,10 @@
 //!
 //! The constraint matrix is totally unimodular (paper prop. LPrelax), so the LP optimum is an
 //! assignment; this module checks that it really is integral and reports it if not.
+//!
+//! Side constraints over the candidates (the band constraints eq. band_con, band_con2,
+//! band_con3) break total unimodularity; with any of them the variables are declared binary and
+//! microlp's branch and bound solves the integer program.
 
 use crate::solvers::min_cost_flow::BoundedAssignment;
 use microlp::{ComparisonOp, OptimizationDirection, Problem};
@@ -48,15 +52,44 @@ fn binding_bins(p: &BoundedAssignment) -> Vec<bool> {
         .collect()
 }
 
+/// A linear constraint `min <= sum coef * b_k <= max` over candidate variables `b_k`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SideConstraint {
+    /// `(candidate index, coefficient)`.
+    pub terms: Vec<(usize, f64)>,
+    pub min: f64,
+    pub max: f64,
+}
+
 /// Solves the LP relaxation and returns the chosen candidate of every item.
 pub fn solve(p: &BoundedAssignment) -> Result<Vec<u32>, LpError> {
+    solve_with(p, &[])
+}
+
+/// Solves the problem with extra side constraints; with any, as an integer program.
+pub fn solve_with(p: &BoundedAssignment, side: &[SideConstraint]) -> Result<Vec<u32>, LpError> {
     let mut lp = Problem::new(OptimizationDirection::Minimize);
     lp.set_time_limit(TIME_LIMIT);
     let vars: Vec<_> = p
         .cand_cost
         .iter()
-        .map(|&c| lp.add_var(c, (0.0, 1.0)))
+        .map(|&c| {
+            if side.is_empty() {
+                lp.add_var(c, (0.0, 1.0))
+            } else {
+                lp.add_binary_var(c)
+            }
+        })
         .collect();
+    for sc in side {
+        let row: Vec<_> = sc.terms.iter().map(|&(k, a)| (vars[k], a)).collect();
+        if sc.min == sc.max {
+            lp.add_constraint(row.as_slice(), ComparisonOp::Eq, sc.min);
+        } else {
+            lp.add_constraint(row.as_slice(), ComparisonOp::Ge, sc.min);
+            lp.add_constraint(row.as_slice(), ComparisonOp::Le, sc.max);
+        }
+    }
     for i in 0..p.items() {
         let row: Vec<_> = p.candidates(i).map(|k| (vars[k], 1.0)).collect();
         lp.add_constraint(row.as_slice(), ComparisonOp::Eq, 1.0);

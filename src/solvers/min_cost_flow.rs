@@ -52,6 +52,27 @@ impl BoundedAssignment {
         self.item_start[item]..self.item_start[item + 1]
     }
 
+    /// The same problem with only the candidates for which `keep(item, candidate)` holds;
+    /// also returns the original index of every kept candidate.
+    pub fn restrict(&self, mut keep: impl FnMut(usize, usize) -> bool) -> (Self, Vec<u32>) {
+        let mut out = Self {
+            item_start: vec![0],
+            lower: self.lower.clone(),
+            upper: self.upper.clone(),
+            ..Default::default()
+        };
+        let mut original = vec![];
+        for i in 0..self.items() {
+            for k in self.candidates(i).filter(|&k| keep(i, k)) {
+                out.cand_bin.push(self.cand_bin[k]);
+                out.cand_cost.push(self.cand_cost[k]);
+                original.push(k as u32);
+            }
+            out.item_start.push(out.cand_bin.len());
+        }
+        (out, original)
+    }
+
     /// Total cost of a choice (one global candidate index per item).
     pub fn objective(&self, choice: &[u32]) -> f64 {
         choice.iter().map(|&k| self.cand_cost[k as usize]).sum()

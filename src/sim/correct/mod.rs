@@ -3,13 +3,16 @@
 //! nothing) with the least total squared displacement, eq. problem3.
 //!
 //! The problem is built once ([`problem::build`]) and solved exactly, by the min-cost-flow
-//! solver (default) or by the simplex on the LP relaxation; both read the same data.
+//! solver (default) or by the simplex on the LP relaxation; both read the same data. With the
+//! band method (sec. band_method) one of the band variants of [`band`] finishes the step.
 
+pub mod band;
 pub mod problem;
 
 use crate::grid::{Grid, Vector};
 use crate::sim::markings::Markings;
 use crate::solvers::{lp, min_cost_flow};
+use band::{BandContext, BandCorrection, BandVariant};
 use problem::{BuildError, CorrectionProblem, Directions};
 use rayon::prelude::*;
 use std::time::{Duration, Instant};
@@ -33,7 +36,10 @@ impl Solver {
         }
     }
 
-    fn solve(self, p: &min_cost_flow::BoundedAssignment) -> Result<(Vec<u32>, usize), String> {
+    pub(crate) fn solve(
+        self,
+        p: &min_cost_flow::BoundedAssignment,
+    ) -> Result<(Vec<u32>, usize), String> {
         match self {
             Solver::Flow => min_cost_flow::solve(p)
                 .map(|(c, s)| (c, s.augmentations))
@@ -83,12 +89,14 @@ pub struct CorrectionReport<const D: usize> {
     pub moves: Vec<(Vector<D>, Vector<D>)>,
     /// The problem as free-format MPS, when asked for.
     pub mps: Option<String>,
+    /// The band correction, with the band method.
+    pub band: Option<BandCorrection<D>>,
 }
 
 /// Corrects `pos` (the advected positions `x_hat` on entry, `x` on return) given the previous
-/// positions `x_bar` and markings. A solver failure keeps every particle in its previous cell
-/// (always feasible) and says why in the report; a problem that cannot be built is a bug and
-/// comes back as an error.
+/// positions `x_bar` and markings, with the band method when `band` is given. A solver failure
+/// keeps every particle in its previous cell (always feasible) and says why in the report; a
+/// problem that cannot be built is a bug and comes back as an error.
 #[allow(clippy::too_many_arguments)]
 pub fn correct<const D: usize>(
     grid: &Grid<D>,
@@ -98,13 +106,50 @@ pub fn correct<const D: usize>(
     solid: &[bool],
     mu: u32,
     settings: &CorrectionSettings,
+    band: Option<BandContext>,
     want_mps: bool,
 ) -> Result<CorrectionReport<D>, BuildError> {
-    let problem = problem::build(grid, x_bar, pos, previous, solid, mu, settings.directions)?;
+    let problem = problem::build(
+        grid,
+        x_bar,
+        pos,
+        previous,
+        solid,
+        mu,
+        settings.directions,
+        band.map(|b| b.r),
+    )?;
     let mut rep = CorrectionReport {
         overfull_before: overfull_cells(grid, pos, mu),
         ..Default::default()
     };
+    if let Some(ctx) = band {
+        correct_band(
+            grid, &problem, x_bar, pos, previous, solid, mu, settings, ctx, &mut rep,
+        );
+        if want_mps {
+            let b = rep.band.as_ref().expect("band report");
+            let mut comment = vec![format!(
+                "band method ({}): eq. problem3 with the bounds of eq. band_con_update; the band row \
+                 eq. band_con (0 <= in - out <= alpha = {}) is not included",
+                ctx.variant.name(),
+                b.alpha
+            )];
+            if ctx.variant != BandVariant::Full && rep.fallback.is_none() {
+                comment.push(format!(
+                    "optimal objective {:.17e} ({} solver)",
+                    b.first_objective,
+                    settings.solver.name()
+                ));
+            }
+            rep.mps = Some(lp::to_mps(
+                &problem.assignment,
+                "cellflip-correction",
+                &comment,
+            ));
+        }
+        return Ok(rep);
+    }
     let t0 = Instant::now();
     // An answer that breaks a constraint counts as a failure of the solver.
     let solved = settings
@@ -153,6 +198,62 @@ pub fn correct<const D: usize>(
     }
     apply(grid, &problem, &choice, pos, &mut rep);
     Ok(rep)
+}
+
+/// The band method's correction: the variant of `ctx`, and with cross-checking every other
+/// variant on the same problem, for their objectives.
+#[allow(clippy::too_many_arguments)]
+fn correct_band<const D: usize>(
+    grid: &Grid<D>,
+    problem: &CorrectionProblem<D>,
+    x_bar: &[Vector<D>],
+    pos: &mut [Vector<D>],
+    previous: &Markings,
+    solid: &[bool],
+    mu: u32,
+    settings: &CorrectionSettings,
+    ctx: BandContext,
+    rep: &mut CorrectionReport<D>,
+) {
+    let x_hat = pos.to_vec();
+    let run = |variant| {
+        let ctx = BandContext { variant, ..ctx };
+        band::correct_band(
+            grid,
+            problem,
+            x_bar,
+            &x_hat,
+            previous,
+            solid,
+            mu,
+            ctx,
+            settings.solver,
+        )
+    };
+    let out = run(ctx.variant);
+    let mut report = out.report;
+    if settings.cross_check {
+        for v in BandVariant::ALL.into_iter().filter(|&v| v != ctx.variant) {
+            let o = run(v);
+            let result = match (o.fallback, o.report.failure) {
+                (Some(e), _) | (None, Some(e)) => Err(e),
+                (None, None) => Ok(o.report.objective),
+            };
+            report.other_objectives.push((v, result));
+        }
+    }
+    pos.copy_from_slice(&out.pos);
+    rep.solver_time = out.solve_time;
+    rep.augmentations = out.augmentations;
+    rep.fallback = out.fallback;
+    rep.objective = report.objective;
+    rep.band = Some(report);
+    rep.moves = x_hat
+        .iter()
+        .zip(pos.iter())
+        .filter(|(h, x)| grid.cell_index_of(h) != grid.cell_index_of(x))
+        .map(|(h, x)| (*h, *x))
+        .collect();
 }
 
 fn overfull_cells<const D: usize>(grid: &Grid<D>, pos: &[Vector<D>], mu: u32) -> usize {

@@ -8,10 +8,16 @@
 //! markings of the previous iteration: empty and surface cells hold at most `mu` (eq.
 //! problem3.d), inner cells between their previous count and `mu` (eq. problem3.e), solid cells
 //! nothing (eq. problem3.f: their candidates are dropped, as are those outside the domain).
+//!
+//! With the band method (sec. band_con) the bounds follow eq. band_con_update instead: the band
+//! interface may lose particles like the surface, the rest of the band keeps its count, and the
+//! deep holds at most `mu` (see [`cell_bounds`]). Each candidate then also says
+//! whether it moves a particle into the interface-and-deep region `C_<=-R` or out of it (the sets
+//! `gamma_in` and `gamma_out` of eq. band_con).
 
 use crate::grid::{Cell, Grid, Vector};
 use crate::sim::advect::CELL_MARGIN;
-use crate::sim::markings::{CellKind, Markings};
+use crate::sim::markings::{CellKind, DepthLevel, Markings};
 use crate::solvers::min_cost_flow::BoundedAssignment;
 use rayon::prelude::*;
 
@@ -65,6 +71,30 @@ pub struct CorrectionProblem<const D: usize> {
     pub bin_cell: Vec<usize>,
     /// Index of the "stay" candidate of each particle (its cell of `x_bar`).
     pub stay: Vec<u32>,
+    /// With the band: per candidate, +1 if it is in `gamma_in` (from `C_>-R` into `C_<=-R`),
+    /// -1 if in `gamma_out` (the reverse), 0 otherwise. Empty without the band.
+    pub band_sign: Vec<i8>,
+}
+
+/// The load bounds `[lower, upper]` of cell `c` in the correction, from the previous markings:
+/// eq. problem3.d-e, or eq. band_con_update with the band parameter `band_r`. An upper bound is
+/// never below the previous count, so staying put is always feasible.
+///
+/// The paper leaves deep cells unbounded, since their particles are deleted after the step. We
+/// bound them by `mu` like the interface: the new markings can turn a deep cell into an
+/// interface cell, whose particles stay, and it must not hold more than `mu` then.
+pub fn cell_bounds(previous: &Markings, c: usize, mu: u32, band_r: Option<u32>) -> (u32, u32) {
+    let prev = previous.count[c];
+    let upper = mu.max(prev);
+    if previous.kind[c] != CellKind::Fluid {
+        return (0, upper);
+    }
+    match band_r.map(|r| previous.level(c, r)) {
+        None if previous.surface[c] => (0, upper),
+        None => (prev, upper),
+        Some(DepthLevel::Band) => (prev, upper),
+        Some(_) => (0, upper),
+    }
 }
 
 impl<const D: usize> CorrectionProblem<D> {
@@ -104,8 +134,9 @@ fn offset_cell<const D: usize>(grid: &Grid<D>, c: Cell<D>, o: &[i64; D]) -> Opti
 const DROPPED: u32 = u32::MAX;
 
 /// Builds eq. problem3 from the previous positions `x_bar`, the advected positions `x_hat`, the
-/// previous markings (with counts `|gamma_bar_c|`) and the current solid cells. An upper bound
-/// is never below the previous count, so `x_bar` is always feasible.
+/// previous markings (with counts `|gamma_bar_c|`) and the current solid cells, with the band's
+/// bounds and in/out signs when `band_r` is given. `x_bar` is always feasible.
+#[allow(clippy::too_many_arguments)]
 pub fn build<const D: usize>(
     grid: &Grid<D>,
     x_bar: &[Vector<D>],
@@ -114,6 +145,7 @@ pub fn build<const D: usize>(
     solid: &[bool],
     mu: u32,
     directions: Directions,
+    band_r: Option<u32>,
 ) -> Result<CorrectionProblem<D>, BuildError> {
     let offsets = directions.offsets::<D>();
     let m = offsets.len();
@@ -175,22 +207,29 @@ pub fn build<const D: usize>(
         },
         bin_cell: vec![],
         stay: Vec::with_capacity(x_bar.len()),
+        band_sign: vec![],
     };
     let a = &mut p.assignment;
+    let low = |c: u32| band_r.is_some_and(|r| previous.at_or_below_interface(c as usize, r));
     a.item_start.push(0);
     for (cells, costs) in slot_cell.chunks(m).zip(slot_cost.chunks(m)) {
         p.stay.push(a.cand_bin.len() as u32);
+        let home_low = low(cells[0]);
         for (&ci, &cost) in cells.iter().zip(costs).filter(|(c, _)| **c != DROPPED) {
+            if band_r.is_some() {
+                p.band_sign.push(match (home_low, low(ci)) {
+                    (false, true) => 1,
+                    (true, false) => -1,
+                    _ => 0,
+                });
+            }
             let ci = ci as usize;
             if bin_of_cell[ci] == u32::MAX {
                 bin_of_cell[ci] = p.bin_cell.len() as u32;
                 p.bin_cell.push(ci);
-                let prev = previous.count[ci];
-                a.upper.push(mu.max(prev));
-                a.lower.push(match previous.kind[ci] {
-                    CellKind::Fluid if !previous.surface[ci] => prev,
-                    _ => 0,
-                });
+                let (lower, upper) = cell_bounds(previous, ci, mu, band_r);
+                a.lower.push(lower);
+                a.upper.push(upper);
             }
             a.cand_bin.push(bin_of_cell[ci]);
             a.cand_cost.push(cost);
@@ -222,7 +261,17 @@ mod tests {
         let mut solid = vec![false; 16];
         solid[g.cell_index([1, 2])] = true;
         let prev = Markings::compute(&g, &x_bar, &solid);
-        let p = build(&g, &x_bar, &x_hat, &prev, &solid, 1, Directions::VonNeumann).unwrap();
+        let p = build(
+            &g,
+            &x_bar,
+            &x_hat,
+            &prev,
+            &solid,
+            1,
+            Directions::VonNeumann,
+            None,
+        )
+        .unwrap();
         let a = &p.assignment;
         // Particle 0: stay, +x, -x, -y (+y is solid): 4 candidates. Particle 1: stay, +x, +y.
         assert_eq!(a.candidates(0).len(), 4);
@@ -251,15 +300,34 @@ mod tests {
         let x_bar: Vec<_> = (0..27).map(|c| g.center(g.cell_coords(c))).collect();
         let solid = vec![false; 27];
         let prev = Markings::compute(&g, &x_bar, &solid);
-        let p = build(&g, &x_bar, &x_bar, &prev, &solid, 2, Directions::VonNeumann).unwrap();
+        let p = build(
+            &g,
+            &x_bar,
+            &x_bar,
+            &prev,
+            &solid,
+            2,
+            Directions::VonNeumann,
+            None,
+        )
+        .unwrap();
         // A full closed box has no surface: every cell is inner with one particle.
         assert!(p.assignment.lower.iter().all(|&l| l == 1));
         assert!(p.assignment.upper.iter().all(|&u| u == 2));
         let bad = vec![Vector::<3>::new(f64::NAN, 0.5, 0.5); 27];
         assert_eq!(
-            build(&g, &x_bar, &bad, &prev, &solid, 2, Directions::VonNeumann)
-                .unwrap_err()
-                .particle,
+            build(
+                &g,
+                &x_bar,
+                &bad,
+                &prev,
+                &solid,
+                2,
+                Directions::VonNeumann,
+                None
+            )
+            .unwrap_err()
+            .particle,
             0
         );
     }

@@ -1,0 +1,627 @@
+//! The band corrections of paper sec. band_method: keeping the number of particles that cross
+//! the band interface consistent with the room in the interface and the deep.
+//!
+//! Let `L = C_<=-R` be the band interface and the deep of the previous markings, `gamma_in` the
+//! moves into `L` and `gamma_out` the moves out of it, and `alpha_<=-R` the room (missing
+//! particles) in `L` (sec. band_con). The band constraint eq. band_con asks
+//! `0 <= n_in - n_out <= alpha_<=-R`. Three variants enforce it:
+//!
+//! - [`BandVariant::Full`]: eq. problem3 with eq. band_con and eq. band_con_update as one
+//!   integer program (microlp's branch and bound). Exact, and only practical on small problems.
+//! - [`BandVariant::OneWay`]: solve eq. problem3 first (`b*`); when `s_in` or `s_out` is
+//!   negative, solve again with the one-way constraint eq. band_con2 or eq. band_con3, an
+//!   integer program with one dense row (sec. band_con2).
+//! - [`BandVariant::Paths`]: keep `b*` and push `n_move` particles along grid paths into or out
+//!   of `L` (sec. push_part): alg. find (a multi-source Dijkstra over cells), alg. edge (the
+//!   cheapest particle per edge, by `sigma_edge` of eq. edge) and alg. update, as written.
+
+use crate::grid::{Cell, Grid, Vector};
+use crate::sim::advect::CELL_MARGIN;
+use crate::sim::markings::{CellKind, DepthLevel, Markings};
+use crate::solvers::lp::{self, SideConstraint};
+use rayon::prelude::*;
+use std::cmp::Ordering;
+use std::collections::BinaryHeap;
+use std::time::{Duration, Instant};
+
+use super::problem::CorrectionProblem;
+
+/// How the correction keeps the band's count right (sec. band_con, band_con2, push_part).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BandVariant {
+    Full,
+    OneWay,
+    Paths,
+}
+
+impl BandVariant {
+    pub const ALL: [BandVariant; 3] = [BandVariant::Full, BandVariant::OneWay, BandVariant::Paths];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            BandVariant::Full => "full",
+            BandVariant::OneWay => "one-way",
+            BandVariant::Paths => "paths",
+        }
+    }
+}
+
+/// The band as the correction sees it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BandContext {
+    /// `R`: the band is `R + 1` cells thick; the interface is at depth `-R`.
+    pub r: u32,
+    /// `n_deep`: the imaginary particles of the deep.
+    pub n_deep: usize,
+    pub variant: BandVariant,
+}
+
+/// One path of alg. find that alg. update applied: cell centres from source to sink.
+#[derive(Clone, Debug, Default)]
+pub struct BandPath<const D: usize> {
+    pub cells: Vec<Vector<D>>,
+    /// Sum of `sigma_edge` along the path (eq. edge); negative when the path lowers the
+    /// objective.
+    pub cost: f64,
+}
+
+/// What the band part of one correction did.
+#[derive(Clone, Debug)]
+pub struct BandCorrection<const D: usize> {
+    pub variant: BandVariant,
+    /// `alpha_<=-R`: the room in the band interface and the deep before the step.
+    pub alpha: i64,
+    /// `n*_in`, `n*_out`: moves into and out of `C_<=-R` in the first solve `b*`
+    /// (for `full`, in its only solve).
+    pub n_in: usize,
+    pub n_out: usize,
+    /// `s_in = n*_out - n*_in + alpha`, `s_out = n*_in - n*_out` (sec. band_con2).
+    pub s_in: i64,
+    pub s_out: i64,
+    /// Particles that had to be moved into (`s_out < 0`) or out of (`s_in < 0`) `C_<=-R`.
+    pub n_move: usize,
+    /// `paths`: paths applied, paths found by all calls of alg. find, and those calls.
+    pub paths_applied: usize,
+    pub paths_found: usize,
+    pub find_calls: usize,
+    /// Time of the second solve (`one-way`) or of the path search (`paths`).
+    pub second_time: Duration,
+    /// `sum |x_j - x_hat_j|^2` after the first solve and of the final positions.
+    pub first_objective: f64,
+    pub objective: f64,
+    /// `n_in - n_out` of the final positions; the band constraint asks `0 <= net <= alpha`.
+    pub net_in: i64,
+    /// Set when the variant could not meet the band constraint (a finding: the paper says it
+    /// always can).
+    pub failure: Option<String>,
+    /// The paths applied (`paths`).
+    pub paths: Vec<BandPath<D>>,
+    /// With cross-checking: the final objective of every other variant on the same problem.
+    pub other_objectives: Vec<(BandVariant, Result<f64, String>)>,
+}
+
+/// `alpha_<=-R = alpha_-R + alpha_<-R`: particles missing from the band interface cells of the
+/// previous markings plus the room in the deep, `mu |C_<-R| - n_deep` (sec. band_con).
+pub fn room_at_or_below_interface(previous: &Markings, r: u32, mu: u32, n_deep: usize) -> i64 {
+    let mut alpha = -(n_deep as i64);
+    for c in 0..previous.kind.len() {
+        if previous.kind[c] != CellKind::Fluid {
+            continue;
+        }
+        match previous.level(c, r) {
+            DepthLevel::Interface => alpha += mu as i64 - previous.count[c] as i64,
+            DepthLevel::Deep => alpha += mu as i64,
+            _ => {}
+        }
+    }
+    alpha
+}
+
+/// `(n_in, n_out)` of a choice: its candidates in `gamma_in` and in `gamma_out`.
+pub fn flows<const D: usize>(p: &CorrectionProblem<D>, choice: &[u32]) -> (usize, usize) {
+    choice
+        .iter()
+        .fold((0, 0), |(i, o), &k| match p.band_sign[k as usize] {
+            1 => (i + 1, o),
+            -1 => (i, o + 1),
+            _ => (i, o),
+        })
+}
+
+/// `n_in - n_out` of final positions against the previous ones.
+pub fn net_into_interface<const D: usize>(
+    grid: &Grid<D>,
+    x_bar: &[Vector<D>],
+    pos: &[Vector<D>],
+    previous: &Markings,
+    r: u32,
+) -> i64 {
+    let low = |x: &Vector<D>| previous.at_or_below_interface(grid.cell_index_of(x), r);
+    x_bar
+        .iter()
+        .zip(pos)
+        .map(|(a, b)| match (low(a), low(b)) {
+            (false, true) => 1,
+            (true, false) => -1,
+            _ => 0,
+        })
+        .sum()
+}
+
+/// `sum |x - x_hat|^2`.
+pub fn objective<const D: usize>(pos: &[Vector<D>], x_hat: &[Vector<D>]) -> f64 {
+    pos.iter()
+        .zip(x_hat)
+        .map(|(x, h)| (x - h).norm_squared())
+        .sum()
+}
+
+/// `full`: eq. problem3 with eq. band_con_update (in the problem's bounds) and eq. band_con
+/// (`0 <= sum gamma_in - sum gamma_out <= alpha`) as an integer program.
+pub fn solve_full<const D: usize>(
+    p: &CorrectionProblem<D>,
+    alpha: i64,
+) -> Result<Vec<u32>, String> {
+    let terms = (0..p.band_sign.len())
+        .filter(|&k| p.band_sign[k] != 0)
+        .map(|k| (k, p.band_sign[k] as f64))
+        .collect();
+    let side = SideConstraint {
+        terms,
+        min: 0.0,
+        max: alpha.max(0) as f64,
+    };
+    lp::solve_with(&p.assignment, &[side]).map_err(|e| e.to_string())
+}
+
+/// `one-way`, second step (sec. band_con2). Given `b*` with `s_in < 0`: keep the moves out of
+/// `C_<=-R` that `b*` made and block the others (eq. band_con2.a), block moves in that `b*` did
+/// not make (eq. band_con2.b) and let exactly `n*_out + alpha` of `b*`'s moves in happen
+/// (eq. band_con2.c). With `s_out < 0` the roles swap (eq. band_con3): keep `b*`'s moves in and
+/// let exactly `n*_in` of its moves out happen. Returns `b*` unchanged when both are >= 0.
+pub fn solve_one_way<const D: usize>(
+    p: &CorrectionProblem<D>,
+    b_star: &[u32],
+    alpha: i64,
+) -> Result<Vec<u32>, String> {
+    let (n_in, n_out) = flows(p, b_star);
+    let (s_in, s_out) = (
+        n_out as i64 - n_in as i64 + alpha,
+        n_in as i64 - n_out as i64,
+    );
+    let (limited, fixed, count) = if s_in < 0 {
+        (1, -1, n_out as i64 + alpha)
+    } else if s_out < 0 {
+        (-1, 1, n_in as i64)
+    } else {
+        return Ok(b_star.to_vec());
+    };
+    let a = &p.assignment;
+    let sign = |k: usize| p.band_sign[k];
+    let (reduced, original) = a.restrict(|i, k| {
+        let chosen = b_star[i] as usize;
+        if sign(chosen) == fixed {
+            // eq. band_con2.a / band_con3.a: this particle's move is fixed.
+            return k == chosen;
+        }
+        // Blocked: moves in the fixed direction that b* did not make, and moves in the
+        // limited direction that b* did not make (eq. band_con2.a-b / band_con3.a-b).
+        sign(k) == 0 || k == chosen
+    });
+    let terms: Vec<(usize, f64)> = (0..original.len())
+        .filter(|&k| sign(original[k] as usize) == limited)
+        .map(|k| (k, 1.0))
+        .collect();
+    let side = SideConstraint {
+        terms,
+        min: count as f64,
+        max: count as f64,
+    };
+    let choice = lp::solve_with(&reduced, &[side]).map_err(|e| e.to_string())?;
+    Ok(choice.iter().map(|&k| original[k as usize]).collect())
+}
+
+/// The direction of the paths (sec. push_part).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PathDirection {
+    /// `s_out < 0`: from surface cells into the band interface and the deep.
+    In,
+    /// `s_in < 0`: from band interface cells to the rest of the band and empty cells.
+    Out,
+}
+
+/// What pushing particles along paths did.
+#[derive(Clone, Debug, Default)]
+pub struct PathOutcome<const D: usize> {
+    pub applied: usize,
+    pub found: usize,
+    pub find_calls: usize,
+    pub paths: Vec<BandPath<D>>,
+}
+
+const NONE: u32 = u32::MAX;
+const ROOT: u32 = u32::MAX - 1;
+
+/// A node of alg. find's priority queue: lowest cost first, ties by cell, root and edge.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Node {
+    cost: f64,
+    cell: u32,
+    edge: u32,
+    root: u32,
+}
+
+impl Eq for Node {}
+
+impl Ord for Node {
+    fn cmp(&self, o: &Self) -> Ordering {
+        o.cost
+            .total_cmp(&self.cost)
+            .then_with(|| o.cell.cmp(&self.cell))
+            .then_with(|| o.root.cmp(&self.root))
+            .then_with(|| o.edge.cmp(&self.edge))
+    }
+}
+
+impl PartialOrd for Node {
+    fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
+        Some(self.cmp(o))
+    }
+}
+
+/// A path found by alg. find: the edge into its sink and the sink.
+struct FoundPath {
+    edge: u32,
+    sink: u32,
+    cost: f64,
+}
+
+/// The state alg. find, alg. edge and alg. update work on.
+pub struct PathPusher<'a, const D: usize> {
+    pub grid: &'a Grid<D>,
+    pub x_bar: &'a [Vector<D>],
+    pub x_hat: &'a [Vector<D>],
+    pub previous: &'a Markings,
+    pub solid: &'a [bool],
+    pub mu: u32,
+    pub r: u32,
+    pub direction: PathDirection,
+}
+
+impl<const D: usize> PathPusher<'_, D> {
+    fn low(&self, c: usize) -> bool {
+        self.previous.at_or_below_interface(c, self.r)
+    }
+
+    fn is_source(&self, c: usize) -> bool {
+        match self.direction {
+            PathDirection::In => {
+                self.previous.kind[c] == CellKind::Fluid && self.previous.surface[c]
+            }
+            PathDirection::Out => {
+                self.previous.kind[c] == CellKind::Fluid
+                    && self.previous.level(c, self.r) == DepthLevel::Interface
+            }
+        }
+    }
+
+    fn is_sink(&self, c: usize) -> bool {
+        match self.direction {
+            PathDirection::In => self.low(c),
+            PathDirection::Out => !self.solid[c] && !self.low(c),
+        }
+    }
+
+    /// `sigma_edge(j, c)` of eq. edge: the cost of particle `j` at its best point of cell `c`
+    /// minus the cost of where it is now.
+    fn sigma_edge(&self, j: usize, c: Cell<D>, x: &Vector<D>) -> f64 {
+        let xh = &self.x_hat[j];
+        (self.grid.closest_in_cell(xh, c, CELL_MARGIN) - xh).norm_squared()
+            - (x - xh).norm_squared()
+    }
+
+    /// Pushes `n_move` particles along paths (sec. push_part): alg. find, then alg. update
+    /// for each path found until `n_move` are applied, and again while more are needed and
+    /// alg. find still finds some.
+    pub fn push(&self, pos: &mut [Vector<D>], n_move: usize) -> PathOutcome<D> {
+        let grid = self.grid;
+        let n = grid.num_cells();
+        let mut cell_of: Vec<u32> = pos.iter().map(|x| grid.cell_index_of(x) as u32).collect();
+        let mut out = PathOutcome::default();
+        while out.applied < n_move {
+            // gamma_c of the current positions, as lists (counting sort).
+            let mut start = vec![0usize; n + 1];
+            for &c in &cell_of {
+                start[c as usize + 1] += 1;
+            }
+            for c in 0..n {
+                start[c + 1] += start[c];
+            }
+            let mut fill = start.clone();
+            let mut members = vec![0u32; cell_of.len()];
+            for (j, &c) in cell_of.iter().enumerate() {
+                members[fill[c as usize]] = j as u32;
+                fill[c as usize] += 1;
+            }
+            let gamma = |c: usize| &members[start[c]..start[c + 1]];
+            let (found, parent) = self.find(pos, &cell_of, &gamma);
+            out.find_calls += 1;
+            out.found += found.len();
+            if found.is_empty() {
+                break;
+            }
+            for path in found.into_iter().take(n_move - out.applied) {
+                out.paths
+                    .push(self.update(&parent, &path, pos, &mut cell_of));
+                out.applied += 1;
+            }
+        }
+        out
+    }
+
+    /// alg. find: non-intersecting cheapest paths from every non-empty source, one per source,
+    /// each ending at the first sink with room that its search reaches. Returns the paths in
+    /// the order found and `J`, each cell's edge (particle) to its parent.
+    ///
+    /// One deviation from the listing: a node extends its path from its own cost rather than
+    /// from `sigma[c]`, which a cheaper node of an already finished root may have lowered.
+    fn find<'g>(
+        &self,
+        pos: &[Vector<D>],
+        cell_of: &[u32],
+        gamma: &impl Fn(usize) -> &'g [u32],
+    ) -> (Vec<FoundPath>, Vec<u32>) {
+        let grid = self.grid;
+        let n = grid.num_cells();
+        let mut parent = vec![NONE; n];
+        let mut finished = vec![false; n];
+        let mut sigma = vec![f64::INFINITY; n];
+        let mut queue = BinaryHeap::new();
+        for c in 0..n {
+            if self.is_source(c) && !gamma(c).is_empty() {
+                parent[c] = ROOT;
+                sigma[c] = 0.0;
+                queue.push(Node {
+                    cost: 0.0,
+                    cell: c as u32,
+                    edge: ROOT,
+                    root: c as u32,
+                });
+            }
+        }
+        let mut paths = vec![];
+        while let Some(a) = queue.pop() {
+            let c = a.cell as usize;
+            if parent[c] != NONE && parent[c] != ROOT {
+                continue; // visited
+            }
+            if finished[a.root as usize] {
+                continue;
+            }
+            parent[c] = a.edge;
+            sigma[c] = a.cost;
+            if self.is_sink(c) && (gamma(c).len() as u32) < self.mu {
+                finished[a.root as usize] = true;
+                paths.push(FoundPath {
+                    edge: a.edge,
+                    sink: a.cell,
+                    cost: a.cost,
+                });
+                continue;
+            }
+            let cc = grid.cell_coords(c);
+            for axis in 0..D {
+                for dir in [-1, 1] {
+                    let Some(nb) = grid.neighbor(cc, axis, dir) else {
+                        continue;
+                    };
+                    let c2 = grid.cell_index(nb);
+                    if parent[c2] != NONE || self.solid[c2] {
+                        continue; // visited, a source or solid
+                    }
+                    // alg. edge: the cheapest particle of c that may move to c2, i.e. one whose
+                    // previous cell is c or c2.
+                    let mut best: Option<(f64, u32)> = None;
+                    for &j in gamma(c) {
+                        let home = grid.cell_index_of(&self.x_bar[j as usize]);
+                        if home != c && home != c2 {
+                            continue;
+                        }
+                        let e = self.sigma_edge(j as usize, nb, &pos[j as usize]);
+                        if best.is_none_or(|(b, _)| e < b) {
+                            best = Some((e, j));
+                        }
+                    }
+                    let Some((e, j)) = best else {
+                        continue;
+                    };
+                    debug_assert_eq!(cell_of[j as usize] as usize, c);
+                    let t = a.cost + e;
+                    if t >= sigma[c2] {
+                        continue;
+                    }
+                    sigma[c2] = t;
+                    queue.push(Node {
+                        cost: t,
+                        cell: c2 as u32,
+                        edge: j,
+                        root: a.root,
+                    });
+                }
+            }
+        }
+        (paths, parent)
+    }
+
+    /// alg. update: walks the path back from its sink, moving each edge's particle into the
+    /// cell after it, and returns the path's cell centres from source to sink.
+    fn update(
+        &self,
+        parent: &[u32],
+        path: &FoundPath,
+        pos: &mut [Vector<D>],
+        cell_of: &mut [u32],
+    ) -> BandPath<D> {
+        let grid = self.grid;
+        let (mut j, mut c) = (path.edge, path.sink as usize);
+        let mut cells = vec![grid.center(grid.cell_coords(c))];
+        while j != ROOT {
+            let from = cell_of[j as usize] as usize;
+            let ju = j as usize;
+            pos[ju] = grid.closest_in_cell(&self.x_hat[ju], grid.cell_coords(c), CELL_MARGIN);
+            cell_of[ju] = c as u32;
+            cells.push(grid.center(grid.cell_coords(from)));
+            j = parent[from];
+            c = from;
+        }
+        cells.reverse();
+        BandPath {
+            cells,
+            cost: path.cost,
+        }
+    }
+}
+
+/// The result of a band correction.
+pub struct BandOutcome<const D: usize> {
+    /// Final positions `x`.
+    pub pos: Vec<Vector<D>>,
+    pub report: BandCorrection<D>,
+    /// The first (or, for `full`, the only) solve: its time, augmenting paths and, when the
+    /// solver failed and every particle kept its cell, why.
+    pub solve_time: Duration,
+    pub augmentations: usize,
+    pub fallback: Option<String>,
+}
+
+/// Corrects the advected positions `x_hat` with the band variant of `ctx`: the first solve of
+/// eq. problem3 by `solver` (for `full`, the integer program), then the variant's second step.
+#[allow(clippy::too_many_arguments)]
+pub fn correct_band<const D: usize>(
+    grid: &Grid<D>,
+    p: &CorrectionProblem<D>,
+    x_bar: &[Vector<D>],
+    x_hat: &[Vector<D>],
+    previous: &Markings,
+    solid: &[bool],
+    mu: u32,
+    ctx: BandContext,
+    solver: super::Solver,
+) -> BandOutcome<D> {
+    let alpha = room_at_or_below_interface(previous, ctx.r, mu, ctx.n_deep);
+    let t0 = Instant::now();
+    let first = match ctx.variant {
+        BandVariant::Full => solve_full(p, alpha).map(|c| (c, 0)),
+        _ => solver.solve(&p.assignment),
+    }
+    .and_then(|(c, aug)| p.assignment.check(&c).map(|()| (c, aug)));
+    let solve_time = t0.elapsed();
+    let (choice, augmentations, fallback) = match first {
+        Ok((c, aug)) => (c, aug, None),
+        Err(e) => {
+            let who = match ctx.variant {
+                BandVariant::Full => "band ILP (simplex)",
+                _ => solver.name(),
+            };
+            let why = format!("{who} solver failed ({e}); particles keep their cells");
+            (p.stay.clone(), 0, Some(why))
+        }
+    };
+    let (n_in, n_out) = flows(p, &choice);
+    let mut pos: Vec<Vector<D>> = positions(grid, p, &choice, x_hat);
+    let mut rep = BandCorrection {
+        variant: ctx.variant,
+        alpha,
+        n_in,
+        n_out,
+        s_in: n_out as i64 - n_in as i64 + alpha,
+        s_out: n_in as i64 - n_out as i64,
+        n_move: 0,
+        paths_applied: 0,
+        paths_found: 0,
+        find_calls: 0,
+        second_time: Duration::ZERO,
+        first_objective: objective(&pos, x_hat),
+        objective: 0.0,
+        net_in: 0,
+        failure: None,
+        paths: vec![],
+        other_objectives: vec![],
+    };
+    rep.n_move = (-rep.s_in).max(-rep.s_out).max(0) as usize;
+    let t1 = Instant::now();
+    match ctx.variant {
+        BandVariant::Full => {}
+        BandVariant::OneWay if rep.n_move > 0 => {
+            match solve_one_way(p, &choice, alpha).and_then(|c| p.assignment.check(&c).map(|()| c))
+            {
+                Ok(c) => pos = positions(grid, p, &c, x_hat),
+                Err(e) => {
+                    rep.failure = Some(format!(
+                        "one-way second solve failed ({e}); particles keep their cells"
+                    ));
+                    pos = positions(grid, p, &p.stay, x_hat);
+                }
+            }
+        }
+        BandVariant::OneWay => {}
+        BandVariant::Paths if rep.n_move > 0 => {
+            let pusher = PathPusher {
+                grid,
+                x_bar,
+                x_hat,
+                previous,
+                solid,
+                mu,
+                r: ctx.r,
+                direction: if rep.s_in < 0 {
+                    PathDirection::Out
+                } else {
+                    PathDirection::In
+                },
+            };
+            let o = pusher.push(&mut pos, rep.n_move);
+            rep.paths_applied = o.applied;
+            rep.paths_found = o.found;
+            rep.find_calls = o.find_calls;
+            rep.paths = o.paths;
+            if o.applied < rep.n_move {
+                rep.failure = Some(format!(
+                    "alg. find found only {} of the {} paths needed",
+                    o.applied, rep.n_move
+                ));
+            }
+        }
+        BandVariant::Paths => {}
+    }
+    rep.second_time = t1.elapsed();
+    rep.net_in = net_into_interface(grid, x_bar, &pos, previous, ctx.r);
+    if rep.failure.is_none() && fallback.is_none() && !(0..=alpha.max(0)).contains(&rep.net_in) {
+        rep.failure = Some(format!(
+            "the band constraint 0 <= n_in - n_out = {} <= alpha = {alpha} does not hold",
+            rep.net_in
+        ));
+    }
+    rep.objective = objective(&pos, x_hat);
+    BandOutcome {
+        pos,
+        report: rep,
+        solve_time,
+        augmentations,
+        fallback,
+    }
+}
+
+/// The positions `xi` of a choice (eq. best_cell_pos).
+fn positions<const D: usize>(
+    grid: &Grid<D>,
+    p: &CorrectionProblem<D>,
+    choice: &[u32],
+    x_hat: &[Vector<D>],
+) -> Vec<Vector<D>> {
+    choice
+        .par_iter()
+        .zip(x_hat)
+        .map(|(&k, xh)| p.position(grid, k as usize, xh))
+        .collect()
+}
