@@ -29,22 +29,58 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         args.warmup,
         rayon::current_num_threads()
     );
+    let bands: Vec<Option<String>> = if args.band.is_empty() {
+        vec![None]
+    } else {
+        args.band.iter().cloned().map(Some).collect()
+    };
     for &res in &args.res {
-        let overrides = Overrides {
-            cells: Some(res),
-            method: args.method.clone(),
-            ..Default::default()
-        };
-        let scene = Scene::load(&args.scene, &overrides)?;
-        match scene.dim() {
-            2 => bench_dim::<2>(&scene, args)?,
-            _ => bench_dim::<3>(&scene, args)?,
+        let mut results: Vec<(String, Measured)> = vec![];
+        for band in &bands {
+            let overrides = Overrides {
+                cells: Some(res),
+                method: args.method.clone(),
+                band: band.clone(),
+                ..Default::default()
+            };
+            let scene = Scene::load(&args.scene, &overrides)?;
+            let m = match scene.dim() {
+                2 => bench_dim::<2>(&scene, args)?,
+                _ => bench_dim::<3>(&scene, args)?,
+            };
+            let name = scene.band.map_or("none", |b| b.variant.name()).to_string();
+            results.push((name, m));
+        }
+        if let Some(((first, base), rest)) = results.split_first().filter(|(_, r)| !r.is_empty()) {
+            println!(
+                "
+  at {res} cells, relative to band {first}:"
+            );
+            for (name, m) in rest {
+                println!(
+                    "  band {name}: step time ratio {:.2} ({:.1} / {:.1} ms); particles held {} vs {} ({:.1}%)",
+                    m.step.as_secs_f64() / base.step.as_secs_f64(),
+                    m.step.as_secs_f64() * 1e3,
+                    base.step.as_secs_f64() * 1e3,
+                    m.particles,
+                    base.particles,
+                    100.0 * m.particles as f64 / base.particles.max(1) as f64
+                );
+            }
         }
     }
     Ok(())
 }
 
-fn bench_dim<const D: usize>(scene: &Scene, args: &BenchArgs) -> Result<()> {
+/// What one measurement found.
+struct Measured {
+    /// Median step time.
+    step: Duration,
+    /// Particles held at the end (band particles with the band).
+    particles: usize,
+}
+
+fn bench_dim<const D: usize>(scene: &Scene, args: &BenchArgs) -> Result<Measured> {
     let mut config = scene.config::<D>();
     config.correction.cross_check = args.cross_check;
     let mut sim = Simulation::<D>::new(config);
@@ -56,12 +92,26 @@ fn bench_dim<const D: usize>(scene: &Scene, args: &BenchArgs) -> Result<()> {
     let mut per_stage: Vec<Vec<Duration>> = vec![vec![]; Stage::ALL.len()];
     let mut totals = vec![];
     let mut iters = vec![];
+    let mut band_gaps: Vec<(&str, Vec<f64>)> = vec![];
+    let mut second_times = vec![];
     for _ in 0..args.steps {
         let rep = sim.step()?;
         if let Some(c) = &rep.correction {
             solver_times.push(c.solver_time);
             if let Some(t) = c.cross_check_time {
                 other_times.push(t);
+            }
+            if let Some(b) = &c.band {
+                second_times.push(b.second_time);
+                for (v, o) in &b.other_objectives {
+                    let gap = o.as_ref().map_or(f64::NAN, |o| {
+                        (o - b.objective) / b.objective.abs().max(1e-12)
+                    });
+                    match band_gaps.iter_mut().find(|(n, _)| *n == v.name()) {
+                        Some((_, g)) => g.push(gap),
+                        None => band_gaps.push((v.name(), vec![gap])),
+                    }
+                }
             }
         }
         for s in Stage::ALL {
@@ -71,8 +121,18 @@ fn bench_dim<const D: usize>(scene: &Scene, args: &BenchArgs) -> Result<()> {
         iters.push(rep.pcg.iterations);
     }
     iters.sort();
+    let band = match sim.band() {
+        Some(b) => format!(
+            ", band {} (R = {}): n_deep {} ({:.1}% of the fluid's particles held)",
+            b.variant.name(),
+            b.r,
+            sim.n_deep,
+            100.0 * sim.particles.len() as f64 / (sim.particles.len() + sim.n_deep).max(1) as f64
+        ),
+        None => String::new(),
+    };
     println!(
-        "\n{} at {:?} cells ({}), {} particles, {} fluid cells, median PCG iterations {}",
+        "\n{} at {:?} cells ({}), {} particles, {} fluid cells, median PCG iterations {}{band}",
         scene.name(),
         sim.grid.dims,
         scene.method.name(),
@@ -128,8 +188,33 @@ fn bench_dim<const D: usize>(scene: &Scene, args: &BenchArgs) -> Result<()> {
             ratios[ratios.len() - 1]
         );
     }
+    if !second_times.is_empty() && band_gaps.is_empty() {
+        println!(
+            "  band second step (one-way solve or path search): median {:.2} ms",
+            median(second_times).as_secs_f64() * 1e3
+        );
+    }
+    let variant = sim.band().map_or("", |b| b.variant.name());
+    for (v, mut g) in band_gaps {
+        let failed = g.iter().filter(|x| x.is_nan()).count();
+        g.retain(|x| !x.is_nan());
+        g.sort_by(f64::total_cmp);
+        match (g.first(), g.last()) {
+            (Some(lo), Some(hi)) => println!(
+                "  band {v} on the same problems: objective {:+.3}% .. {:+.3}% (median {:+.3}%) relative to {variant}; failed on {failed} of {} steps",
+                100.0 * lo,
+                100.0 * hi,
+                100.0 * g[g.len() / 2],
+                g.len() + failed
+            ),
+            _ => println!("  band {v} on the same problems: failed on all {failed} steps"),
+        }
+    }
     if let Some(m) = peak_memory_mib() {
         println!("  peak memory (process so far): {m:.0} MiB");
     }
-    Ok(())
+    Ok(Measured {
+        step,
+        particles: sim.particles.len(),
+    })
 }

@@ -244,6 +244,53 @@ fn ccp_recordings_carry_the_corrector_and_export_the_lp() {
 }
 
 #[test]
+fn band_recordings_carry_depth_levels_paths_and_band_metrics_2d_and_3d() {
+    let dir = scratch_dir("band");
+    for (scene, extra) in [
+        (
+            "dam-2d",
+            vec![
+                "--band",
+                "paths",
+                "--band-r",
+                "2",
+                "--res",
+                "24",
+                "--cross-check",
+            ],
+        ),
+        ("drop-3d", vec!["--res", "12"]),
+    ] {
+        let out = dir.join(format!("{scene}.rrd"));
+        let mut args = vec![
+            "run",
+            scene,
+            "--steps",
+            "30",
+            "-q",
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        args.extend(extra);
+        let o = cellflip(&args);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let got = logged_entities(&out);
+        for e in cellflip::record::BAND_ENTITY_PATHS {
+            let e = e.replace("<variant>", "paths");
+            assert!(
+                got.contains(&format!("/{e}")),
+                "{scene}: /{e} missing from {got:?}"
+            );
+        }
+        if scene == "dam-2d" {
+            // The cross-check records the other variants' objectives on the same problems.
+            assert!(got.contains("/metrics/band/objective/full"));
+            assert!(got.contains("/metrics/band/objective/one-way"));
+        }
+    }
+}
+
+#[test]
 fn ctrl_c_stops_the_run_and_leaves_a_valid_recording() {
     let dir = scratch_dir("ctrlc");
     let out = dir.join("dam.rrd");

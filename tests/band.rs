@@ -1,0 +1,259 @@
+//! The band method (paper sec. band_method): exact bookkeeping of the deep over long runs in 2D
+//! and 3D, feasibility of all three band corrections, their objectives against each other, and
+//! a known-answer case of fig. path.
+
+use cellflip::grid::{Grid, Vector};
+use cellflip::metrics::check_cell_counts;
+use cellflip::scene::{Overrides, Scene};
+use cellflip::sim::correct::band::{BandContext, BandVariant};
+use cellflip::sim::correct::{correct, CorrectionSettings};
+use cellflip::sim::markings::{DepthLevel, Markings};
+use cellflip::sim::Simulation;
+
+/// Runs `steps` steps of a scene with method ccp and the given band, checking every step: the
+/// invariants (inside `step`: cell bounds after the correction, particles plus `n_deep` equal
+/// everything seeded or emitted, every cell <= mu), the band constraint of the final positions,
+/// room in the interface for the deep's excess, and no real particle left in the deep.
+/// Returns the volume of every step and the simulation.
+fn run_band<const D: usize>(
+    name: &str,
+    band: &str,
+    overrides: Overrides,
+    steps: u64,
+    cross_check: bool,
+) -> (Vec<f64>, Simulation<D>) {
+    let overrides = Overrides {
+        method: Some("ccp".into()),
+        band: Some(band.into()),
+        ..overrides
+    };
+    let scene = Scene::load(name, &overrides).unwrap();
+    let mut config = scene.config::<D>();
+    config.correction.cross_check = cross_check;
+    let mut sim = Simulation::<D>::new(config);
+    let r = sim.band().expect("a band").r;
+    let mut volumes = vec![sim.volume_percent()];
+    for _ in 0..steps {
+        let rep = sim
+            .step()
+            .unwrap_or_else(|e| panic!("{name} ({band}) step {}: {e}", sim.steps + 1));
+        let at = format!("{name} ({band}) step {}", sim.steps);
+        let c = rep.correction.as_ref().unwrap();
+        assert!(c.fallback.is_none(), "{at}: {:?}", c.fallback);
+        let b = c.band.as_ref().expect("band report");
+        assert!(b.failure.is_none(), "{at}: {:?}", b.failure);
+        assert!(
+            b.alpha >= 0 && (0..=b.alpha).contains(&b.net_in),
+            "{at}: 0 <= net {} <= alpha {}",
+            b.net_in,
+            b.alpha
+        );
+        let deep = rep.deep.unwrap();
+        assert_eq!(deep.unplaced, 0, "{at}: no room in the interface");
+        assert_eq!(
+            sim.particles.len() + sim.n_deep,
+            sim.total_particles,
+            "{at}"
+        );
+        for x in &sim.particles.pos {
+            let cell = sim.grid.cell_index_of(x);
+            assert_ne!(sim.markings.level(cell, r), DepthLevel::Deep, "{at}");
+        }
+        if cross_check {
+            for (v, o) in &b.other_objectives {
+                let o = o
+                    .as_ref()
+                    .unwrap_or_else(|e| panic!("{at}: {} failed: {e}", v.name()));
+                // full is the optimum of the constrained problem; the others are feasible for it.
+                if *v == BandVariant::Full {
+                    assert!(
+                        *o <= b.objective * (1.0 + 1e-9) + 1e-9,
+                        "{at}: full {o} > {}",
+                        b.objective
+                    );
+                }
+            }
+        }
+        volumes.push(rep.volume_percent);
+    }
+    (volumes, sim)
+}
+
+fn min(v: &[f64]) -> f64 {
+    v.iter().cloned().fold(f64::INFINITY, f64::min)
+}
+
+#[test]
+fn band_conserves_volume_over_a_long_2d_run() {
+    // The whole dam-2d with its emitter (8 s, about 1200 steps), R = 6 as in the paper.
+    let (v, sim) = run_band::<2>("dam-2d", "paths", Overrides::default(), 1200, false);
+    assert!(min(&v) >= 100.0 - 1e-9, "volume fell to {}%", min(&v));
+    // The emitter filled exactly half the tank, counting the deep's particles.
+    assert_eq!(sim.total_particles, sim.grid.num_cells() / 2 * 4);
+    assert!(sim.n_deep > 0);
+}
+
+#[test]
+fn band_conserves_volume_over_a_long_3d_run() {
+    let (v, sim) = run_band::<3>(
+        "dam-3d",
+        "paths",
+        Overrides {
+            cells: Some(32),
+            band_r: Some(3),
+            ..Default::default()
+        },
+        200,
+        false,
+    );
+    assert!(min(&v) >= 100.0 - 1e-9, "volume fell to {}%", min(&v));
+    assert!(sim.n_deep > 0);
+    let (v, _) = run_band::<3>(
+        "drop-3d",
+        "paths",
+        Overrides {
+            cells: Some(24),
+            ..Default::default()
+        },
+        100,
+        false,
+    );
+    assert!(min(&v) >= 100.0 - 1e-9, "volume fell to {}%", min(&v));
+}
+
+#[test]
+fn all_three_band_variants_stay_feasible_and_full_is_the_optimum_2d() {
+    // Every step runs all three variants on the same problem (cross-check).
+    let small = Overrides {
+        cells: Some(24),
+        band_r: Some(2),
+        ..Default::default()
+    };
+    for band in ["paths", "one-way", "full"] {
+        let (v, _) = run_band::<2>("dam-2d", band, small.clone(), 80, true);
+        assert!(
+            min(&v) >= 100.0 - 1e-9,
+            "{band}: volume fell to {}%",
+            min(&v)
+        );
+    }
+}
+
+#[test]
+fn all_three_band_variants_stay_feasible_3d() {
+    let small = Overrides {
+        cells: Some(12),
+        band_r: Some(1),
+        ..Default::default()
+    };
+    for band in ["paths", "one-way", "full"] {
+        run_band::<3>("dam-3d", band, small.clone(), 30, true);
+    }
+}
+
+#[test]
+fn the_band_holds_fewer_particles_than_the_fluid_on_dam_3d() {
+    let at = |band: &str| {
+        let scene = Scene::load(
+            "dam-3d",
+            &Overrides {
+                cells: Some(100),
+                band: Some(band.into()),
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        Simulation::<3>::new(scene.config::<3>())
+    };
+    let full = at("none");
+    let band = at("paths");
+    assert_eq!(full.n_deep, 0);
+    assert_eq!(band.particles.len() + band.n_deep, full.particles.len());
+    let ratio = band.particles.len() as f64 / full.particles.len() as f64;
+    println!(
+        "dam-3d at 100^3, R = 6: {} of {} particles held ({:.1}%)",
+        band.particles.len(),
+        full.particles.len(),
+        100.0 * ratio
+    );
+    assert!(ratio < 0.75, "{ratio}");
+}
+
+/// Fig. path at 1 ppc: a 6x6 tank, R = 1, fluid in rows 0..=3 (row 3 surface, row 2 the band
+/// interface, rows 0..=1 deep and full: no room, alpha = 0). In the first solve the interface
+/// particle of column 2 sinks into the deep and the surface particle above takes its place:
+/// one move in, none out, `s_in = -1`. Each variant must undo that: one particle leaves the
+/// interface again.
+#[test]
+fn a_move_into_a_full_interface_is_undone_by_every_variant() {
+    let g = Grid::new([6, 6]);
+    let mu = 1;
+    let solid = vec![false; 36];
+    let mut x_bar = vec![];
+    for i in 0..6 {
+        for j in 2..4 {
+            x_bar.push(g.center([i, j]));
+        }
+    }
+    // Markings as the band method keeps them: rows 0..=1 are deep, fluid without particles.
+    let mut keep = vec![false; 36];
+    for i in 0..6 {
+        for j in 0..2 {
+            keep[g.cell_index([i, j])] = true;
+        }
+    }
+    let prev = Markings::compute_keeping(&g, &x_bar, &solid, Some(&keep));
+    assert_eq!(prev.level(g.cell_index([2, 3]), 1), DepthLevel::Surface);
+    assert_eq!(prev.level(g.cell_index([2, 2]), 1), DepthLevel::Interface);
+    assert_eq!(prev.level(g.cell_index([2, 1]), 1), DepthLevel::Deep);
+    let x_hat: Vec<Vector<2>> = x_bar
+        .iter()
+        .map(|x| {
+            if (x[0] - 2.5).abs() < 1e-9 {
+                x - Vector::<2>::new(0.0, 0.9) // column 2 moves down
+            } else {
+                *x
+            }
+        })
+        .collect();
+    let mut objectives = vec![];
+    for variant in BandVariant::ALL {
+        let mut pos = x_hat.clone();
+        let ctx = BandContext {
+            r: 1,
+            n_deep: 12,
+            variant,
+        };
+        let rep = correct(
+            &g,
+            &x_bar,
+            &mut pos,
+            &prev,
+            &solid,
+            mu,
+            &CorrectionSettings::default(),
+            Some(ctx),
+            false,
+        )
+        .unwrap();
+        let b = rep.band.unwrap();
+        assert_eq!(b.alpha, 0);
+        assert!(b.failure.is_none(), "{}: {:?}", variant.name(), b.failure);
+        assert_eq!(b.net_in, 0, "{}", variant.name());
+        check_cell_counts(&g, &pos, &prev, &solid, mu, Some(1)).unwrap();
+        if variant != BandVariant::Full {
+            assert_eq!((b.n_in, b.n_out, b.s_in, b.n_move), (1, 0, -1, 1));
+        }
+        if variant == BandVariant::Paths {
+            assert_eq!(b.paths_applied, 1);
+            let p = &b.paths[0];
+            // From the interface to a cell above it, through neighbouring cell centres.
+            assert_eq!(p.cells.first().unwrap()[1], 2.5);
+            assert!(p.cells.last().unwrap()[1] > 2.5);
+            assert!(p.cells.windows(2).all(|w| (w[0] - w[1]).norm() == 1.0));
+        }
+        objectives.push(b.objective);
+    }
+    // full is the optimum; one-way and paths cannot beat it.
+    assert!(objectives[0] <= objectives[1] + 1e-12 && objectives[0] <= objectives[2] + 1e-12);
+}
