@@ -37,11 +37,31 @@ pub fn advect_particles<const D: usize>(
 
 /// Semi-Lagrangian advection of the grid velocity by itself over `dt` (first order): each face
 /// takes the value found at the point its velocity traces back from, `u(x_f - dt u(x_f))`.
-pub fn advect_velocity<const D: usize>(grid: &Grid<D>, u: &MacField<D>, dt: f64) -> MacField<D> {
-    let mut out = MacField::zeros(grid);
+/// Only faces next to a cell flagged in `needed` are advected; the others keep `u` (the band
+/// method reads the grid velocity only near its interface and deep).
+pub fn advect_velocity<const D: usize>(
+    grid: &Grid<D>,
+    u: &MacField<D>,
+    dt: f64,
+    needed: &[bool],
+) -> MacField<D> {
+    let mut out = u.clone();
     for a in 0..D {
         out.comp[a].par_iter_mut().enumerate().for_each(|(i, v)| {
             let f = grid.face_coords(a, i);
+            let below = (f[a] > 0).then(|| {
+                let mut c = f;
+                c[a] -= 1;
+                c
+            });
+            let above = (f[a] < grid.dims[a]).then_some(f);
+            if ![below, above]
+                .into_iter()
+                .flatten()
+                .any(|c| needed[grid.cell_index(c)])
+            {
+                return;
+            }
             let x = Vector::<D>::from_fn(|k, _| f[k] as f64 + if k == a { 0.0 } else { 0.5 });
             let mut back = x - dt * u.interpolate(grid, &x);
             for k in 0..D {
@@ -68,7 +88,7 @@ mod tests {
             let f = g.face_coords(1, i);
             u.comp[1][i] = 0.5 * (f[0] as f64 + 0.5);
         }
-        let out = advect_velocity(&g, &u, 0.5);
+        let out = advect_velocity(&g, &u, 0.5, &vec![true; g.num_cells()]);
         assert!(out.comp[0].iter().all(|&v| (v - 2.0).abs() < 1e-12));
         for i in 0..g.num_faces(1) {
             let f = g.face_coords(1, i);

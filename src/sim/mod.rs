@@ -364,7 +364,14 @@ impl<const D: usize> Simulation<D> {
         let x_bar = (c.method == Method::Ccp).then(|| self.particles.pos.clone());
         let advected_u = rep.times.time(Stage::Advect, || {
             advect::advect_particles(grid, &u, &self.solid, dt, &mut self.particles.pos);
-            band.map(|_| advect::advect_velocity(grid, &u, dt))
+            band.map(|b| {
+                // The next step reads the grid velocity next to the interface and the deep;
+                // depths move by at most two levels a step, hence the margin.
+                let needed: Vec<bool> = (0..grid.num_cells())
+                    .map(|c| self.markings.is_fluid(c) && self.markings.depth[c] <= 2 - b.r as i32)
+                    .collect();
+                advect::advect_velocity(grid, &u, dt, &needed)
+            })
         });
         if let Some(x_bar) = x_bar {
             let want_mps = self.export_problem_at_step == Some(self.steps + 1);
