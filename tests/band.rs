@@ -179,49 +179,46 @@ fn the_band_holds_fewer_particles_than_the_fluid_on_dam_3d() {
     assert!(ratio < 0.75, "{ratio}");
 }
 
-/// Fig. path at 1 ppc: a 6x6 tank, R = 1, fluid in rows 0..=3 (row 3 surface, row 2 the band
-/// interface, rows 0..=1 deep and full: no room, alpha = 0). In the first solve the interface
-/// particle of column 2 sinks into the deep and the surface particle above takes its place:
-/// one move in, none out, `s_in = -1`. Each variant must undo that: one particle leaves the
-/// interface again.
-#[test]
-fn a_move_into_a_full_interface_is_undone_by_every_variant() {
-    let g = Grid::new([6, 6]);
+/// Fig. path at 1 ppc: a tank 6 cells along every axis, R = 1, fluid in layers y = 0..=3
+/// (y = 3 surface, y = 2 the band interface, y = 0..=1 deep and full: no room, alpha = 0). In
+/// the first solve the interface particle of column x = 2 (z = 2) sinks into the deep and the
+/// surface particle above takes its place: one move in, none out, `s_in = -1`. Each variant
+/// must undo that: one particle leaves the interface again.
+fn a_move_into_a_full_interface_is_undone<const D: usize>() {
+    let g = Grid::new([6; D]);
     let mu = 1;
-    let solid = vec![false; 36];
-    let mut x_bar = vec![];
-    for i in 0..6 {
-        for j in 2..4 {
-            x_bar.push(g.center([i, j]));
-        }
-    }
-    // Markings as the band method keeps them: rows 0..=1 are deep, fluid without particles.
-    let mut keep = vec![false; 36];
-    for i in 0..6 {
-        for j in 0..2 {
-            keep[g.cell_index([i, j])] = true;
-        }
-    }
+    let n = g.num_cells();
+    let solid = vec![false; n];
+    let layer = |c: usize| g.cell_coords(c)[1];
+    let x_bar: Vec<Vector<D>> = (0..n)
+        .filter(|&c| (2..4).contains(&layer(c)))
+        .map(|c| g.center(g.cell_coords(c)))
+        .collect();
+    // Markings as the band method keeps them: layers 0..=1 are deep, fluid without particles.
+    let keep: Vec<bool> = (0..n).map(|c| layer(c) < 2).collect();
     let prev = Markings::compute_keeping(&g, &x_bar, &solid, Some(&keep));
-    assert_eq!(prev.level(g.cell_index([2, 3]), 1), DepthLevel::Surface);
-    assert_eq!(prev.level(g.cell_index([2, 2]), 1), DepthLevel::Interface);
-    assert_eq!(prev.level(g.cell_index([2, 1]), 1), DepthLevel::Deep);
-    let x_hat: Vec<Vector<2>> = x_bar
+    let column = |y: usize| g.cell_index(std::array::from_fn(|k| if k == 1 { y } else { 2 }));
+    assert_eq!(prev.level(column(3), 1), DepthLevel::Surface);
+    assert_eq!(prev.level(column(2), 1), DepthLevel::Interface);
+    assert_eq!(prev.level(column(1), 1), DepthLevel::Deep);
+    let in_column = |x: &Vector<D>| (0..D).all(|k| k == 1 || (x[k] - 2.5).abs() < 1e-9);
+    let x_hat: Vec<Vector<D>> = x_bar
         .iter()
         .map(|x| {
-            if (x[0] - 2.5).abs() < 1e-9 {
-                x - Vector::<2>::new(0.0, 0.9) // column 2 moves down
-            } else {
-                *x
+            let mut y = *x;
+            if in_column(x) {
+                y[1] -= 0.9; // the column moves down
             }
+            y
         })
         .collect();
+    let n_deep = keep.iter().filter(|k| **k).count();
     let mut objectives = vec![];
     for variant in BandVariant::ALL {
         let mut pos = x_hat.clone();
         let ctx = BandContext {
             r: 1,
-            n_deep: 12,
+            n_deep,
             variant,
         };
         let rep = correct(
@@ -237,23 +234,33 @@ fn a_move_into_a_full_interface_is_undone_by_every_variant() {
         )
         .unwrap();
         let b = rep.band.unwrap();
-        assert_eq!(b.alpha, 0);
-        assert!(b.failure.is_none(), "{}: {:?}", variant.name(), b.failure);
-        assert_eq!(b.net_in, 0, "{}", variant.name());
+        let at = format!("{D}D {}", variant.name());
+        assert_eq!(b.alpha, 0, "{at}");
+        assert!(b.failure.is_none(), "{at}: {:?}", b.failure);
+        assert_eq!(b.net_in, 0, "{at}");
         check_cell_counts(&g, &pos, &prev, &solid, mu, Some(1)).unwrap();
         if variant != BandVariant::Full {
-            assert_eq!((b.n_in, b.n_out, b.s_in, b.n_move), (1, 0, -1, 1));
+            assert_eq!((b.n_in, b.n_out, b.s_in, b.n_move), (1, 0, -1, 1), "{at}");
         }
         if variant == BandVariant::Paths {
-            assert_eq!(b.paths_applied, 1);
+            assert_eq!(b.paths_applied, 1, "{at}");
             let p = &b.paths[0];
             // From the interface to a cell above it, through neighbouring cell centres.
-            assert_eq!(p.cells.first().unwrap()[1], 2.5);
-            assert!(p.cells.last().unwrap()[1] > 2.5);
-            assert!(p.cells.windows(2).all(|w| (w[0] - w[1]).norm() == 1.0));
+            assert_eq!(p.cells.first().unwrap()[1], 2.5, "{at}");
+            assert!(p.cells.last().unwrap()[1] > 2.5, "{at}");
+            assert!(
+                p.cells.windows(2).all(|w| (w[0] - w[1]).norm() == 1.0),
+                "{at}"
+            );
         }
         objectives.push(b.objective);
     }
     // full is the optimum; one-way and paths cannot beat it.
     assert!(objectives[0] <= objectives[1] + 1e-12 && objectives[0] <= objectives[2] + 1e-12);
+}
+
+#[test]
+fn a_move_into_a_full_interface_is_undone_by_every_variant_2d_and_3d() {
+    a_move_into_a_full_interface_is_undone::<2>();
+    a_move_into_a_full_interface_is_undone::<3>();
 }

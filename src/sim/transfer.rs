@@ -198,6 +198,37 @@ mod tests {
     }
 
     #[test]
+    fn band_faces_take_particles_and_faces_at_the_interface_take_the_grid_3d() {
+        // A full 4x4x6 column (the tank's whole footprint) at 1 ppc, R = 1: the top layer
+        // z = 5 is surface, z = 4 the interface, z <= 3 deep. Particles move at +1 along z, the
+        // grid at -7.
+        let g = Grid::new([4, 4, 8]);
+        let mut pos = vec![];
+        for c in 0..g.num_cells() {
+            let cc = g.cell_coords(c);
+            if cc[2] < 6 {
+                pos.push(g.center(cc));
+            }
+        }
+        let vel = vec![Vector::<3>::new(0.0, 0.0, 1.0); pos.len()];
+        let m = Markings::compute(&g, &pos, &vec![false; g.num_cells()]);
+        let (mut u, mut known) = particles_to_grid(&g, &pos, &vel);
+        let mut grid_u = MacField::zeros(&g);
+        grid_u.comp[2].iter_mut().for_each(|v| *v = -7.0);
+        combine_with_grid(&g, &mut u, &mut known, &grid_u, &m, 1);
+        for i in 0..g.num_faces(2) {
+            let f = g.face_coords(2, i);
+            match f[2] {
+                // Faces touching a cell at depth <= -1: grid velocity, known.
+                0..=5 => assert!(known[2][i] && u.comp[2][i] == -7.0, "{f:?}"),
+                // Between the surface layer and the air above: particle velocity.
+                6 => assert!(known[2][i] && (u.comp[2][i] - 1.0).abs() < 1e-12, "{f:?}"),
+                _ => assert!(!known[2][i], "{f:?}"),
+            }
+        }
+    }
+
+    #[test]
     fn extrapolation_fills_rings_from_known_faces() {
         let g = Grid::new([6, 6]);
         let mut u = MacField::zeros(&g);
