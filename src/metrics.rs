@@ -148,7 +148,7 @@ pub fn check_particles<const D: usize>(
 /// The guarantees of the correction step (paper eq. problem3, or eq. band_con_update with the
 /// band parameter `band_r`), checked from the final positions alone: every cell's count lies
 /// within its bounds ([`cell_bounds`]: at most `mu`, or what it held if that was more; inner
-/// cells keep their count; the band's deep is unbounded) and no solid cell holds anything.
+/// cells keep their count) and no solid cell holds anything.
 pub fn check_cell_counts<const D: usize>(
     grid: &Grid<D>,
     pos: &[Vector<D>],

@@ -416,6 +416,14 @@ fn check(source: &str, file: SceneFile) -> Result<Scene> {
         0 => None,
         k => Some(BandVariant::ALL[k - 1]),
     };
+    if band_variant.is_some() && directions == Directions::Moore {
+        return Err(err(
+            "simulation.band",
+            "the band method moves particles to von Neumann neighbours only (sec. push_part); \
+             use directions = \"von-neumann\" or band = \"none\""
+                .into(),
+        ));
+    }
     if !(1..=10_000).contains(&s.band_r) {
         return Err(err(
             "simulation.band_r",

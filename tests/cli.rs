@@ -106,6 +106,26 @@ fn zero_ppc_is_rejected() {
 }
 
 #[test]
+fn bad_band_settings_are_rejected() {
+    let with = |extra: &str| GOOD.replace("duration = 0.05", &format!("duration = 0.05\n{extra}"));
+    rejects(
+        "band-name",
+        &with("band = \"wide\""),
+        &["simulation.band", "wide", "paths"],
+    );
+    rejects(
+        "band-r",
+        &with("band = \"paths\"\nband_r = 0"),
+        &["simulation.band_r", "at least 1"],
+    );
+    rejects(
+        "band-moore",
+        &with("band = \"paths\"\ndirections = \"moore\""),
+        &["simulation.band", "von Neumann"],
+    );
+}
+
+#[test]
 fn negative_duration_is_rejected() {
     rejects(
         "duration",

@@ -64,6 +64,20 @@ pub struct DeepExchange {
     pub interface_cells: usize,
 }
 
+impl DeepExchange {
+    /// Both exchanges of one step together (after emission and after the correction); the
+    /// cell counts are the later one's.
+    pub fn merged(self, earlier: Option<DeepExchange>) -> Self {
+        let e = earlier.unwrap_or_default();
+        Self {
+            removed: self.removed + e.removed,
+            added: self.added + e.added,
+            unplaced: self.unplaced + e.unplaced,
+            ..self
+        }
+    }
+}
+
 /// Removes particles in deep cells (into `n_deep`) and fills the band interface from the
 /// deep's excess (alg. band, line 9), and with it the cells of `was_low` (the interface and
 /// deep of the previous markings) that are now above the interface. Keeps `markings.count` up
@@ -100,7 +114,8 @@ pub fn exchange_with_deep<const D: usize>(
     particles.vel.retain(|_| *it.next().unwrap());
     out.removed = before - particles.len();
     *n_deep += out.removed;
-    let mut interface = vec![];
+    // Former interface or deep cells now above the interface first, then the interface.
+    let (mut risen, mut interface) = (vec![], vec![]);
     for c in 0..markings.kind.len() {
         match level(markings, c) {
             DepthLevel::Deep => {
@@ -109,17 +124,18 @@ pub fn exchange_with_deep<const D: usize>(
             }
             DepthLevel::Interface => interface.push(c),
             DepthLevel::Band | DepthLevel::Surface if was_low.is_some_and(|k| k[c]) => {
-                interface.push(c)
+                risen.push(c)
             }
             _ => {}
         }
     }
-    out.interface_cells = interface.len();
+    out.interface_cells = risen.len() + interface.len();
     let capacity = mu as usize * out.deep_cells;
     let mut excess = n_deep.saturating_sub(capacity);
     if excess > 0 {
+        risen.shuffle(rng);
         interface.shuffle(rng);
-        for &c in &interface {
+        for &c in risen.iter().chain(&interface) {
             if excess == 0 {
                 break;
             }

@@ -122,8 +122,9 @@ impl Markings {
         Self::compute_keeping(grid, positions, solid, None)
     }
 
-    /// As [`Self::compute`], but cells flagged in `keep` are fluid even without particles: the
-    /// band method's interface and deep (sec. band_method), whose particles are imaginary.
+    /// As [`Self::compute`], but cells flagged in `keep` are fluid even without particles: with
+    /// the band method (sec. band_method), the fluid cells below the surface of the previous
+    /// markings, among them the deep, whose particles are imaginary.
     pub fn compute_keeping<const D: usize>(
         grid: &Grid<D>,
         positions: &[Vector<D>],

@@ -24,7 +24,7 @@ use band::{BandSettings, DeepExchange};
 use correct::band::BandContext;
 use correct::{CorrectionReport, CorrectionSettings};
 use emit::Emitter;
-use markings::Markings;
+use markings::{DepthLevel, Markings};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 
@@ -186,10 +186,10 @@ impl<const D: usize> Simulation<D> {
             .filter(|_| self.config.method == Method::Ccp)
     }
 
-    /// Markings of the current positions; with the band, fluid cells below the surface stay
-    /// fluid without particles ([`band::kept_cells`]). Returns the band interface and deep of
-    /// the markings it replaced.
-    fn remark(&mut self) -> Option<Vec<bool>> {
+    /// Markings of the current positions. With the band, fluid cells below the surface stay
+    /// fluid without particles ([`band::kept_cells`]), and then particles are exchanged with
+    /// the deep (alg. band, line 9).
+    fn refresh_markings(&mut self) -> Option<DeepExchange> {
         let band = self.band();
         let was_low = band.map(|b| band::at_or_below_interface(&self.markings, b.r));
         let keep = band.map(|_| band::kept_cells(&self.markings));
@@ -199,7 +199,19 @@ impl<const D: usize> Simulation<D> {
             &self.solid,
             keep.as_deref(),
         );
-        was_low
+        band.map(|b| {
+            band::exchange_with_deep(
+                &self.grid,
+                &mut self.particles,
+                &mut self.markings,
+                was_low.as_deref(),
+                b.r,
+                self.config.mu(),
+                &mut self.n_deep,
+                &self.velocity,
+                &mut self.rng,
+            )
+        })
     }
 
     /// The volume measure of eq. volume as a percentage of `V*`.
@@ -247,7 +259,7 @@ impl<const D: usize> Simulation<D> {
             let occupied: Vec<u32> = match band {
                 Some(b) if !c.emitters.is_empty() => (0..grid.num_cells())
                     .map(|i| match self.markings.level(i, b.r) {
-                        markings::DepthLevel::Deep if self.markings.is_fluid(i) => c.mu(),
+                        DepthLevel::Deep if self.markings.is_fluid(i) => c.mu(),
                         _ => self.markings.count[i],
                     })
                     .collect(),
@@ -274,9 +286,12 @@ impl<const D: usize> Simulation<D> {
             }
             added
         });
+        // New fluid changes the depths: the deep must hold no real particle when the
+        // correction counts its room.
+        let mut emit_exchange = None;
         if emitted > 0 {
             let mu = self.config.mu();
-            self.remark();
+            emit_exchange = self.refresh_markings();
             self.total_particles += emitted;
             self.target_volume += emitted as f64 / mu as f64;
         }
@@ -364,11 +379,11 @@ impl<const D: usize> Simulation<D> {
         let x_bar = (c.method == Method::Ccp).then(|| self.particles.pos.clone());
         let advected_u = rep.times.time(Stage::Advect, || {
             advect::advect_particles(grid, &u, &self.solid, dt, &mut self.particles.pos);
-            band.map(|b| {
-                // The next step reads the grid velocity next to the interface and the deep;
-                // depths move by at most two levels a step, hence the margin.
+            band.map(|_| {
+                // The next step reads the grid velocity next to the interface and the deep,
+                // which lie inside the fluid: advect the faces of fluid cells.
                 let needed: Vec<bool> = (0..grid.num_cells())
-                    .map(|c| self.markings.is_fluid(c) && self.markings.depth[c] <= 2 - b.r as i32)
+                    .map(|c| self.markings.is_fluid(c))
                     .collect();
                 advect::advect_velocity(grid, &u, dt, &needed)
             })
@@ -405,22 +420,10 @@ impl<const D: usize> Simulation<D> {
             rep.correction = Some(report);
         }
         self.velocity = advected_u.unwrap_or(u);
-        rep.deep = rep.times.time(Stage::Markings, || {
-            let was_low = self.remark();
-            band.map(|b| {
-                band::exchange_with_deep(
-                    &self.grid,
-                    &mut self.particles,
-                    &mut self.markings,
-                    was_low.as_deref(),
-                    b.r,
-                    self.config.mu(),
-                    &mut self.n_deep,
-                    &self.velocity,
-                    &mut self.rng,
-                )
-            })
-        });
+        rep.deep = rep
+            .times
+            .time(Stage::Markings, || self.refresh_markings())
+            .map(|x| x.merged(emit_exchange));
         self.time_secs += dt;
         self.steps += 1;
         rep.dt_secs = dt;
@@ -447,13 +450,22 @@ impl<const D: usize> Simulation<D> {
                     ))
                 })?,
         )?;
-        if self.band().is_some() {
+        if let Some(b) = self.band() {
             let mu = self.config.mu();
             if let Some(c) = (0..self.grid.num_cells()).find(|&c| self.markings.count[c] > mu) {
                 return Err(InvariantViolation(format!(
                     "cell {:?} holds {} particles after the exchange with the deep (mu = {mu})",
                     self.grid.cell_coords(c),
                     self.markings.count[c]
+                )));
+            }
+            if let Some(x) = self.particles.pos.iter().find(|x| {
+                let c = self.grid.cell_index_of(x);
+                self.markings.is_fluid(c) && self.markings.level(c, b.r) == DepthLevel::Deep
+            }) {
+                return Err(InvariantViolation(format!(
+                    "a particle at {:?} is in the deep after the exchange",
+                    x.as_slice()
                 )));
             }
         }

@@ -169,7 +169,7 @@ pub fn solve_full<const D: usize>(
     let side = SideConstraint {
         terms,
         min: 0.0,
-        max: alpha.max(0) as f64,
+        max: alpha as f64,
     };
     lp::solve_with(&p.assignment, &[side]).map_err(|e| e.to_string())
 }
@@ -508,7 +508,9 @@ pub fn correct_band<const D: usize>(
     ctx: BandContext,
     solver: super::Solver,
 ) -> BandOutcome<D> {
-    let alpha = room_at_or_below_interface(previous, ctx.r, mu, ctx.n_deep);
+    // Negative only if an earlier step left excess without room (reported there): then no
+    // particle may enter.
+    let alpha = room_at_or_below_interface(previous, ctx.r, mu, ctx.n_deep).max(0);
     let t0 = Instant::now();
     let first = match ctx.variant {
         BandVariant::Full => solve_full(p, alpha).map(|c| (c, 0)),
@@ -549,6 +551,21 @@ pub fn correct_band<const D: usize>(
         other_objectives: vec![],
     };
     rep.n_move = (-rep.s_in).max(-rep.s_out).max(0) as usize;
+    // Out of the interface when too many went in (`s_in < 0`), else into it.
+    let pusher = |out: bool| PathPusher {
+        grid,
+        x_bar,
+        x_hat,
+        previous,
+        solid,
+        mu,
+        r: ctx.r,
+        direction: if out {
+            PathDirection::Out
+        } else {
+            PathDirection::In
+        },
+    };
     let t1 = Instant::now();
     match ctx.variant {
         BandVariant::Full => {}
@@ -557,30 +574,19 @@ pub fn correct_band<const D: usize>(
             {
                 Ok(c) => pos = positions(grid, p, &c, x_hat),
                 Err(e) => {
+                    // The paper says the second solve is always feasible; if it is not (or
+                    // times out), correct b* along paths instead.
+                    let o = pusher(rep.s_in < 0).push(&mut pos, rep.n_move);
                     rep.failure = Some(format!(
-                        "one-way second solve failed ({e}); particles keep their cells"
+                        "one-way second solve failed ({e}); corrected along {} paths instead",
+                        o.applied
                     ));
-                    pos = positions(grid, p, &p.stay, x_hat);
                 }
             }
         }
         BandVariant::OneWay => {}
         BandVariant::Paths if rep.n_move > 0 => {
-            let pusher = PathPusher {
-                grid,
-                x_bar,
-                x_hat,
-                previous,
-                solid,
-                mu,
-                r: ctx.r,
-                direction: if rep.s_in < 0 {
-                    PathDirection::Out
-                } else {
-                    PathDirection::In
-                },
-            };
-            let o = pusher.push(&mut pos, rep.n_move);
+            let o = pusher(rep.s_in < 0).push(&mut pos, rep.n_move);
             rep.paths_applied = o.applied;
             rep.paths_found = o.found;
             rep.find_calls = o.find_calls;
@@ -596,7 +602,7 @@ pub fn correct_band<const D: usize>(
     }
     rep.second_time = t1.elapsed();
     rep.net_in = net_into_interface(grid, x_bar, &pos, previous, ctx.r);
-    if rep.failure.is_none() && fallback.is_none() && !(0..=alpha.max(0)).contains(&rep.net_in) {
+    if rep.failure.is_none() && fallback.is_none() && !(0..=alpha).contains(&rep.net_in) {
         rep.failure = Some(format!(
             "the band constraint 0 <= n_in - n_out = {} <= alpha = {alpha} does not hold",
             rep.net_in
