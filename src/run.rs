@@ -174,6 +174,14 @@ fn run_dim<const D: usize>(
         r.log_setup(&sim);
         r.log_step(&sim, None, true);
     }
+    if sim.band().is_some() && sim.particles.is_empty() && sim.n_deep > 0 {
+        let msg = "the fluid has no free surface, so the band method put every particle in the \
+                   deep: the run is grid-only (use --band none)";
+        eprintln!("warning: {msg}");
+        if let Some(r) = &recorder {
+            r.warn(&sim, msg);
+        }
+    }
     let t0 = Instant::now();
     let bar = progress_bar(limit);
     let mut summary = Summary::new(sim.volume_percent());
