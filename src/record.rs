@@ -285,40 +285,11 @@ impl Recorder {
                             .with_radii([0.12f32])
                             .with_draw_order(10.0),
                     )?;
-                    let (w, h) = (self.dims[0], self.dims[1]);
-                    let mut img = vec![0u8; w * h];
-                    for (c, px) in (0..w * h).map(|c| (c, sim.grid.cell_coords(c))) {
-                        let row = h - 1 - px[1];
-                        img[row * w + px[0]] = marks.class(c, mu) as u8;
-                    }
-                    self.rec.log(
-                        "world/grid/markings",
-                        &rerun::SegmentationImage::new(
-                            img,
-                            rerun::ImageFormat::segmentation(
-                                [w as u32, h as u32],
-                                rerun::ChannelDatatype::U8,
-                            ),
-                        )
-                        .with_draw_order(0.0),
-                    )?;
+                    self.log_class_image("world/grid/markings", 0.0, |c| marks.class(c, mu) as u8)?;
                     if let Some(b) = sim.band() {
-                        let mut img = vec![0u8; w * h];
-                        for (c, px) in (0..w * h).map(|c| (c, sim.grid.cell_coords(c))) {
-                            let row = h - 1 - px[1];
-                            img[row * w + px[0]] = level_of(marks, c, b.r) as u8;
-                        }
-                        self.rec.log(
-                            "world/grid/depth",
-                            &rerun::SegmentationImage::new(
-                                img,
-                                rerun::ImageFormat::segmentation(
-                                    [w as u32, h as u32],
-                                    rerun::ChannelDatatype::U8,
-                                ),
-                            )
-                            .with_draw_order(1.0),
-                        )?;
+                        self.log_class_image("world/grid/depth", 1.0, |c| {
+                            level_of(marks, c, b.r) as u8
+                        })?;
                     }
                 } else {
                     let pos: Vec<[f32; 3]> = sim
@@ -463,6 +434,30 @@ impl Recorder {
         })();
         self.report(result);
         self.flush_now_and_then();
+    }
+
+    /// A 2D `SegmentationImage` of one class id per cell (rows down: row 0 is the top).
+    fn log_class_image(
+        &self,
+        path: &str,
+        draw_order: f32,
+        class: impl Fn(usize) -> u8,
+    ) -> rerun::RecordingStreamResult<()> {
+        let (w, h) = (self.dims[0], self.dims[1]);
+        let mut img = vec![0u8; w * h];
+        for c in 0..w * h {
+            // Cell index c = x + w y (axis 0 fastest).
+            let (x, y) = (c % w, c / w);
+            img[(h - 1 - y) * w + x] = class(c);
+        }
+        self.rec.log(
+            path,
+            &rerun::SegmentationImage::new(
+                img,
+                rerun::ImageFormat::segmentation([w as u32, h as u32], rerun::ChannelDatatype::U8),
+            )
+            .with_draw_order(draw_order),
+        )
     }
 
     /// The band correction's scalars and, when `full`, its paths as line strips through cell

@@ -203,31 +203,46 @@ fn logged_entities(path: &Path) -> BTreeSet<String> {
     out
 }
 
+/// Runs `scene` for `steps` steps with `extra` flags into `dir`, then checks that every entity
+/// of `expected` (with `<...>` replaced by `fill`) was logged; returns all logged entities.
+fn record_and_check(
+    dir: &Path,
+    scene: &str,
+    steps: &str,
+    extra: &[&str],
+    expected: &[&str],
+    fill: (&str, &str),
+) -> BTreeSet<String> {
+    let out = dir.join(format!("{scene}.rrd"));
+    let mut args = vec![
+        "run",
+        scene,
+        "--steps",
+        steps,
+        "-q",
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend(extra);
+    let o = cellflip(&args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let got = logged_entities(&out);
+    for e in expected {
+        let e = e.replace(fill.0, fill.1);
+        assert!(
+            got.contains(&format!("/{e}")),
+            "{scene}: /{e} missing from {got:?}"
+        );
+    }
+    got
+}
+
 #[test]
 fn recordings_read_back_with_the_documented_entities_2d_and_3d() {
     let dir = scratch_dir("record");
     for (scene, extra) in [("hydrostatic-2d", vec![]), ("drop-3d", vec!["--res", "12"])] {
-        let out = dir.join(format!("{scene}.rrd"));
-        let mut args = vec![
-            "run",
-            scene,
-            "--steps",
-            "3",
-            "-q",
-            "--out",
-            out.to_str().unwrap(),
-        ];
-        args.extend(extra);
-        let o = cellflip(&args);
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        let got = logged_entities(&out);
-        for e in cellflip::record::ENTITY_PATHS {
-            let e = e.replace("<stage>", "pressure");
-            assert!(
-                got.contains(&format!("/{e}")),
-                "{scene}: /{e} missing from {got:?}"
-            );
-        }
+        let paths = cellflip::record::ENTITY_PATHS;
+        record_and_check(&dir, scene, "3", &extra, paths, ("<stage>", "pressure"));
     }
 }
 
@@ -281,27 +296,8 @@ fn band_recordings_carry_depth_levels_paths_and_band_metrics_2d_and_3d() {
         ),
         ("drop-3d", vec!["--res", "12"]),
     ] {
-        let out = dir.join(format!("{scene}.rrd"));
-        let mut args = vec![
-            "run",
-            scene,
-            "--steps",
-            "30",
-            "-q",
-            "--out",
-            out.to_str().unwrap(),
-        ];
-        args.extend(extra);
-        let o = cellflip(&args);
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        let got = logged_entities(&out);
-        for e in cellflip::record::BAND_ENTITY_PATHS {
-            let e = e.replace("<variant>", "paths");
-            assert!(
-                got.contains(&format!("/{e}")),
-                "{scene}: /{e} missing from {got:?}"
-            );
-        }
+        let paths = cellflip::record::BAND_ENTITY_PATHS;
+        let got = record_and_check(&dir, scene, "30", &extra, paths, ("<variant>", "paths"));
         if scene == "dam-2d" {
             // The cross-check records the other variants' objectives on the same problems.
             assert!(got.contains("/metrics/band/objective/full"));
