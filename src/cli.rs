@@ -69,6 +69,10 @@ pub struct RunArgs {
     /// Band interface depth R; the band is R + 1 cells thick (overrides `simulation.band_r`).
     #[arg(long, value_name = "R")]
     pub band_r: Option<u32>,
+    /// How obstacles pass particles (overrides `simulation.obstacle`): couple (ccp), or for
+    /// the other methods naive (wait for free cells) or ignore (move regardless).
+    #[arg(long)]
+    pub obstacle: Option<String>,
     /// Solve every correction with both solvers and report their largest objective difference;
     /// with a band, run every band variant on each step's problem and record their objectives.
     #[arg(long)]

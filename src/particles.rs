@@ -45,6 +45,38 @@ impl<const D: usize> Region<D> {
     pub fn cells<'a>(&'a self, grid: &'a Grid<D>) -> impl Iterator<Item = usize> + 'a {
         (0..grid.num_cells()).filter(move |&c| self.contains(&grid.center(grid.cell_coords(c))))
     }
+
+    /// The region moved by `d`.
+    pub fn translated(&self, d: &Vector<D>) -> Self {
+        match self {
+            Region::Box { min, max } => Region::Box {
+                min: min + d,
+                max: max + d,
+            },
+            Region::Ball { center, radius } => Region::Ball {
+                center: center + d,
+                radius: *radius,
+            },
+        }
+    }
+
+    /// The smallest box holding the region: `(min, max)`.
+    pub fn bounds(&self) -> (Vector<D>, Vector<D>) {
+        match self {
+            Region::Box { min, max } => (*min, *max),
+            Region::Ball { center, radius } => {
+                (center.add_scalar(-radius), center.add_scalar(*radius))
+            }
+        }
+    }
+
+    /// The centre of the region.
+    pub fn center(&self) -> Vector<D> {
+        match self {
+            Region::Box { min, max } => (min + max) / 2.0,
+            Region::Ball { center, .. } => *center,
+        }
+    }
 }
 
 /// The `k^D` stratified sample positions of cell `c`, each jittered by up to `jitter` of the

@@ -7,6 +7,7 @@
 
 use crate::grid::Vector;
 use crate::metrics::Stage;
+use crate::particles::Region;
 use crate::scene::Scene;
 use crate::sim::correct::band::BandCorrection;
 use crate::sim::markings::{DepthLevel, MarkingClass, Markings};
@@ -17,7 +18,7 @@ use rerun::blueprint::{
     TimeSeriesView, Vertical,
 };
 use rerun::RecordingStream;
-use std::cell::Cell;
+use std::cell::{Cell, RefCell};
 use std::path::Path;
 use std::time::{Duration, Instant};
 
@@ -67,12 +68,24 @@ pub const BAND_ENTITY_PATHS: &[&str] = &[
     "metrics/band/objective/<variant>",
 ];
 
+/// What scenes with obstacles (sec. 7) log besides the above.
+pub const OBSTACLE_ENTITY_PATHS: &[&str] = &[
+    "world/obstacles/<name>",
+    "world/obstacles/<name>/trail",
+    "world/obstacles/new_solid",
+    "metrics/obstacle/<name>/height",
+    "metrics/obstacle/<name>/speed",
+    "metrics/obstacle/<name>/blocked",
+];
+
 /// Writes one run to an `.rrd` file.
 pub struct Recorder {
     rec: RecordingStream,
     dims: Vec<usize>,
     max_speed: f64,
     last_flush: Cell<Instant>,
+    /// Every obstacle's centres so far (world coordinates), for its trail.
+    trails: RefCell<Vec<Vec<[f32; 3]>>>,
 }
 
 fn blueprint(dim: usize) -> Blueprint {
@@ -192,6 +205,7 @@ impl Recorder {
             dims: scene.dims.clone(),
             max_speed: scene.file.simulation.max_speed / scene.cell_size_m,
             last_flush: Cell::new(Instant::now()),
+            trails: RefCell::new(vec![]),
         })
     }
 
@@ -348,6 +362,9 @@ impl Recorder {
                     }
                 }
             }
+            if full {
+                self.log_obstacles(sim)?;
+            }
             if let Some(rep) = rep {
                 let h = sim.config.cell_size_m;
                 let scalar = |path: &str, v: f64| self.rec.log(path, &rerun::Scalars::single(v));
@@ -400,6 +417,15 @@ impl Recorder {
                     if let Some(b) = &c.band {
                         self.log_band(sim, b, full)?;
                     }
+                }
+                for (o, &blocked) in sim.obstacles.iter().zip(&rep.blocked) {
+                    let m = format!("metrics/obstacle/{}", o.name);
+                    scalar(&format!("{m}/height"), o.bottom() * h)?;
+                    scalar(&format!("{m}/speed"), o.velocity.norm() * h)?;
+                    scalar(&format!("{m}/blocked"), blocked as u8 as f64)?;
+                }
+                if full && !sim.obstacles.is_empty() {
+                    self.log_new_solid(sim, &rep.new_solid)?;
                 }
                 if let Some(x) = &rep.deep {
                     scalar("metrics/band/n_deep", sim.n_deep as f64)?;
@@ -458,6 +484,113 @@ impl Recorder {
             )
             .with_draw_order(draw_order),
         )
+    }
+
+    /// World coordinates of a point in cells (2D: rows down).
+    fn world(&self, x: &[f64]) -> [f32; 3] {
+        if x.len() == 2 {
+            [x[0] as f32, self.dims[1] as f32 - x[1] as f32, 0.0]
+        } else {
+            [x[0] as f32, x[1] as f32, x[2] as f32]
+        }
+    }
+
+    /// Each obstacle's shape where it is now, and its trail (its centre over the steps).
+    fn log_obstacles<const D: usize>(
+        &self,
+        sim: &Simulation<D>,
+    ) -> rerun::RecordingStreamResult<()> {
+        let mut trails = self.trails.borrow_mut();
+        trails.resize(sim.obstacles.len(), vec![]);
+        let color = [[230u8, 90, 40]];
+        for (o, trail) in sim.obstacles.iter().zip(trails.iter_mut()) {
+            let path = format!("world/obstacles/{}", o.name);
+            let r = o.region_at(&o.offset);
+            let (lo, hi) = r.bounds();
+            let (a, b) = (self.world(lo.as_slice()), self.world(hi.as_slice()));
+            let centre = self.world(r.center().as_slice());
+            trail.push(centre);
+            let half: [f32; 3] = std::array::from_fn(|k| (b[k] - a[k]).abs() / 2.0);
+            match (&r, D) {
+                (Region::Box { .. }, 2) => self.rec.log(
+                    path.as_str(),
+                    &rerun::Boxes2D::from_centers_and_half_sizes(
+                        [(centre[0], centre[1])],
+                        [(half[0], half[1])],
+                    )
+                    .with_colors(color)
+                    .with_draw_order(25.0),
+                )?,
+                (Region::Box { .. }, _) => self.rec.log(
+                    path.as_str(),
+                    &rerun::Boxes3D::from_centers_and_half_sizes([centre], [half])
+                        .with_colors(color),
+                )?,
+                (Region::Ball { radius, .. }, 2) => self.rec.log(
+                    path.as_str(),
+                    &rerun::Points2D::new([(centre[0], centre[1])])
+                        .with_radii([*radius as f32])
+                        .with_colors(color)
+                        .with_draw_order(25.0),
+                )?,
+                (Region::Ball { radius, .. }, _) => self.rec.log(
+                    path.as_str(),
+                    &rerun::Points3D::new([centre])
+                        .with_radii([*radius as f32])
+                        .with_colors(color),
+                )?,
+            }
+            let trail_path = format!("{path}/trail");
+            if D == 2 {
+                let strip: Vec<[f32; 2]> = trail.iter().map(|p| [p[0], p[1]]).collect();
+                self.rec.log(
+                    trail_path.as_str(),
+                    &rerun::LineStrips2D::new([strip])
+                        .with_colors(color)
+                        .with_draw_order(24.0),
+                )?;
+            } else {
+                self.rec.log(
+                    trail_path.as_str(),
+                    &rerun::LineStrips3D::new([trail.clone()]).with_colors(color),
+                )?;
+            }
+        }
+        Ok(())
+    }
+
+    /// The cells obstacles wanted this step (`C_new_solid`), labelled with their clearing
+    /// distance (an empty batch clears the previous step's).
+    fn log_new_solid<const D: usize>(
+        &self,
+        sim: &Simulation<D>,
+        cells: &[(usize, u32)],
+    ) -> rerun::RecordingStreamResult<()> {
+        let centres: Vec<[f32; 3]> = cells
+            .iter()
+            .map(|(c, _)| self.world(sim.grid.center(sim.grid.cell_coords(*c)).as_slice()))
+            .collect();
+        let labels: Vec<String> = cells.iter().map(|(_, d)| d.to_string()).collect();
+        let color = [[255u8, 200, 0]];
+        if D == 2 {
+            let pts: Vec<[f32; 2]> = centres.iter().map(|p| [p[0], p[1]]).collect();
+            self.rec.log(
+                "world/obstacles/new_solid",
+                &rerun::Points2D::new(pts)
+                    .with_labels(labels)
+                    .with_radii([0.3f32])
+                    .with_colors(color)
+                    .with_draw_order(26.0),
+            )
+        } else {
+            self.rec.log(
+                "world/obstacles/new_solid",
+                &rerun::Points3D::new(centres)
+                    .with_labels(labels)
+                    .with_radii([0.3f32])
+                    .with_colors(color),
+            )
+        }
     }
 
     /// The band correction's scalars and, when `full`, its paths as line strips through cell

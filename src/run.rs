@@ -55,6 +55,8 @@ pub struct Summary {
     pub band_failures: u64,
     pub unplaced: u64,
     pub band_gaps: Vec<(String, Vec<f64>)>,
+    /// Per obstacle: its name, lowest point at the end (m), and steps it had to stay.
+    pub obstacles: Vec<(String, f64, u64)>,
 }
 
 impl Summary {
@@ -104,6 +106,9 @@ impl Summary {
         if let Some(x) = &rep.deep {
             self.unplaced += x.unplaced as u64;
         }
+        for (o, &b) in self.obstacles.iter_mut().zip(&rep.blocked) {
+            o.2 += b as u64;
+        }
     }
 
     /// Records the band particles after a step.
@@ -128,6 +133,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
         directions: args.directions.clone(),
         band: args.band.clone(),
         band_r: args.band_r,
+        obstacle: args.obstacle.clone(),
     };
     let scene = Scene::load(&args.scene, &overrides)?;
     let limit = match args.steps {
@@ -185,6 +191,11 @@ fn run_dim<const D: usize>(
     let t0 = Instant::now();
     let bar = progress_bar(limit);
     let mut summary = Summary::new(sim.volume_percent());
+    summary.obstacles = sim
+        .obstacles
+        .iter()
+        .map(|o| (o.name.clone(), 0.0, 0))
+        .collect();
     let result = loop {
         let done = match limit {
             Limit::Steps(n) => sim.steps >= n,
@@ -251,6 +262,9 @@ fn run_dim<const D: usize>(
     summary.sim_secs = sim.time_secs;
     summary.particles = sim.particles.len();
     summary.n_deep = sim.n_deep;
+    for (s, o) in summary.obstacles.iter_mut().zip(&sim.obstacles) {
+        s.1 = o.bottom() * sim.config.cell_size_m;
+    }
     summary.band = sim.band().map(|b| (b.variant.name().to_string(), b.r));
     if let Some(r) = recorder {
         r.finish()
@@ -321,6 +335,13 @@ fn print_summary(scene: &Scene, s: &Summary, out: Option<&Path>) {
             s.cross_check_max
                 .map(|d| format!("; flow vs simplex objectives differ by at most {d:.2e} (relative)"))
                 .unwrap_or_default()
+        );
+    }
+    for (name, bottom, blocked) in &s.obstacles {
+        println!(
+            "obstacle {name} ({}): lowest point at {bottom:.3} m at the end; had to stay on {blocked} of {} steps",
+            scene.obstacle_mode.name(),
+            s.steps
         );
     }
     if let Some((variant, r)) = &s.band {

@@ -11,6 +11,7 @@ use crate::sim::correct::band::BandVariant;
 use crate::sim::correct::problem::Directions;
 use crate::sim::correct::{CorrectionSettings, Solver};
 use crate::sim::emit::Emitter;
+use crate::sim::solids::{Obstacle, ObstacleMode};
 use crate::sim::{Method, SimConfig};
 use anyhow::{anyhow, bail, Context, Result};
 use serde::{Deserialize, Serialize};
@@ -21,6 +22,7 @@ pub const BUILT_IN: &[(&str, &str)] = &[
     ("dam-2d", include_str!("../scenes/dam-2d.toml")),
     ("dam-1ppc-2d", include_str!("../scenes/dam-1ppc-2d.toml")),
     ("dam-3d", include_str!("../scenes/dam-3d.toml")),
+    ("compress-2d", include_str!("../scenes/compress-2d.toml")),
     ("drop-2d", include_str!("../scenes/drop-2d.toml")),
     ("drop-3d", include_str!("../scenes/drop-3d.toml")),
     (
@@ -53,6 +55,46 @@ pub struct SceneFile {
     pub solid: Vec<RegionFile>,
     #[serde(default)]
     pub emitter: Vec<EmitterFile>,
+    /// Moving obstacles (sec. 7).
+    #[serde(default)]
+    pub obstacle: Vec<ObstacleFile>,
+}
+
+/// A moving box (`min`, `max`) or ball (`center`, `radius`), in metres, with a constant
+/// velocity.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ObstacleFile {
+    /// Names the obstacle in recordings (`world/obstacles/<name>`).
+    pub name: String,
+    /// "box" or "ball".
+    pub shape: String,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub min: Option<Vec<f64>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max: Option<Vec<f64>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub center: Option<Vec<f64>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub radius: Option<f64>,
+    /// m/s, constant.
+    pub velocity: Vec<f64>,
+    /// The zero-velocity variant: the pressure solve sees the obstacle at rest.
+    #[serde(default)]
+    pub zero_velocity_bc: bool,
+}
+
+impl ObstacleFile {
+    /// Its shape as a region.
+    pub fn region(&self) -> RegionFile {
+        RegionFile {
+            shape: self.shape.clone(),
+            min: self.min.clone(),
+            max: self.max.clone(),
+            center: self.center.clone(),
+            radius: self.radius,
+        }
+    }
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize)]
@@ -98,6 +140,11 @@ pub struct SimulationFile {
     /// `R`: depth of the band interface; the band is `R + 1` cells thick (the paper: 3, and 6
     /// for the dam scenes).
     pub band_r: u32,
+    /// How obstacles get through particles: "couple" (method ccp, sec. 7), or for the other
+    /// methods "naive" (wait until the way is free) or "ignore" (move regardless). Default:
+    /// couple for ccp, naive otherwise.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub obstacle: Option<String>,
 }
 
 impl Default for SimulationFile {
@@ -118,6 +165,7 @@ impl Default for SimulationFile {
             directions: "von-neumann".into(),
             band: "none".into(),
             band_r: 3,
+            obstacle: None,
         }
     }
 }
@@ -167,6 +215,7 @@ pub struct Overrides {
     pub directions: Option<String>,
     pub band: Option<String>,
     pub band_r: Option<u32>,
+    pub obstacle: Option<String>,
 }
 
 /// A scene ready to run: its source, the file with overrides applied, and its checked values.
@@ -180,6 +229,7 @@ pub struct Scene {
     pub method: Method,
     pub correction: CorrectionSettings,
     pub band: Option<BandSettings>,
+    pub obstacle_mode: ObstacleMode,
 }
 
 impl Scene {
@@ -248,6 +298,9 @@ impl Scene {
         if let Some(r) = o.band_r {
             sim.band_r = r;
         }
+        if let Some(m) = &o.obstacle {
+            sim.obstacle = Some(m.clone());
+        }
         if let Some(c) = o.cells {
             file.domain.cells = c;
         }
@@ -314,6 +367,19 @@ impl Scene {
                 .collect(),
             correction: self.correction,
             band: self.band,
+            obstacles: self
+                .file
+                .obstacle
+                .iter()
+                .map(|o| Obstacle {
+                    name: o.name.clone(),
+                    shape: region(&o.region()),
+                    offset: Vector::<D>::zeros(),
+                    velocity: vec(&o.velocity),
+                    zero_velocity_bc: o.zero_velocity_bc,
+                })
+                .collect(),
+            obstacle_mode: self.obstacle_mode,
         }
     }
 }
@@ -598,11 +664,51 @@ fn check(source: &str, file: SceneFile) -> Result<Scene> {
             }
         }
     }
+    let mut names = std::collections::BTreeSet::new();
+    for (i, o) in file.obstacle.iter().enumerate() {
+        let key = format!("obstacle[{i}]");
+        region(key.clone(), &o.region())?;
+        len(&format!("{key}.velocity"), &o.velocity)?;
+        let ok = !o.name.is_empty()
+            && o.name
+                .chars()
+                .all(|ch| ch.is_ascii_alphanumeric() || ch == '-' || ch == '_');
+        if !ok {
+            return Err(err(
+                &format!("{key}.name"),
+                format!("must be letters, digits, '-' or '_', got '{}'", o.name),
+            ));
+        }
+        if !names.insert(o.name.clone()) {
+            return Err(err(
+                &format!("{key}.name"),
+                format!("'{}' names two obstacles", o.name),
+            ));
+        }
+    }
+    let modes = ObstacleMode::ALL.map(ObstacleMode::name);
+    let obstacle_mode = match &s.obstacle {
+        None if method == Method::Ccp => ObstacleMode::Couple,
+        None => ObstacleMode::Naive,
+        Some(m) => ObstacleMode::ALL[pick("simulation.obstacle", m, &modes)?],
+    };
+    if (method == Method::Ccp) != (obstacle_mode == ObstacleMode::Couple) {
+        return Err(err(
+            "simulation.obstacle",
+            format!(
+                "method {} cannot use obstacle mode '{}': ccp couples obstacles through its \
+                 correction (sec. 7); the other methods use 'naive' or 'ignore'",
+                method.name(),
+                obstacle_mode.name()
+            ),
+        ));
+    }
     Ok(Scene {
         source: source.to_string(),
         cell_size_m: h,
         dims,
         method,
+        obstacle_mode,
         correction: CorrectionSettings {
             solver,
             directions,

@@ -196,7 +196,7 @@ fn a_move_into_a_full_interface_is_undone<const D: usize>() {
         .collect();
     // Markings as the band method keeps them: layers 0..=1 are deep, fluid without particles.
     let keep: Vec<bool> = (0..n).map(|c| layer(c) < 2).collect();
-    let prev = Markings::compute_keeping(&g, &x_bar, &solid, Some(&keep));
+    let prev = Markings::compute_keeping(&g, &x_bar, &solid, Some(&keep), None);
     let column = |y: usize| g.cell_index(std::array::from_fn(|k| if k == 1 { y } else { 2 }));
     assert_eq!(prev.level(column(3), 1), DepthLevel::Surface);
     assert_eq!(prev.level(column(2), 1), DepthLevel::Interface);
@@ -230,6 +230,7 @@ fn a_move_into_a_full_interface_is_undone<const D: usize>() {
             mu,
             &CorrectionSettings::default(),
             Some(ctx),
+            None,
             false,
         )
         .unwrap();

@@ -307,6 +307,13 @@ fn band_recordings_carry_depth_levels_paths_and_band_metrics_2d_and_3d() {
 }
 
 #[test]
+fn obstacle_recordings_carry_the_obstacle_its_trail_and_its_metrics() {
+    let dir = scratch_dir("obstacle");
+    let paths = cellflip::record::OBSTACLE_ENTITY_PATHS;
+    record_and_check(&dir, "compress-2d", "20", &[], paths, ("<name>", "lid"));
+}
+
+#[test]
 fn ctrl_c_stops_the_run_and_leaves_a_valid_recording() {
     let dir = scratch_dir("ctrlc");
     let out = dir.join("dam.rrd");

@@ -62,7 +62,7 @@ fn agree_on_random_instances<const D: usize>(count: usize, seed: u64) {
         } else {
             Directions::VonNeumann
         };
-        let p = problem::build(&g, &x_bar, &x_hat, &prev, &solid, mu, dirs, None).unwrap();
+        let p = problem::build(&g, &x_bar, &x_hat, &prev, &solid, mu, dirs, None, None).unwrap();
         let a = &p.assignment;
         let (flow, stats) = min_cost_flow::solve(a).unwrap_or_else(|e| panic!("instance {n}: {e}"));
         let simplex = lp::solve(a).unwrap_or_else(|e| panic!("instance {n}: {e}"));
@@ -115,6 +115,7 @@ fn flow_work_grows_with_conflicts_not_particles() {
         &solid,
         1,
         Directions::VonNeumann,
+        None,
         None,
     )
     .unwrap();

@@ -119,17 +119,19 @@ impl Markings {
         positions: &[Vector<D>],
         solid: &[bool],
     ) -> Self {
-        Self::compute_keeping(grid, positions, solid, None)
+        Self::compute_keeping(grid, positions, solid, None, None)
     }
 
     /// As [`Self::compute`], but cells flagged in `keep` are fluid even without particles: with
     /// the band method (sec. band_method), the fluid cells below the surface of the previous
-    /// markings, among them the deep, whose particles are imaginary.
+    /// markings, among them the deep, whose particles are imaginary. Fluid cells touching a
+    /// cell of `moving` (a moving obstacle) are surface, to give it room (sec. 7).
     pub fn compute_keeping<const D: usize>(
         grid: &Grid<D>,
         positions: &[Vector<D>],
         solid: &[bool],
         keep: Option<&[bool]>,
+        moving: Option<&[bool]>,
     ) -> Self {
         let n = grid.num_cells();
         let mut count = vec![0u32; n];
@@ -150,9 +152,10 @@ impl Markings {
         let surface: Vec<bool> = (0..n)
             .map(|c| {
                 kind[c] == CellKind::Fluid
-                    && grid
-                        .moore_neighbors(grid.cell_coords(c))
-                        .any(|m| kind[grid.cell_index(m)] == CellKind::Empty)
+                    && grid.moore_neighbors(grid.cell_coords(c)).any(|m| {
+                        let m = grid.cell_index(m);
+                        kind[m] == CellKind::Empty || moving.is_some_and(|mv| mv[m])
+                    })
             })
             .collect();
         let depth = depth(grid, &kind, &surface);

@@ -14,6 +14,7 @@ pub mod correct;
 pub mod emit;
 pub mod markings;
 pub mod pressure;
+pub mod solids;
 pub mod transfer;
 
 use crate::grid::{Grid, MacField, Vector};
@@ -27,6 +28,7 @@ use emit::Emitter;
 use markings::{DepthLevel, Markings};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
+use solids::{Obstacle, ObstacleMode};
 
 /// The fluid methods a scene can run.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -78,6 +80,9 @@ pub struct SimConfig<const D: usize> {
     pub correction: CorrectionSettings,
     /// The band method (method `ccp` only; ignored by the others).
     pub band: Option<BandSettings>,
+    /// Moving obstacles (sec. 7) and how the method lets them through particles.
+    pub obstacles: Vec<Obstacle<D>>,
+    pub obstacle_mode: ObstacleMode,
 }
 
 impl<const D: usize> SimConfig<D> {
@@ -102,6 +107,10 @@ pub struct StepReport<const D: usize> {
     pub correction: Option<CorrectionReport<D>>,
     /// The exchange with the deep, with the band method.
     pub deep: Option<DeepExchange>,
+    /// Per obstacle: whether it had to stay this step.
+    pub blocked: Vec<bool>,
+    /// The cells obstacles wanted this step (`C_new_solid`) with their clearing distance.
+    pub new_solid: Vec<(usize, u32)>,
 }
 
 /// The state of a running simulation.
@@ -111,9 +120,15 @@ pub struct Simulation<const D: usize> {
     pub particles: Particles<D>,
     /// Grid velocity after the last projection, cells per second.
     pub velocity: MacField<D>,
+    /// Solid cells: the static solids and the obstacles where they are now.
     pub solid: Vec<bool>,
     /// Velocity of each solid cell (zero for walls and static solids).
     pub solid_vel: Vec<Vector<D>>,
+    /// Cells of moving obstacles (their fluid neighbours are surface).
+    pub moving: Vec<bool>,
+    /// The obstacles, at their current offsets.
+    pub obstacles: Vec<Obstacle<D>>,
+    static_solid: Vec<bool>,
     pub markings: Markings,
     pub time_secs: f64,
     pub steps: u64,
@@ -132,10 +147,12 @@ impl<const D: usize> Simulation<D> {
     pub fn new(config: SimConfig<D>) -> Self {
         let grid = Grid::new(config.dims);
         let n = grid.num_cells();
-        let mut solid = vec![false; n];
+        let mut static_solid = vec![false; n];
         for r in &config.solids {
-            r.cells(&grid).for_each(|c| solid[c] = true);
+            r.cells(&grid).for_each(|c| static_solid[c] = true);
         }
+        let obstacles = config.obstacles.clone();
+        let (solid, solid_vel, moving) = rasterise(&grid, &static_solid, &obstacles);
         let mut rng = StdRng::seed_from_u64(config.seed);
         let particles = particles::seed(
             &grid,
@@ -145,12 +162,16 @@ impl<const D: usize> Simulation<D> {
             config.jitter,
             &mut rng,
         );
-        let markings = Markings::compute(&grid, &particles.pos, &solid);
+        let markings =
+            Markings::compute_keeping(&grid, &particles.pos, &solid, None, Some(&moving));
         let total = particles.len();
         let mut sim = Self {
             target_volume: total as f64 / config.mu() as f64,
             velocity: MacField::zeros(&grid),
-            solid_vel: vec![Vector::zeros(); n],
+            solid_vel,
+            moving,
+            obstacles,
+            static_solid,
             markings,
             time_secs: 0.0,
             steps: 0,
@@ -198,6 +219,7 @@ impl<const D: usize> Simulation<D> {
             &self.particles.pos,
             &self.solid,
             keep.as_deref(),
+            Some(&self.moving),
         );
         band.map(|b| {
             band::exchange_with_deep(
@@ -234,7 +256,13 @@ impl<const D: usize> Simulation<D> {
             .iter()
             .map(|v| v.amax())
             .fold(0.0f64, f64::max)
-            .min(c.max_speed);
+            .min(c.max_speed)
+            .max(
+                self.obstacles
+                    .iter()
+                    .map(|o| o.velocity.amax())
+                    .fold(0.0, f64::max),
+            );
         let g = c.gravity.amax();
         let dt = if g > 0.0 {
             (-v + (v * v + 4.0 * g * c.cfl).sqrt()) / (2.0 * g)
@@ -388,6 +416,28 @@ impl<const D: usize> Simulation<D> {
                 advect::advect_velocity(grid, &u, dt, &needed)
             })
         });
+        // Where each obstacle would be after this step, and the cells it would newly occupy
+        // (C_new_solid) with their clearing distance (def. clear_dist).
+        let targets: Vec<Vector<D>> = self.obstacles.iter().map(|o| o.target(grid, dt)).collect();
+        let wanted: Vec<Vec<usize>> = self
+            .obstacles
+            .iter()
+            .zip(&targets)
+            .map(|(o, t)| {
+                let mut cells = o.cells_at(grid, t);
+                cells.retain(|&c| !self.solid[c]);
+                cells
+            })
+            .collect();
+        let mut new_solid = vec![false; grid.num_cells()];
+        wanted.iter().flatten().for_each(|&c| new_solid[c] = true);
+        let clear = solids::clearing_distance(grid, &new_solid, &self.solid);
+        rep.new_solid = (0..grid.num_cells())
+            .filter(|&c| new_solid[c])
+            .map(|c| (c, clear[c]))
+            .collect();
+        let penalty = (c.obstacle_mode == ObstacleMode::Couple && !rep.new_solid.is_empty())
+            .then(|| solids::penalties(&clear));
         if let Some(x_bar) = x_bar {
             let want_mps = self.export_problem_at_step == Some(self.steps + 1);
             let report = rep.times.time(Stage::Correct, || {
@@ -404,6 +454,7 @@ impl<const D: usize> Simulation<D> {
                         n_deep: self.n_deep,
                         variant: b.variant,
                     }),
+                    penalty.as_deref(),
                     want_mps,
                 )
             });
@@ -418,6 +469,27 @@ impl<const D: usize> Simulation<D> {
                 band.map(|b| b.r),
             )?;
             rep.correction = Some(report);
+        }
+        // Each obstacle moves unless particles hold cells it wants (couple: after the
+        // correction; naive: after advection); with `ignore` it always moves.
+        if !self.obstacles.is_empty() {
+            let mut occupied = vec![false; grid.num_cells()];
+            for x in &self.particles.pos {
+                occupied[grid.cell_index_of(x)] = true;
+            }
+            rep.blocked = wanted
+                .iter()
+                .map(|cells| {
+                    c.obstacle_mode != ObstacleMode::Ignore && cells.iter().any(|&k| occupied[k])
+                })
+                .collect();
+            for ((o, t), &blocked) in self.obstacles.iter_mut().zip(&targets).zip(&rep.blocked) {
+                if !blocked {
+                    o.offset = *t;
+                }
+            }
+            (self.solid, self.solid_vel, self.moving) =
+                rasterise(&self.grid, &self.static_solid, &self.obstacles);
         }
         self.velocity = advected_u.unwrap_or(u);
         rep.deep = rep
@@ -436,11 +508,16 @@ impl<const D: usize> Simulation<D> {
     /// band, particles plus `n_deep` account for every particle seeded or emitted, and no cell
     /// holds more than `mu`.
     pub fn check_invariants(&self) -> Result<(), InvariantViolation> {
+        // With `ignore`, particles an obstacle covers are lost volume, not a broken invariant.
+        let solid = match self.config.obstacle_mode {
+            ObstacleMode::Ignore => &self.static_solid,
+            _ => &self.solid,
+        };
         metrics::check_particles(
             &self.grid,
             &self.particles.pos,
             &self.particles.vel,
-            &self.solid,
+            solid,
             self.total_particles
                 .checked_sub(self.n_deep)
                 .ok_or_else(|| {
@@ -471,4 +548,25 @@ impl<const D: usize> Simulation<D> {
         }
         Ok(())
     }
+}
+
+/// Solid cells, their velocities and the moving ones: the static solids plus every obstacle
+/// at its current offset.
+fn rasterise<const D: usize>(
+    grid: &Grid<D>,
+    static_solid: &[bool],
+    obstacles: &[Obstacle<D>],
+) -> (Vec<bool>, Vec<Vector<D>>, Vec<bool>) {
+    let n = grid.num_cells();
+    let mut solid = static_solid.to_vec();
+    let mut vel = vec![Vector::zeros(); n];
+    let mut moving = vec![false; n];
+    for o in obstacles {
+        for c in o.cells_at(grid, &o.offset) {
+            solid[c] = true;
+            vel[c] = o.boundary_velocity();
+            moving[c] = o.velocity != Vector::<D>::zeros();
+        }
+    }
+    (solid, vel, moving)
 }

@@ -283,6 +283,8 @@ pub struct PathPusher<'a, const D: usize> {
     pub x_hat: &'a [Vector<D>],
     pub previous: &'a Markings,
     pub solid: &'a [bool],
+    /// `sigma_solid_obj`'s penalty per cell (sec. 7), > 0 on `C_new_solid`.
+    pub penalty: Option<&'a [f64]>,
     pub mu: u32,
     pub r: u32,
     pub direction: PathDirection,
@@ -504,6 +506,7 @@ pub fn correct_band<const D: usize>(
     x_hat: &[Vector<D>],
     previous: &Markings,
     solid: &[bool],
+    penalty: Option<&[f64]>,
     mu: u32,
     ctx: BandContext,
     solver: super::Solver,
@@ -558,6 +561,7 @@ pub fn correct_band<const D: usize>(
         x_hat,
         previous,
         solid,
+        penalty,
         mu,
         r: ctx.r,
         direction: if out {

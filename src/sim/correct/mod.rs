@@ -107,6 +107,7 @@ pub fn correct<const D: usize>(
     mu: u32,
     settings: &CorrectionSettings,
     band: Option<BandContext>,
+    penalty: Option<&[f64]>,
     want_mps: bool,
 ) -> Result<CorrectionReport<D>, BuildError> {
     let problem = problem::build(
@@ -118,15 +119,23 @@ pub fn correct<const D: usize>(
         mu,
         settings.directions,
         band.map(|b| b.r),
+        penalty,
     )?;
     let mut rep = CorrectionReport {
         overfull_before: overfull_cells(grid, pos, mu),
         ..Default::default()
     };
     if let Some(ctx) = band {
-        correct_band(
-            grid, &problem, x_bar, pos, previous, solid, mu, settings, ctx, &mut rep,
-        );
+        let inputs = BandInputs {
+            grid,
+            problem: &problem,
+            x_bar,
+            previous,
+            solid,
+            penalty,
+            mu,
+        };
+        correct_band(&inputs, pos, settings, ctx, &mut rep);
         if want_mps {
             let b = rep.band.as_ref().expect("band report");
             let mut comment = vec![format!(
@@ -200,17 +209,22 @@ pub fn correct<const D: usize>(
     Ok(rep)
 }
 
+/// What every band variant reads.
+struct BandInputs<'a, const D: usize> {
+    grid: &'a Grid<D>,
+    problem: &'a CorrectionProblem<D>,
+    x_bar: &'a [Vector<D>],
+    previous: &'a Markings,
+    solid: &'a [bool],
+    penalty: Option<&'a [f64]>,
+    mu: u32,
+}
+
 /// The band method's correction: the variant of `ctx`, and with cross-checking every other
 /// variant on the same problem, for their objectives.
-#[allow(clippy::too_many_arguments)]
 fn correct_band<const D: usize>(
-    grid: &Grid<D>,
-    problem: &CorrectionProblem<D>,
-    x_bar: &[Vector<D>],
+    inp: &BandInputs<'_, D>,
     pos: &mut [Vector<D>],
-    previous: &Markings,
-    solid: &[bool],
-    mu: u32,
     settings: &CorrectionSettings,
     ctx: BandContext,
     rep: &mut CorrectionReport<D>,
@@ -219,13 +233,14 @@ fn correct_band<const D: usize>(
     let run = |variant| {
         let ctx = BandContext { variant, ..ctx };
         band::correct_band(
-            grid,
-            problem,
-            x_bar,
+            inp.grid,
+            inp.problem,
+            inp.x_bar,
             &x_hat,
-            previous,
-            solid,
-            mu,
+            inp.previous,
+            inp.solid,
+            inp.penalty,
+            inp.mu,
             ctx,
             settings.solver,
         )
@@ -248,6 +263,7 @@ fn correct_band<const D: usize>(
     rep.fallback = out.fallback;
     rep.objective = report.objective;
     rep.band = Some(report);
+    let grid = inp.grid;
     rep.moves = x_hat
         .iter()
         .zip(pos.iter())

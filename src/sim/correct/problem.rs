@@ -135,7 +135,9 @@ const DROPPED: u32 = u32::MAX;
 
 /// Builds eq. problem3 from the previous positions `x_bar`, the advected positions `x_hat`, the
 /// previous markings (with counts `|gamma_bar_c|`) and the current solid cells, with the band's
-/// bounds and in/out signs when `band_r` is given. `x_bar` is always feasible.
+/// bounds and in/out signs when `band_r` is given. With `penalty` (per cell, > 0 on the cells
+/// an obstacle wants, `C_new_solid`) a candidate there costs the penalty instead of its
+/// distance: `sigma_solid_obj` of eq. solid_penalty2. `x_bar` is always feasible.
 #[allow(clippy::too_many_arguments)]
 pub fn build<const D: usize>(
     grid: &Grid<D>,
@@ -146,6 +148,7 @@ pub fn build<const D: usize>(
     mu: u32,
     directions: Directions,
     band_r: Option<u32>,
+    penalty: Option<&[f64]>,
 ) -> Result<CorrectionProblem<D>, BuildError> {
     let offsets = directions.offsets::<D>();
     let m = offsets.len();
@@ -188,7 +191,10 @@ pub fn build<const D: usize>(
                 let ci = grid.cell_index(c);
                 if !solid[ci] {
                     cells[i] = ci as u32;
-                    costs[i] = (grid.closest_in_cell(xh, c, CELL_MARGIN) - xh).norm_squared();
+                    costs[i] = match penalty.map(|p| p[ci]) {
+                        Some(p) if p > 0.0 => p,
+                        _ => (grid.closest_in_cell(xh, c, CELL_MARGIN) - xh).norm_squared(),
+                    };
                 }
             }
             if cells[0] == DROPPED {
@@ -270,6 +276,7 @@ mod tests {
             1,
             Directions::VonNeumann,
             None,
+            None,
         )
         .unwrap();
         let a = &p.assignment;
@@ -309,6 +316,7 @@ mod tests {
             2,
             Directions::VonNeumann,
             None,
+            None,
         )
         .unwrap();
         // A full closed box has no surface: every cell is inner with one particle.
@@ -324,6 +332,7 @@ mod tests {
                 &solid,
                 2,
                 Directions::VonNeumann,
+                None,
                 None
             )
             .unwrap_err()

@@ -1,0 +1,200 @@
+//! Coupling with solids (paper sec. 7): obstacles under ccp never overlap a particle and still
+//! get through the fluid; the baselines' options lose volume (`ignore`) or halt (`naive`).
+//! Every step checks the invariants inside `step` (no particle in a solid, cell bounds after
+//! the correction, counts conserved, all finite).
+
+use cellflip::scene::{Overrides, Scene};
+use cellflip::sim::Simulation;
+
+struct Run {
+    volume_min: f64,
+    /// Lowest point of the first obstacle at the end, cells.
+    bottom: f64,
+    blocked_steps: usize,
+    steps: usize,
+}
+
+fn run<const D: usize>(scene: &Scene) -> (Run, Simulation<D>) {
+    let mut sim = Simulation::<D>::new(scene.config::<D>());
+    let mut r = Run {
+        volume_min: f64::INFINITY,
+        bottom: 0.0,
+        blocked_steps: 0,
+        steps: 0,
+    };
+    while sim.time_secs < scene.duration_secs() {
+        let rep = sim
+            .step()
+            .unwrap_or_else(|e| panic!("{} step {}: {e}", scene.name(), sim.steps + 1));
+        assert!(rep.volume_percent.is_finite());
+        r.volume_min = r.volume_min.min(rep.volume_percent);
+        r.blocked_steps += rep.blocked.first().copied().unwrap_or(false) as usize;
+        r.steps += 1;
+    }
+    r.bottom = sim.obstacles[0].bottom();
+    (r, sim)
+}
+
+fn scene(name: &str, method: &str, obstacle: Option<&str>) -> Scene {
+    Scene::load(
+        name,
+        &Overrides {
+            method: Some(method.into()),
+            obstacle: obstacle.map(str::to_string),
+            ..Default::default()
+        },
+    )
+    .unwrap()
+}
+
+#[test]
+fn ccp_compresses_exactly_to_mu_per_cell_and_the_baselines_do_not() {
+    let (ccp, sim) = run::<2>(&scene("compress-2d", "ccp", None));
+    assert!(
+        ccp.volume_min >= 100.0 - 1e-9,
+        "ccp volume fell to {}%",
+        ccp.volume_min
+    );
+    // Maximum compression: the particles fill whole rows below the lid, mu per cell.
+    let mu = sim.config.mu() as usize;
+    let width = sim.grid.dims[0];
+    let rows = sim.total_particles / (mu * width);
+    assert_eq!(rows * mu * width, sim.total_particles);
+    assert!(
+        ccp.bottom > rows as f64 - 0.5 && ccp.bottom <= rows as f64 + 0.5,
+        "the lid stopped at {} cells, full rows end at {rows}",
+        ccp.bottom
+    );
+    for c in 0..sim.grid.num_cells() {
+        if sim.grid.cell_coords(c)[1] < rows {
+            assert_eq!(
+                sim.markings.count[c] as usize,
+                mu,
+                "cell {:?}",
+                sim.grid.cell_coords(c)
+            );
+        }
+    }
+    // FLIP moving the lid regardless loses volume under it; FLIP waiting for free cells halts
+    // again and again, and still loses volume (it packs particles more densely than mu).
+    let (ignore, _) = run::<2>(&scene("compress-2d", "flip", Some("ignore")));
+    assert!(
+        ignore.volume_min < 50.0,
+        "ignore kept {}%",
+        ignore.volume_min
+    );
+    assert_eq!(ignore.blocked_steps, 0);
+    let (naive, _) = run::<2>(&scene("compress-2d", "flip", Some("naive")));
+    assert!(naive.volume_min < 95.0, "naive kept {}%", naive.volume_min);
+    assert!(
+        naive.blocked_steps * 10 > naive.steps,
+        "naive halted on {} steps",
+        naive.blocked_steps
+    );
+}
+
+/// A scene with water `depth` deep and one obstacle, in 2D or 3D, at `cells` per axis.
+fn obstacle_scene(dim: usize, cells: usize, depth: f64, obstacle: &str, duration: f64) -> Scene {
+    let v = |x: f64, y: f64, z: f64| {
+        if dim == 2 {
+            format!("[{x}, {y}]")
+        } else {
+            format!("[{x}, {y}, {z}]")
+        }
+    };
+    let text = format!(
+        "name = \"test\"\ndim = {dim}\n[domain]\nsize = {}\ncells = {cells}\n\
+         [simulation]\nmethod = \"ccp\"\nduration = {duration}\nppc = {}\nmax_dt = 0.02\nmax_speed = 3.0\n\
+         [[fluid]]\nshape = \"box\"\nmin = {}\nmax = {}\n\
+         [[obstacle]]\nname = \"o\"\n{obstacle}\n",
+        v(1.0, 1.0, 1.0),
+        if dim == 2 { 4 } else { 8 },
+        v(0.0, 0.0, 0.0),
+        v(1.0, depth, 1.0),
+    );
+    Scene::parse("test scene", &text, &Overrides::default()).unwrap()
+}
+
+#[test]
+fn a_fast_ball_at_the_one_cell_limit_reaches_the_floor_2d_and_3d() {
+    // 6 m/s at 24 cells per metre is 7 cells per max_dt step: the time step keeps the ball
+    // within one cell per step.
+    for dim in [2, 3] {
+        let ball = if dim == 2 {
+            "shape = \"ball\"\ncenter = [0.5, 0.85]\nradius = 0.1\nvelocity = [0.0, -6.0]"
+        } else {
+            "shape = \"ball\"\ncenter = [0.5, 0.85, 0.5]\nradius = 0.1\nvelocity = [0.0, -6.0, 0.0]"
+        };
+        let s = obstacle_scene(dim, if dim == 2 { 24 } else { 16 }, 0.5, ball, 0.6);
+        let r = if dim == 2 {
+            run::<2>(&s).0
+        } else {
+            run::<3>(&s).0
+        };
+        assert!(
+            r.volume_min >= 100.0 - 1e-9,
+            "{dim}D: volume fell to {}%",
+            r.volume_min
+        );
+        assert!(
+            r.bottom <= 1.0,
+            "{dim}D: the ball stopped {} cells above the floor",
+            r.bottom
+        );
+    }
+}
+
+#[test]
+fn a_large_obstacle_leaving_one_cell_gaps_reaches_the_floor_2d_and_3d() {
+    for dim in [2, 3] {
+        let cells = if dim == 2 { 30 } else { 14 };
+        let gap = 1.0 / cells as f64;
+        let lid = if dim == 2 {
+            format!(
+                "shape = \"box\"\nmin = [{gap}, 0.6]\nmax = [{}, 0.8]\nvelocity = [0.0, -1.0]",
+                1.0 - gap
+            )
+        } else {
+            format!(
+                "shape = \"box\"\nmin = [{gap}, 0.6, {gap}]\nmax = [{}, 0.8, {}]\nvelocity = [0.0, -1.0, 0.0]",
+                1.0 - gap,
+                1.0 - gap
+            )
+        };
+        let s = obstacle_scene(dim, cells, 0.2, &lid, 1.5);
+        let r = if dim == 2 {
+            run::<2>(&s).0
+        } else {
+            run::<3>(&s).0
+        };
+        assert!(
+            r.volume_min >= 100.0 - 1e-9,
+            "{dim}D: volume fell to {}%",
+            r.volume_min
+        );
+        assert!(
+            r.bottom <= 1.0,
+            "{dim}D: the obstacle stopped {} cells above the floor",
+            r.bottom
+        );
+    }
+}
+
+#[test]
+fn a_lid_compresses_to_the_last_layer_in_3d() {
+    let lid = "shape = \"box\"\nmin = [0.0, 0.7, 0.0]\nmax = [1.0, 0.9, 1.0]\nvelocity = [0.0, -1.0, 0.0]";
+    let s = obstacle_scene(3, 12, 0.25, lid, 1.0);
+    let (r, sim) = run::<3>(&s);
+    assert!(
+        r.volume_min >= 100.0 - 1e-9,
+        "volume fell to {}%",
+        r.volume_min
+    );
+    let layer = sim.grid.dims[0] * sim.grid.dims[2] * sim.config.mu() as usize;
+    let rows = sim.total_particles.div_ceil(layer);
+    assert!(
+        (r.bottom - rows as f64).abs() <= 0.5,
+        "the lid stopped at {} cells; the particles need {rows} layers",
+        r.bottom
+    );
+}
