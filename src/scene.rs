@@ -11,7 +11,7 @@ use crate::sim::correct::band::BandVariant;
 use crate::sim::correct::problem::Directions;
 use crate::sim::correct::{CorrectionSettings, Solver};
 use crate::sim::emit::Emitter;
-use crate::sim::solids::{Obstacle, ObstacleMode};
+use crate::sim::solids::{Motion, Obstacle, ObstacleMode};
 use crate::sim::{Method, SimConfig};
 use anyhow::{anyhow, bail, Context, Result};
 use serde::{Deserialize, Serialize};
@@ -23,6 +23,26 @@ pub const BUILT_IN: &[(&str, &str)] = &[
     ("dam-1ppc-2d", include_str!("../scenes/dam-1ppc-2d.toml")),
     ("dam-3d", include_str!("../scenes/dam-3d.toml")),
     ("compress-2d", include_str!("../scenes/compress-2d.toml")),
+    (
+        "falling-obstacle-2d",
+        include_str!("../scenes/falling-obstacle-2d.toml"),
+    ),
+    (
+        "falling-obstacle-3d",
+        include_str!("../scenes/falling-obstacle-3d.toml"),
+    ),
+    (
+        "falling-obstacle-zero-bc-2d",
+        include_str!("../scenes/falling-obstacle-zero-bc-2d.toml"),
+    ),
+    (
+        "large-obstacle-2d",
+        include_str!("../scenes/large-obstacle-2d.toml"),
+    ),
+    (
+        "large-obstacle-3d",
+        include_str!("../scenes/large-obstacle-3d.toml"),
+    ),
     ("drop-2d", include_str!("../scenes/drop-2d.toml")),
     ("drop-3d", include_str!("../scenes/drop-3d.toml")),
     (
@@ -77,11 +97,25 @@ pub struct ObstacleFile {
     pub center: Option<Vec<f64>>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub radius: Option<f64>,
-    /// m/s, constant.
+    /// m/s: constant, or the start velocity of a falling obstacle.
     pub velocity: Vec<f64>,
+    /// "constant", or "falling": gravity in the air, then buoyancy and drag towards
+    /// `terminal_speed` in the water (a dense object, sec. 7).
+    #[serde(default = "default_motion")]
+    pub motion: String,
+    /// Falling: the speed it settles to in the water, m/s.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub terminal_speed: Option<f64>,
+    /// Falling: how fast it approaches the terminal speed in the water, 1/s (default 10).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub drag: Option<f64>,
     /// The zero-velocity variant: the pressure solve sees the obstacle at rest.
     #[serde(default)]
     pub zero_velocity_bc: bool,
+}
+
+fn default_motion() -> String {
+    "constant".into()
 }
 
 impl ObstacleFile {
@@ -376,6 +410,13 @@ impl Scene {
                     shape: region(&o.region()),
                     offset: Vector::<D>::zeros(),
                     velocity: vec(&o.velocity),
+                    motion: match o.motion.as_str() {
+                        "falling" => Motion::Falling {
+                            terminal_speed: o.terminal_speed.unwrap() / h,
+                            drag: o.drag.unwrap_or(10.0),
+                        },
+                        _ => Motion::Constant,
+                    },
                     zero_velocity_bc: o.zero_velocity_bc,
                 })
                 .collect(),
@@ -678,6 +719,38 @@ fn check(source: &str, file: SceneFile) -> Result<Scene> {
                 &format!("{key}.name"),
                 format!("must be letters, digits, '-' or '_', got '{}'", o.name),
             ));
+        }
+        let falling = pick(
+            &format!("{key}.motion"),
+            &o.motion,
+            &["constant", "falling"],
+        )? == 1;
+        match (falling, o.terminal_speed, o.drag) {
+            (true, None, _) => {
+                return Err(err(
+                    &format!("{key}.terminal_speed"),
+                    "a falling obstacle needs its terminal speed in the water (m/s)".into(),
+                ))
+            }
+            (true, Some(v), _) if !(v.is_finite() && v >= 0.0) => {
+                return Err(err(
+                    &format!("{key}.terminal_speed"),
+                    format!("must be a speed >= 0 m/s, got {v}"),
+                ))
+            }
+            (true, _, Some(d)) if !(d.is_finite() && d > 0.0) => {
+                return Err(err(
+                    &format!("{key}.drag"),
+                    format!("must be a rate > 0 per second, got {d}"),
+                ))
+            }
+            (false, Some(_), _) | (false, _, Some(_)) => {
+                return Err(err(
+                    &key,
+                    "'terminal_speed' and 'drag' apply to motion = \"falling\" only".into(),
+                ))
+            }
+            _ => {}
         }
         if !names.insert(o.name.clone()) {
             return Err(err(

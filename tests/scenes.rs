@@ -36,13 +36,18 @@ fn every_2d_scene_keeps_its_invariants() {
 
 #[test]
 fn every_3d_scene_keeps_its_invariants() {
-    let small = Overrides {
-        cells: Some(20),
-        ..Default::default()
-    };
     for (name, _) in BUILT_IN {
         let scene = Scene::load(name, &Overrides::default()).unwrap();
         if scene.dim() == 3 {
+            // 20 cells along the shortest axis.
+            let (lo, hi) = (
+                scene.dims.iter().min().unwrap(),
+                scene.dims.iter().max().unwrap(),
+            );
+            let small = Overrides {
+                cells: Some(20 * hi / lo),
+                ..Default::default()
+            };
             let sim = run::<3>(name, &small, 40);
             assert!(sim.particles.len() > 1000);
         }

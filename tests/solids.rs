@@ -198,3 +198,67 @@ fn a_lid_compresses_to_the_last_layer_in_3d() {
         r.bottom
     );
 }
+
+#[test]
+fn falling_obstacles_reach_the_floor_under_ccp_and_stall_or_trap_under_flip() {
+    for name in [
+        "falling-obstacle-2d",
+        "falling-obstacle-zero-bc-2d",
+        "large-obstacle-2d",
+    ] {
+        let (ccp, _) = run::<2>(&scene(name, "ccp", None));
+        assert!(
+            ccp.volume_min >= 100.0 - 1e-9,
+            "{name}: volume fell to {}%",
+            ccp.volume_min
+        );
+        assert!(
+            ccp.bottom <= 1.0,
+            "{name}: ccp stopped {} cells above the floor",
+            ccp.bottom
+        );
+        let (naive, _) = run::<2>(&scene(name, "flip", Some("naive")));
+        assert!(
+            naive.bottom > 2.0,
+            "{name}: FLIP-naive reached {} cells",
+            naive.bottom
+        );
+        let (ignore, _) = run::<2>(&scene(name, "flip", Some("ignore")));
+        assert!(
+            ignore.bottom <= 1.0,
+            "{name}: FLIP-ignore stopped at {}",
+            ignore.bottom
+        );
+        assert!(
+            ignore.volume_min < 97.0,
+            "{name}: FLIP-ignore kept {}%",
+            ignore.volume_min
+        );
+    }
+}
+
+#[test]
+fn falling_obstacles_reach_the_floor_in_3d_with_the_band() {
+    for name in ["falling-obstacle-3d", "large-obstacle-3d"] {
+        let s = Scene::load(
+            name,
+            &Overrides {
+                cells: Some(if name == "large-obstacle-3d" { 24 } else { 16 }),
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        assert!(s.band.is_some());
+        let (r, _) = run::<3>(&s);
+        assert!(
+            r.volume_min >= 100.0 - 1e-9,
+            "{name}: volume fell to {}%",
+            r.volume_min
+        );
+        assert!(
+            r.bottom <= 1.0,
+            "{name}: stopped {} cells above the floor",
+            r.bottom
+        );
+    }
+}

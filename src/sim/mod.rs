@@ -483,10 +483,26 @@ impl<const D: usize> Simulation<D> {
                     c.obstacle_mode != ObstacleMode::Ignore && cells.iter().any(|&k| occupied[k])
                 })
                 .collect();
-            for ((o, t), &blocked) in self.obstacles.iter_mut().zip(&targets).zip(&rep.blocked) {
-                if !blocked {
-                    o.offset = *t;
+            // In the water: fluid in or next to a cell the obstacle occupies or wants.
+            let touches_fluid = |cells: &[usize]| {
+                cells.iter().any(|&k| {
+                    self.markings.is_fluid(k)
+                        || grid
+                            .moore_neighbors(grid.cell_coords(k))
+                            .any(|m| self.markings.is_fluid(grid.cell_index(m)))
+                })
+            };
+            let in_water: Vec<bool> = self
+                .obstacles
+                .iter()
+                .zip(&wanted)
+                .map(|(o, w)| touches_fluid(w) || touches_fluid(&o.cells_at(grid, &o.offset)))
+                .collect();
+            for (k, o) in self.obstacles.iter_mut().enumerate() {
+                if !rep.blocked[k] {
+                    o.offset = targets[k];
                 }
+                o.accelerate(grid, &c.gravity, dt, in_water[k]);
             }
             (self.solid, self.solid_vel, self.moving) =
                 rasterise(&self.grid, &self.static_solid, &self.obstacles);

@@ -45,6 +45,17 @@ impl ObstacleMode {
     }
 }
 
+/// How an obstacle's velocity evolves.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Motion {
+    /// The velocity never changes (the compress and spiral lids).
+    Constant,
+    /// A dense object: gravity alone in the air; in the water buoyancy and linear drag, which
+    /// bring its velocity to `terminal_speed` (cells per second, along gravity) at the rate
+    /// `drag` (1/s): `v += (v_t - v) (1 - exp(-drag dt))`.
+    Falling { terminal_speed: f64, drag: f64 },
+}
+
 /// A moving obstacle, in grid units.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Obstacle<const D: usize> {
@@ -53,8 +64,9 @@ pub struct Obstacle<const D: usize> {
     pub shape: Region<D>,
     /// Displacement from the start, cells.
     pub offset: Vector<D>,
-    /// Constant velocity, cells per second.
+    /// Velocity, cells per second.
     pub velocity: Vector<D>,
+    pub motion: Motion,
     /// The zero-velocity variant: the pressure boundary condition uses 0, so only the
     /// correction moves fluid out of the way.
     pub zero_velocity_bc: bool,
@@ -89,6 +101,32 @@ impl<const D: usize> Obstacle<D> {
             }
         }
         t
+    }
+
+    /// Updates the velocity after a step of `dt` (gravity `g`, cells/s^2), `in_water` when the
+    /// obstacle touches fluid. A velocity into a tank wall it rests on is dropped.
+    pub fn accelerate(&mut self, grid: &Grid<D>, g: &Vector<D>, dt: f64, in_water: bool) {
+        if let Motion::Falling {
+            terminal_speed,
+            drag,
+        } = self.motion
+        {
+            if in_water {
+                let down = g.try_normalize(0.0).unwrap_or_else(Vector::zeros);
+                let v_t = down * terminal_speed;
+                self.velocity += (v_t - self.velocity) * (1.0 - (-drag * dt).exp());
+            } else {
+                self.velocity += g * dt;
+            }
+        }
+        let (lo, hi) = self.region_at(&self.offset).bounds();
+        for k in 0..D {
+            let at_low = lo[k] <= 1e-9 && self.velocity[k] < 0.0;
+            let at_high = hi[k] >= grid.dims[k] as f64 - 1e-9 && self.velocity[k] > 0.0;
+            if at_low || at_high {
+                self.velocity[k] = 0.0;
+            }
+        }
     }
 
     /// The velocity the pressure solve sees (eq. solid_boundary).

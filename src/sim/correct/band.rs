@@ -307,11 +307,15 @@ impl<const D: usize> PathPusher<'_, D> {
         }
     }
 
+    /// Cells an obstacle wants (`C_new_solid`, sec. 7) are never sinks: a path into one would
+    /// block the obstacle.
     fn is_sink(&self, c: usize) -> bool {
-        match self.direction {
-            PathDirection::In => self.low(c),
-            PathDirection::Out => !self.solid[c] && !self.low(c),
-        }
+        let wanted = self.penalty.is_some_and(|p| p[c] > 0.0);
+        !wanted
+            && match self.direction {
+                PathDirection::In => self.low(c),
+                PathDirection::Out => !self.solid[c] && !self.low(c),
+            }
     }
 
     /// `sigma_edge(j, c)` of eq. edge: the cost of particle `j` at its best point of cell `c`
