@@ -307,11 +307,11 @@ impl<const D: usize> PathPusher<'_, D> {
         }
     }
 
-    /// Cells an obstacle wants (`C_new_solid`, sec. 7) are never sinks: a path into one would
-    /// block the obstacle.
-    fn is_sink(&self, c: usize) -> bool {
+    /// Whether `c` can end a path. Cells an obstacle wants (`C_new_solid`, sec. 7) only with
+    /// `allow_wanted`: a path into one blocks the obstacle, so they are the last resort.
+    fn is_sink(&self, c: usize, allow_wanted: bool) -> bool {
         let wanted = self.penalty.is_some_and(|p| p[c] > 0.0);
-        !wanted
+        (allow_wanted || !wanted)
             && match self.direction {
                 PathDirection::In => self.low(c),
                 PathDirection::Out => !self.solid[c] && !self.low(c),
@@ -328,12 +328,14 @@ impl<const D: usize> PathPusher<'_, D> {
 
     /// Pushes `n_move` particles along paths (sec. push_part): alg. find, then alg. update
     /// for each path found until `n_move` are applied, and again while more are needed and
-    /// alg. find still finds some.
+    /// alg. find still finds some. Paths into cells an obstacle wants are searched for only
+    /// when no other path is left (reverting `b*` must stay possible, sec. push_part).
     pub fn push(&self, pos: &mut [Vector<D>], n_move: usize) -> PathOutcome<D> {
         let grid = self.grid;
         let n = grid.num_cells();
         let mut cell_of: Vec<u32> = pos.iter().map(|x| grid.cell_index_of(x) as u32).collect();
         let mut out = PathOutcome::default();
+        let mut allow_wanted = self.penalty.is_none();
         while out.applied < n_move {
             // gamma_c of the current positions, as lists (counting sort).
             let mut start = vec![0usize; n + 1];
@@ -350,11 +352,15 @@ impl<const D: usize> PathPusher<'_, D> {
                 fill[c as usize] += 1;
             }
             let gamma = |c: usize| &members[start[c]..start[c + 1]];
-            let (found, parent) = self.find(pos, &cell_of, &gamma);
+            let (found, parent) = self.find(pos, &cell_of, &gamma, allow_wanted);
             out.find_calls += 1;
             out.found += found.len();
             if found.is_empty() {
-                break;
+                if allow_wanted {
+                    break;
+                }
+                allow_wanted = true;
+                continue;
             }
             for path in found.into_iter().take(n_move - out.applied) {
                 out.paths
@@ -376,6 +382,7 @@ impl<const D: usize> PathPusher<'_, D> {
         pos: &[Vector<D>],
         cell_of: &[u32],
         gamma: &impl Fn(usize) -> &'g [u32],
+        allow_wanted: bool,
     ) -> (Vec<FoundPath>, Vec<u32>) {
         let grid = self.grid;
         let n = grid.num_cells();
@@ -406,7 +413,7 @@ impl<const D: usize> PathPusher<'_, D> {
             }
             parent[c] = a.edge;
             sigma[c] = a.cost;
-            if self.is_sink(c) && (gamma(c).len() as u32) < self.mu {
+            if self.is_sink(c, allow_wanted) && (gamma(c).len() as u32) < self.mu {
                 finished[a.root as usize] = true;
                 paths.push(FoundPath {
                     edge: a.edge,
