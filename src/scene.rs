@@ -80,8 +80,9 @@ pub struct SceneFile {
     pub obstacle: Vec<ObstacleFile>,
 }
 
-/// A moving box (`min`, `max`) or ball (`center`, `radius`), in metres, with a constant
-/// velocity.
+/// A moving box (`min`, `max`) or ball (`center`, `radius`), in metres, with a velocity.
+/// The shape keys repeat [`RegionFile`]'s because serde cannot flatten a struct into one that
+/// rejects unknown keys.
 #[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct ObstacleFile {

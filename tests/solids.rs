@@ -129,6 +129,26 @@ fn obstacle_scene(dim: usize, cells: usize, depth: f64, obstacle: &str, duration
     Scene::parse("test scene", &text, &Overrides::default()).unwrap()
 }
 
+/// Runs a scene of [`obstacle_scene`] and checks that the obstacle reached the floor (within
+/// one cell) without the volume dropping below 100%.
+fn reaches_the_floor(what: &str, dim: usize, s: &Scene) {
+    let r = if dim == 2 {
+        run::<2>(s).0
+    } else {
+        run::<3>(s).0
+    };
+    assert!(
+        r.volume_min >= 100.0 - 1e-9,
+        "{what} {dim}D: volume fell to {}%",
+        r.volume_min
+    );
+    assert!(
+        r.bottom <= 1.0,
+        "{what} {dim}D: stopped {} cells above the floor",
+        r.bottom
+    );
+}
+
 #[test]
 fn a_fast_ball_at_the_one_cell_limit_reaches_the_floor_2d_and_3d() {
     // 6 m/s at 24 cells per metre is 7 cells per max_dt step: the time step keeps the ball
@@ -140,21 +160,7 @@ fn a_fast_ball_at_the_one_cell_limit_reaches_the_floor_2d_and_3d() {
             "shape = \"ball\"\ncenter = [0.5, 0.85, 0.5]\nradius = 0.1\nvelocity = [0.0, -6.0, 0.0]"
         };
         let s = obstacle_scene(dim, if dim == 2 { 24 } else { 16 }, 0.5, ball, 0.6);
-        let r = if dim == 2 {
-            run::<2>(&s).0
-        } else {
-            run::<3>(&s).0
-        };
-        assert!(
-            r.volume_min >= 100.0 - 1e-9,
-            "{dim}D: volume fell to {}%",
-            r.volume_min
-        );
-        assert!(
-            r.bottom <= 1.0,
-            "{dim}D: the ball stopped {} cells above the floor",
-            r.bottom
-        );
+        reaches_the_floor("the fast ball", dim, &s);
     }
 }
 
@@ -176,21 +182,7 @@ fn a_large_obstacle_leaving_one_cell_gaps_reaches_the_floor_2d_and_3d() {
             )
         };
         let s = obstacle_scene(dim, cells, 0.2, &lid, 1.5);
-        let r = if dim == 2 {
-            run::<2>(&s).0
-        } else {
-            run::<3>(&s).0
-        };
-        assert!(
-            r.volume_min >= 100.0 - 1e-9,
-            "{dim}D: volume fell to {}%",
-            r.volume_min
-        );
-        assert!(
-            r.bottom <= 1.0,
-            "{dim}D: the obstacle stopped {} cells above the floor",
-            r.bottom
-        );
+        reaches_the_floor("the large obstacle", dim, &s);
     }
 }
 
