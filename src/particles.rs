@@ -41,9 +41,33 @@ impl<const D: usize> Region<D> {
         }
     }
 
-    /// Cells whose centre lies in the region.
+    /// Cells whose centre lies in the region, in increasing index order. Only the cells of
+    /// the region's bounding box are visited.
     pub fn cells<'a>(&'a self, grid: &'a Grid<D>) -> impl Iterator<Item = usize> + 'a {
-        (0..grid.num_cells()).filter(move |&c| self.contains(&grid.center(grid.cell_coords(c))))
+        let (lo, hi) = self.bounds();
+        // Cells with centre in [lo, hi] along axis k: ceil(lo - 0.5) ..= floor(hi - 0.5).
+        let first: [usize; D] = std::array::from_fn(|k| (lo[k] - 0.5).ceil().max(0.0) as usize);
+        let end: [usize; D] = std::array::from_fn(|k| {
+            ((hi[k] - 0.5).floor() + 1.0).clamp(0.0, grid.dims[k] as f64) as usize
+        });
+        let empty = (0..D).any(|k| first[k] >= end[k]);
+        let count: usize = if empty {
+            0
+        } else {
+            (0..D).map(|k| end[k] - first[k]).product()
+        };
+        (0..count)
+            .map(move |mut i| {
+                // Axis 0 fastest, as in cell indices: the order is increasing.
+                let c: [usize; D] = std::array::from_fn(|k| {
+                    let n = end[k] - first[k];
+                    let v = first[k] + i % n;
+                    i /= n;
+                    v
+                });
+                grid.cell_index(c)
+            })
+            .filter(move |&c| self.contains(&grid.center(grid.cell_coords(c))))
     }
 
     /// The region moved by `d`.
@@ -153,6 +177,33 @@ mod tests {
         check([8, 6], 2);
         check([6, 4, 4], 2);
         check([5, 5], 1);
+    }
+
+    #[test]
+    fn region_cells_are_the_cells_whose_centre_is_inside_2d_and_3d() {
+        fn check<const D: usize>(dims: [usize; D], r: Region<D>) {
+            let g = Grid::new(dims);
+            let all: Vec<usize> = (0..g.num_cells())
+                .filter(|&c| r.contains(&g.center(g.cell_coords(c))))
+                .collect();
+            assert!(!all.is_empty());
+            assert_eq!(r.cells(&g).collect::<Vec<_>>(), all);
+        }
+        check(
+            [9, 7],
+            Region::Ball {
+                center: Vector::<2>::new(3.2, 4.9),
+                radius: 2.6,
+            },
+        );
+        // Reaching past the walls, and with faces exactly on cell centres.
+        check(
+            [6, 5, 4],
+            Region::Box {
+                min: Vector::<3>::new(-1.0, 1.5, 0.0),
+                max: Vector::<3>::new(3.5, 9.0, 2.5),
+            },
+        );
     }
 
     #[test]

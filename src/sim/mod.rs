@@ -429,15 +429,19 @@ impl<const D: usize> Simulation<D> {
                 cells
             })
             .collect();
-        let mut new_solid = vec![false; grid.num_cells()];
-        wanted.iter().flatten().for_each(|&c| new_solid[c] = true);
-        let clear = solids::clearing_distance(grid, &new_solid, &self.solid);
-        rep.new_solid = (0..grid.num_cells())
-            .filter(|&c| new_solid[c])
-            .map(|c| (c, clear[c]))
-            .collect();
-        let penalty = (c.obstacle_mode == ObstacleMode::Couple && !rep.new_solid.is_empty())
-            .then(|| solids::penalties(&clear));
+        let mut penalty = None;
+        if !self.obstacles.is_empty() {
+            let mut new_solid = vec![false; grid.num_cells()];
+            wanted.iter().flatten().for_each(|&c| new_solid[c] = true);
+            let clear = solids::clearing_distance(grid, &new_solid, &self.solid);
+            rep.new_solid = (0..grid.num_cells())
+                .filter(|&c| new_solid[c])
+                .map(|c| (c, clear[c]))
+                .collect();
+            if c.obstacle_mode == ObstacleMode::Couple && !rep.new_solid.is_empty() {
+                penalty = Some(solids::penalties(&clear));
+            }
+        }
         if let Some(x_bar) = x_bar {
             let want_mps = self.export_problem_at_step == Some(self.steps + 1);
             let report = rep.times.time(Stage::Correct, || {
