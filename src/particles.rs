@@ -31,6 +31,55 @@ impl<const D: usize> Particles<D> {
 pub enum Region<const D: usize> {
     Box { min: Vector<D>, max: Vector<D> },
     Ball { center: Vector<D>, radius: f64 },
+    Spiral(SpiralBlock<D>),
+}
+
+/// A block with a spiral channel carved into it, for the spiral scene of sec. 8 (the paper's
+/// spiral mesh is not public). The region is the box `[min, max]` minus the channel.
+///
+/// The channel's centre line is the Archimedean spiral `r(t) = radius - pitch t / 2 pi`,
+/// `t` in `[0, 2 pi turns]`, starting straight above `center` and winding clockwise inwards,
+/// with `pitch = radius / (turns + 1/2)` so that its inner end stays clear of the centre. The
+/// channel is `width` wide, measured radially; a straight mouth as wide joins its outer end to
+/// the block's top face. Only axes 0 and 1 take part: in 3D the channel would be extruded.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SpiralBlock<const D: usize> {
+    pub min: Vector<D>,
+    pub max: Vector<D>,
+    pub center: Vector<D>,
+    pub radius: f64,
+    pub turns: f64,
+    pub width: f64,
+}
+
+impl<const D: usize> SpiralBlock<D> {
+    /// The distance between successive turns of the centre line.
+    pub fn pitch(&self) -> f64 {
+        pitch(self.radius, self.turns)
+    }
+
+    /// Whether `x` lies in the channel (or its mouth).
+    pub fn channel_contains(&self, x: &Vector<D>) -> bool {
+        use std::f64::consts::{FRAC_PI_2, TAU};
+        let (dx, dy) = (x[0] - self.center[0], x[1] - self.center[1]);
+        let half = self.width / 2.0;
+        if dx.abs() <= half && dy >= self.radius {
+            return true;
+        }
+        let rho = dx.hypot(dy);
+        // The parameters t at which the centre line passes the angle of x, one per turn.
+        let first = (FRAC_PI_2 - dy.atan2(dx)).rem_euclid(TAU);
+        let pitch = self.pitch();
+        (0..)
+            .map(|k| first + TAU * k as f64)
+            .take_while(|&t| t <= TAU * self.turns)
+            .any(|t| (rho - (self.radius - pitch * t / TAU)).abs() <= half)
+    }
+}
+
+/// The pitch of a [`SpiralBlock`] of this outer radius and number of turns (any length unit).
+pub fn pitch(radius: f64, turns: f64) -> f64 {
+    radius / (turns + 0.5)
 }
 
 impl<const D: usize> Region<D> {
@@ -38,6 +87,9 @@ impl<const D: usize> Region<D> {
         match self {
             Region::Box { min, max } => (0..D).all(|k| x[k] >= min[k] && x[k] <= max[k]),
             Region::Ball { center, radius } => (x - center).norm_squared() <= radius * radius,
+            Region::Spiral(s) => {
+                (0..D).all(|k| x[k] >= s.min[k] && x[k] <= s.max[k]) && !s.channel_contains(x)
+            }
         }
     }
 
@@ -81,13 +133,19 @@ impl<const D: usize> Region<D> {
                 center: center + d,
                 radius: *radius,
             },
+            Region::Spiral(s) => Region::Spiral(SpiralBlock {
+                min: s.min + d,
+                max: s.max + d,
+                center: s.center + d,
+                ..s.clone()
+            }),
         }
     }
 
     /// The smallest box holding the region: `(min, max)`.
     pub fn bounds(&self) -> (Vector<D>, Vector<D>) {
         match self {
-            Region::Box { min, max } => (*min, *max),
+            Region::Box { min, max } | Region::Spiral(SpiralBlock { min, max, .. }) => (*min, *max),
             Region::Ball { center, radius } => {
                 (center.add_scalar(-radius), center.add_scalar(*radius))
             }
@@ -97,7 +155,9 @@ impl<const D: usize> Region<D> {
     /// The centre of the region.
     pub fn center(&self) -> Vector<D> {
         match self {
-            Region::Box { min, max } => (min + max) / 2.0,
+            Region::Box { min, max } | Region::Spiral(SpiralBlock { min, max, .. }) => {
+                (min + max) / 2.0
+            }
             Region::Ball { center, .. } => *center,
         }
     }
@@ -203,6 +263,120 @@ mod tests {
                 min: Vector::<3>::new(-1.0, 1.5, 0.0),
                 max: Vector::<3>::new(3.5, 9.0, 2.5),
             },
+        );
+    }
+
+    /// The spiral scene's block at 128 cells: channel 6.4 cells wide, walls 6.4 thick.
+    fn spiral() -> SpiralBlock<2> {
+        SpiralBlock {
+            min: Vector::<2>::new(0.0, 0.0),
+            max: Vector::<2>::new(128.0, 64.0),
+            center: Vector::<2>::new(64.0, 32.0),
+            radius: 25.6,
+            turns: 1.5,
+            width: 6.4,
+        }
+    }
+
+    /// The length of the spiral's centre line, by the midpoint rule.
+    fn centre_line_length(s: &SpiralBlock<2>) -> f64 {
+        use std::f64::consts::TAU;
+        let n = 100_000;
+        let dt = TAU * s.turns / n as f64;
+        let dr = s.pitch() / TAU;
+        (0..n)
+            .map(|i| {
+                let t = (i as f64 + 0.5) * dt;
+                (s.radius - dr * t).hypot(dr) * dt
+            })
+            .sum()
+    }
+
+    #[test]
+    fn the_spiral_channel_is_as_long_and_wide_as_its_centre_line_says() {
+        let s = spiral();
+        // Area of the channel by sampling the block on a fine lattice.
+        let k = 20;
+        let (w, h) = (128 * k, 64 * k);
+        let inside = (0..w * h)
+            .filter(|&i| {
+                let x = Vector::<2>::new(
+                    ((i % w) as f64 + 0.5) / k as f64,
+                    ((i / w) as f64 + 0.5) / k as f64,
+                );
+                s.channel_contains(&x)
+            })
+            .count();
+        let area = inside as f64 / (k * k) as f64;
+        let mouth = s.max[1] - s.center[1] - s.radius;
+        let expected = s.width * (centre_line_length(&s) + mouth);
+        assert!(
+            (area / expected - 1.0).abs() < 0.02,
+            "channel area {area}, width x length {expected}"
+        );
+        // The centre line is in the channel, the middle of the walls between turns is not.
+        let at = |r: f64, angle: f64| {
+            Vector::<2>::new(s.center[0] + r * angle.cos(), s.center[1] + r * angle.sin())
+        };
+        for angle in [0.3, 1.0, 2.0, 3.0, 4.0, 5.0] {
+            let t = (std::f64::consts::FRAC_PI_2 - angle).rem_euclid(std::f64::consts::TAU);
+            let r = s.radius - s.pitch() * t / std::f64::consts::TAU;
+            assert!(s.channel_contains(&at(r, angle)), "centre line at {angle}");
+            assert!(
+                !s.channel_contains(&at(r + s.pitch() / 2.0, angle)),
+                "wall at {angle}"
+            );
+        }
+    }
+
+    #[test]
+    fn the_rasterised_spiral_is_one_passage_with_no_shortcut_through_its_walls() {
+        let s = spiral();
+        let g = Grid::new([128, 64]);
+        let solid: Vec<bool> = {
+            let mut m = vec![false; g.num_cells()];
+            Region::Spiral(s.clone())
+                .cells(&g)
+                .for_each(|c| m[c] = true);
+            m
+        };
+        let open: Vec<usize> = (0..g.num_cells()).filter(|&c| !solid[c]).collect();
+        // Breadth-first from the mouth's cells on the top row.
+        let mut dist = vec![usize::MAX; g.num_cells()];
+        let mut queue: std::collections::VecDeque<usize> = open
+            .iter()
+            .copied()
+            .filter(|&c| g.cell_coords(c)[1] == 63)
+            .collect();
+        assert!(
+            !queue.is_empty() && queue.len() <= 7,
+            "mouth: {} cells",
+            queue.len()
+        );
+        queue.iter().for_each(|&c| dist[c] = 0);
+        while let Some(c) = queue.pop_front() {
+            for a in 0..2 {
+                for dir in [-1, 1] {
+                    if let Some(nb) = g.neighbor(g.cell_coords(c), a, dir) {
+                        let nb = g.cell_index(nb);
+                        if !solid[nb] && dist[nb] == usize::MAX {
+                            dist[nb] = dist[c] + 1;
+                            queue.push_back(nb);
+                        }
+                    }
+                }
+            }
+        }
+        assert!(
+            open.iter().all(|&c| dist[c] != usize::MAX),
+            "the channel is not one piece"
+        );
+        // The farthest cell is at the inner end, as far along as the centre line goes.
+        let far = open.iter().map(|&c| dist[c]).max().unwrap() as f64;
+        let length = centre_line_length(&s) + (s.max[1] - s.center[1] - s.radius);
+        assert!(
+            far > 0.9 * length && far < 1.3 * length,
+            "{far} steps to the inner end, centre line {length}"
         );
     }
 

@@ -511,8 +511,9 @@ impl Recorder {
             let centre = self.world(r.center().as_slice());
             trail.push(centre);
             let half: [f32; 3] = std::array::from_fn(|k| (b[k] - a[k]).abs() / 2.0);
+            // Obstacles are boxes or balls (scene checks); a spiral would be drawn as its box.
             match (&r, D) {
-                (Region::Box { .. }, 2) => self.rec.log(
+                (Region::Box { .. } | Region::Spiral(_), 2) => self.rec.log(
                     path.as_str(),
                     &rerun::Boxes2D::from_centers_and_half_sizes(
                         [(centre[0], centre[1])],
@@ -521,7 +522,7 @@ impl Recorder {
                     .with_colors(color)
                     .with_draw_order(25.0),
                 )?,
-                (Region::Box { .. }, _) => self.rec.log(
+                (Region::Box { .. } | Region::Spiral(_), _) => self.rec.log(
                     path.as_str(),
                     &rerun::Boxes3D::from_centers_and_half_sizes([centre], [half])
                         .with_colors(color),

@@ -4,8 +4,8 @@
 //! module works in grid units. All checks of user input live here, and every error names the
 //! file, the key and the reason.
 
-use crate::grid::Vector;
-use crate::particles::Region;
+use crate::grid::{Grid, Vector};
+use crate::particles::{self, Region, SpiralBlock};
 use crate::sim::band::BandSettings;
 use crate::sim::correct::band::BandVariant;
 use crate::sim::correct::problem::Directions;
@@ -23,6 +23,7 @@ pub const BUILT_IN: &[(&str, &str)] = &[
     ("dam-1ppc-2d", include_str!("../scenes/dam-1ppc-2d.toml")),
     ("dam-3d", include_str!("../scenes/dam-3d.toml")),
     ("compress-2d", include_str!("../scenes/compress-2d.toml")),
+    ("spiral-2d", include_str!("../scenes/spiral-2d.toml")),
     (
         "falling-obstacle-2d",
         include_str!("../scenes/falling-obstacle-2d.toml"),
@@ -128,6 +129,8 @@ impl ObstacleFile {
             max: self.max.clone(),
             center: self.center.clone(),
             radius: self.radius,
+            turns: None,
+            width: None,
         }
     }
 }
@@ -209,7 +212,10 @@ impl Default for SimulationFile {
 #[derive(Clone, Debug, Default, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct RegionFile {
-    /// "box" or "ball".
+    /// "box" (`min`, `max`), "ball" (`center`, `radius`), or, for a 2D solid only, "spiral":
+    /// the box `min`..`max` with a spiral channel carved into it, centred at `center`, its
+    /// centre line starting `radius` above the centre and winding `turns` times inwards, the
+    /// channel `width` wide and open to the box's top face (see `particles::SpiralBlock`).
     pub shape: String,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub min: Option<Vec<f64>>,
@@ -219,6 +225,13 @@ pub struct RegionFile {
     pub center: Option<Vec<f64>>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub radius: Option<f64>,
+    /// Spiral: how many times the channel winds around the centre.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub turns: Option<f64>,
+    /// Spiral: the channel's width, metres; at least one cell, and the walls between turns
+    /// (`radius / (turns + 1/2) - width`) too.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub width: Option<f64>,
 }
 
 /// A box that injects particles at `velocity` from `start` to `stop` seconds.
@@ -360,10 +373,18 @@ impl Scene {
                 min: vec(r.min.as_deref().unwrap()),
                 max: vec(r.max.as_deref().unwrap()),
             },
-            _ => Region::Ball {
+            "ball" => Region::Ball {
                 center: vec(r.center.as_deref().unwrap()),
                 radius: r.radius.unwrap() / h,
             },
+            _ => Region::Spiral(SpiralBlock {
+                min: vec(r.min.as_deref().unwrap()),
+                max: vec(r.max.as_deref().unwrap()),
+                center: vec(r.center.as_deref().unwrap()),
+                radius: r.radius.unwrap() / h,
+                turns: r.turns.unwrap(),
+                width: r.width.unwrap() / h,
+            }),
         };
         let dims: [usize; D] = std::array::from_fn(|k| self.dims[k]);
         let per_axis = ppc_per_axis(s.ppc, D).unwrap();
@@ -616,55 +637,141 @@ fn check(source: &str, file: SceneFile) -> Result<Scene> {
         }
         Ok(())
     };
-    let region = |key: String, r: &RegionFile| -> Result<()> {
+    // A box's corners inside the domain and below each other.
+    let block = |key: &str, min: &[f64], max: &[f64]| -> Result<()> {
+        inside(&format!("{key}.min"), min)?;
+        inside(&format!("{key}.max"), max)?;
+        if (0..dim).any(|k| min[k] >= max[k]) {
+            return Err(err(
+                key,
+                format!("'min' {min:?} must be below 'max' {max:?} on every axis"),
+            ));
+        }
+        Ok(())
+    };
+    let positive = |key: String, v: f64| -> Result<()> {
+        if v.is_finite() && v > 0.0 {
+            Ok(())
+        } else {
+            Err(err(&key, format!("must be positive, got {v}")))
+        }
+    };
+    // Which keys each shape takes, in the order they are named in errors.
+    let takes = |key: &str, r: &RegionFile, shape: &str, wanted: &[&str]| -> Result<()> {
+        let given = [
+            ("min", r.min.is_some()),
+            ("max", r.max.is_some()),
+            ("center", r.center.is_some()),
+            ("radius", r.radius.is_some()),
+            ("turns", r.turns.is_some()),
+            ("width", r.width.is_some()),
+        ];
+        let quoted = |names: Vec<&str>| {
+            let q: Vec<String> = names.iter().map(|n| format!("'{n}'")).collect();
+            match q.split_last() {
+                Some((last, rest)) if !rest.is_empty() => format!("{} and {last}", rest.join(", ")),
+                _ => q.join(""),
+            }
+        };
+        let missing: Vec<&str> = given
+            .iter()
+            .filter(|(n, g)| !g && wanted.contains(n))
+            .map(|(n, _)| *n)
+            .collect();
+        let extra: Vec<&str> = given
+            .iter()
+            .filter(|(n, g)| *g && !wanted.contains(n))
+            .map(|(n, _)| *n)
+            .collect();
+        if !missing.is_empty() {
+            return Err(err(
+                key,
+                format!("a {shape} needs {}", quoted(wanted.to_vec())),
+            ));
+        }
+        if !extra.is_empty() {
+            return Err(err(
+                key,
+                format!(
+                    "a {shape} takes {}, not {}",
+                    quoted(wanted.to_vec()),
+                    quoted(extra)
+                ),
+            ));
+        }
+        Ok(())
+    };
+    let region = |key: String, r: &RegionFile, solid: bool| -> Result<()> {
         match r.shape.as_str() {
             "box" => {
-                let (Some(min), Some(max)) = (&r.min, &r.max) else {
-                    return Err(err(&key, "a box needs 'min' and 'max'".into()));
-                };
-                if r.center.is_some() || r.radius.is_some() {
-                    return Err(err(
-                        &key,
-                        "a box takes 'min' and 'max', not 'center' or 'radius'".into(),
-                    ));
-                }
-                inside(&format!("{key}.min"), min)?;
-                inside(&format!("{key}.max"), max)?;
-                if (0..dim).any(|k| min[k] >= max[k]) {
-                    return Err(err(
-                        &key,
-                        format!("'min' {min:?} must be below 'max' {max:?} on every axis"),
-                    ));
-                }
+                takes(&key, r, "box", &["min", "max"])?;
+                block(&key, r.min.as_deref().unwrap(), r.max.as_deref().unwrap())?;
             }
             "ball" => {
-                let (Some(c), Some(rad)) = (&r.center, r.radius) else {
-                    return Err(err(&key, "a ball needs 'center' and 'radius'".into()));
-                };
-                if r.min.is_some() || r.max.is_some() {
-                    return Err(err(
-                        &key,
-                        "a ball takes 'center' and 'radius', not 'min' or 'max'".into(),
-                    ));
-                }
+                takes(&key, r, "ball", &["center", "radius"])?;
+                let (c, rad) = (r.center.as_deref().unwrap(), r.radius.unwrap());
                 len(&format!("{key}.center"), c)?;
-                if !(rad.is_finite() && rad > 0.0) {
-                    return Err(err(
-                        &format!("{key}.radius"),
-                        format!("must be positive, got {rad}"),
-                    ));
-                }
+                positive(format!("{key}.radius"), rad)?;
                 for k in 0..dim {
                     if c[k] - rad < 0.0 || c[k] + rad > d.size[k] {
                         return Err(err(&key, format!("the ball leaves the domain on axis {k}")));
                     }
                 }
             }
-            other => {
+            "spiral" if solid && dim == 2 => {
+                takes(
+                    &key,
+                    r,
+                    "spiral",
+                    &["min", "max", "center", "radius", "turns", "width"],
+                )?;
+                let (min, max) = (r.min.as_deref().unwrap(), r.max.as_deref().unwrap());
+                block(&key, min, max)?;
+                let c = r.center.as_deref().unwrap();
+                len(&format!("{key}.center"), c)?;
+                let (rad, turns, width) = (r.radius.unwrap(), r.turns.unwrap(), r.width.unwrap());
+                positive(format!("{key}.radius"), rad)?;
+                positive(format!("{key}.turns"), turns)?;
+                positive(format!("{key}.width"), width)?;
+                if width < h {
+                    return Err(err(
+                        &format!("{key}.width"),
+                        format!("{width} m is narrower than a cell ({h:.4} m)"),
+                    ));
+                }
+                let wall = particles::pitch(rad, turns) - width;
+                if wall < h {
+                    return Err(err(
+                        &key,
+                        format!(
+                            "the walls between turns are {wall:.4} m thick, thinner than a cell \
+                             ({h:.4} m): fewer turns, a narrower channel or a larger radius"
+                        ),
+                    ));
+                }
+                let reach = rad + width / 2.0;
+                for k in 0..dim {
+                    if c[k] - reach < min[k] || c[k] + reach > max[k] {
+                        return Err(err(&key, format!("the channel leaves the box on axis {k}")));
+                    }
+                }
+            }
+            "spiral" => {
                 return Err(err(
                     &format!("{key}.shape"),
-                    format!("must be \"box\" or \"ball\", got \"{other}\""),
+                    "a spiral is a static 2D solid ([[solid]] in a 2D scene) only".into(),
                 ))
+            }
+            other => {
+                let shapes = if solid && dim == 2 {
+                    "\"box\", \"ball\" or \"spiral\""
+                } else {
+                    "\"box\" or \"ball\""
+                };
+                return Err(err(
+                    &format!("{key}.shape"),
+                    format!("must be {shapes}, got \"{other}\""),
+                ));
             }
         }
         Ok(())
@@ -673,10 +780,10 @@ fn check(source: &str, file: SceneFile) -> Result<Scene> {
         return Err(err("fluid", "the scene has no fluid and no emitter".into()));
     }
     for (i, r) in file.fluid.iter().enumerate() {
-        region(format!("fluid[{i}]"), r)?;
+        region(format!("fluid[{i}]"), r, false)?;
     }
     for (i, r) in file.solid.iter().enumerate() {
-        region(format!("solid[{i}]"), r)?;
+        region(format!("solid[{i}]"), r, true)?;
     }
     for (i, e) in file.emitter.iter().enumerate() {
         let key = format!("emitter[{i}]");
@@ -709,7 +816,7 @@ fn check(source: &str, file: SceneFile) -> Result<Scene> {
     let mut names = std::collections::BTreeSet::new();
     for (i, o) in file.obstacle.iter().enumerate() {
         let key = format!("obstacle[{i}]");
-        region(key.clone(), &o.region())?;
+        region(key.clone(), &o.region(), false)?;
         len(&format!("{key}.velocity"), &o.velocity)?;
         let ok = !o.name.is_empty()
             && o.name
@@ -777,7 +884,7 @@ fn check(source: &str, file: SceneFile) -> Result<Scene> {
             ),
         ));
     }
-    Ok(Scene {
+    let scene = Scene {
         source: source.to_string(),
         cell_size_m: h,
         dims,
@@ -793,7 +900,44 @@ fn check(source: &str, file: SceneFile) -> Result<Scene> {
             r: s.band_r,
         }),
         file,
-    })
+    };
+    match dim {
+        2 => obstacles_start_clear::<2>(&scene),
+        _ => obstacles_start_clear::<3>(&scene),
+    }
+    .map_err(|(key, why)| err(&key, why))?;
+    Ok(scene)
+}
+
+/// Every obstacle starts clear of the static solids and of the other obstacles, cell by cell
+/// at the scene's resolution; otherwise the key of the first offender and why.
+fn obstacles_start_clear<const D: usize>(scene: &Scene) -> Result<(), (String, String)> {
+    let config = scene.config::<D>();
+    let grid = Grid::new(config.dims);
+    let mut owner: Vec<Option<String>> = vec![None; grid.num_cells()];
+    for (i, r) in config.solids.iter().enumerate() {
+        r.cells(&grid)
+            .for_each(|c| owner[c] = Some(format!("solid[{i}]")));
+    }
+    for (i, o) in config.obstacles.iter().enumerate() {
+        for c in o.cells_at(&grid, &o.offset) {
+            if let Some(other) = &owner[c] {
+                return Err((
+                    format!("obstacle[{i}]"),
+                    format!(
+                        "'{}' starts in a cell of {other} (cell {:?}); obstacles must start \
+                         clear of solids and of each other",
+                        o.name,
+                        grid.cell_coords(c)
+                    ),
+                ));
+            }
+        }
+        for c in o.cells_at(&grid, &o.offset) {
+            owner[c] = Some(format!("obstacle[{i}] '{}'", o.name));
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]

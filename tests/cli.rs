@@ -126,6 +126,69 @@ fn bad_band_settings_are_rejected() {
 }
 
 #[test]
+fn bad_solids_and_obstacles_are_rejected() {
+    let with = |extra: &str| format!("{GOOD}{extra}");
+    let spiral = |keys: &str| {
+        with(&format!(
+            "[[solid]]\nshape = \"spiral\"\nmin = [0.0, 0.5]\nmax = [1.0, 1.0]\n{keys}\n"
+        ))
+    };
+    rejects(
+        "spiral-fluid",
+        &GOOD.replace("shape = \"box\"", "shape = \"spiral\""),
+        &["fluid[0].shape", "static 2D solid"],
+    );
+    rejects(
+        "spiral-keys",
+        &spiral("center = [0.5, 0.75]\nradius = 0.2"),
+        &["solid[0]", "a spiral needs", "'turns' and 'width'"],
+    );
+    rejects(
+        "spiral-narrow",
+        &spiral("center = [0.5, 0.75]\nradius = 0.2\nturns = 0.5\nwidth = 0.1"),
+        &["solid[0].width", "narrower than a cell"],
+    );
+    rejects(
+        "spiral-walls",
+        &spiral("center = [0.5, 0.75]\nradius = 0.2\nturns = 1.5\nwidth = 0.13"),
+        &["solid[0]", "walls between turns", "thinner than a cell"],
+    );
+    rejects(
+        "spiral-outside",
+        &spiral("center = [0.5, 0.6]\nradius = 0.3\nturns = 0.5\nwidth = 0.13"),
+        &["solid[0]", "channel leaves the box on axis 1"],
+    );
+    rejects(
+        "box-radius",
+        &with("[[solid]]\nshape = \"box\"\nmin = [0.0, 0.0]\nmax = [1.0, 0.1]\nradius = 0.2\n"),
+        &["solid[0]", "a box takes 'min' and 'max', not 'radius'"],
+    );
+    let obstacle = |name: &str, min: &str, max: &str| {
+        format!(
+            "[[obstacle]]\nname = \"{name}\"\nshape = \"box\"\nmin = {min}\nmax = {max}\n\
+             velocity = [0.0, -1.0]\n"
+        )
+    };
+    rejects(
+        "obstacle-in-solid",
+        &with(&format!(
+            "[[solid]]\nshape = \"box\"\nmin = [0.0, 0.6]\nmax = [1.0, 0.7]\n{}",
+            obstacle("lid", "[0.2, 0.65]", "[0.4, 0.9]")
+        )),
+        &["obstacle[0]", "'lid' starts in a cell of solid[0]"],
+    );
+    rejects(
+        "obstacles-overlap",
+        &with(&format!(
+            "{}{}",
+            obstacle("a", "[0.2, 0.6]", "[0.4, 0.8]"),
+            obstacle("b", "[0.3, 0.65]", "[0.6, 0.9]")
+        )),
+        &["obstacle[1]", "'b' starts in a cell of obstacle[0] 'a'"],
+    );
+}
+
+#[test]
 fn negative_duration_is_rejected() {
     rejects(
         "duration",

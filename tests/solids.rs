@@ -107,6 +107,133 @@ fn ccp_compresses_exactly_to_mu_per_cell_and_the_baselines_do_not() {
     );
 }
 
+#[test]
+fn ccp_squeezes_the_water_through_the_spiral_until_every_cell_holds_mu() {
+    let (ccp, sim) = run::<2>(&scene("spiral-2d", "ccp", None));
+    assert!(
+        ccp.volume_min >= 100.0 - 1e-9,
+        "ccp volume fell to {}%",
+        ccp.volume_min
+    );
+    // Maximum compression: every open cell below the lid, the whole channel included, holds
+    // mu particles, except in the row right under the lid.
+    let mu = sim.config.mu();
+    let below: Vec<usize> = (0..sim.grid.num_cells())
+        .filter(|&c| !sim.solid[c] && (sim.grid.cell_coords(c)[1] as f64 + 1.0) < ccp.bottom)
+        .collect();
+    let short: Vec<_> = below
+        .iter()
+        .filter(|&&c| sim.markings.count[c] < mu)
+        .map(|&c| sim.grid.cell_coords(c))
+        .collect();
+    assert!(short.is_empty(), "cells below the lid not full: {short:?}");
+    let width = sim.grid.dims[0];
+    assert!(
+        below.len() * mu as usize + width * mu as usize >= sim.total_particles,
+        "the lid stopped at {} cells with room for {} more rows below it",
+        ccp.bottom,
+        (sim.total_particles - below.len() * mu as usize) / (width * mu as usize)
+    );
+    // The water could go only as fast as the channel let it: the lid had to stay on most
+    // steps.
+    assert!(
+        ccp.blocked_steps * 2 > ccp.steps,
+        "stayed {} of {}",
+        ccp.blocked_steps,
+        ccp.steps
+    );
+    // FLIP moving the lid regardless loses volume; waiting for free cells halts and packs
+    // particles denser than mu.
+    let (ignore, _) = run::<2>(&scene("spiral-2d", "flip", Some("ignore")));
+    assert!(
+        ignore.volume_min < 60.0,
+        "ignore kept {}%",
+        ignore.volume_min
+    );
+    let (naive, _) = run::<2>(&scene("spiral-2d", "flip", Some("naive")));
+    assert!(naive.volume_min < 95.0, "naive kept {}%", naive.volume_min);
+    assert!(
+        naive.blocked_steps * 10 > naive.steps,
+        "naive halted on {} steps",
+        naive.blocked_steps
+    );
+}
+
+#[test]
+fn obstacles_come_to_rest_on_static_solids_and_on_each_other_2d_and_3d() {
+    fn check<const D: usize>() {
+        let v = |x: f64, y: f64, z: f64| {
+            if D == 2 {
+                format!("[{x}, {y}]")
+            } else {
+                format!("[{x}, {y}, {z}]")
+            }
+        };
+        // A box falls onto a shelf, a ball onto the box; water lies on the floor.
+        let text = format!(
+            "name = \"rest\"\ndim = {D}\n[domain]\nsize = {}\ncells = 20\n\
+             [simulation]\nmethod = \"ccp\"\nduration = 0.8\nppc = {}\nmax_dt = 0.02\n\
+             [[fluid]]\nshape = \"box\"\nmin = {}\nmax = {}\n\
+             [[solid]]\nshape = \"box\"\nmin = {}\nmax = {}\n\
+             [[obstacle]]\nname = \"box\"\nshape = \"box\"\nmin = {}\nmax = {}\n\
+             velocity = {}\nmotion = \"falling\"\nterminal_speed = 0.5\n\
+             [[obstacle]]\nname = \"ball\"\nshape = \"ball\"\ncenter = {}\nradius = 0.08\n\
+             velocity = {}\nmotion = \"falling\"\nterminal_speed = 0.5\n",
+            v(1.0, 1.0, 1.0),
+            1 << D,
+            v(0.0, 0.0, 0.0),
+            v(1.0, 0.1, 1.0),
+            v(0.1, 0.3, 0.0),
+            v(0.9, 0.4, 1.0),
+            v(0.35, 0.55, 0.3),
+            v(0.65, 0.7, 0.7),
+            v(0.0, 0.0, 0.0),
+            v(0.5, 0.85, 0.5),
+            v(0.0, 0.0, 0.0),
+        );
+        let scene = Scene::parse("rest scene", &text, &Overrides::default()).unwrap();
+        let mut sim = Simulation::<D>::new(scene.config::<D>());
+        let mut static_solid = vec![false; sim.grid.num_cells()];
+        for r in &sim.config.solids {
+            r.cells(&sim.grid).for_each(|c| static_solid[c] = true);
+        }
+        let mut last = vec![];
+        while sim.time_secs < scene.duration_secs() {
+            sim.step()
+                .unwrap_or_else(|e| panic!("{D}D step {}: {e}", sim.steps + 1));
+            let mut owner = vec![usize::MAX; sim.grid.num_cells()];
+            for (k, o) in sim.obstacles.iter().enumerate() {
+                for c in o.cells_at(&sim.grid, &o.offset) {
+                    assert!(
+                        !static_solid[c],
+                        "{D}D step {}: {} in the shelf",
+                        sim.steps, o.name
+                    );
+                    assert_eq!(owner[c], usize::MAX, "{D}D step {}: overlap", sim.steps);
+                    owner[c] = k;
+                }
+            }
+            last.push(sim.obstacles.iter().map(|o| o.bottom()).collect::<Vec<_>>());
+        }
+        // Shelf top at 8 cells; the box is 3 cells tall.
+        let (b, ball) = (sim.obstacles[0].bottom(), sim.obstacles[1].bottom());
+        assert!((7.5..=8.5).contains(&b), "{D}D: the box rests at {b}");
+        assert!(
+            (b + 2.5..=b + 3.5).contains(&ball),
+            "{D}D: the ball rests at {ball}, box at {b}"
+        );
+        // At rest: nothing moved over the last ten steps.
+        assert!(last.len() > 10);
+        let end = last.len() - 1;
+        assert!(
+            last[end - 10..].iter().all(|x| x == &last[end]),
+            "{D}D: still moving"
+        );
+    }
+    check::<2>();
+    check::<3>();
+}
+
 /// A scene with water `depth` deep and one obstacle, in 2D or 3D, at `cells` per axis.
 fn obstacle_scene(dim: usize, cells: usize, depth: f64, obstacle: &str, duration: f64) -> Scene {
     let v = |x: f64, y: f64, z: f64| {

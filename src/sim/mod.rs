@@ -207,6 +207,20 @@ impl<const D: usize> Simulation<D> {
             .filter(|_| self.config.method == Method::Ccp)
     }
 
+    /// Which obstacle covers each cell now, if any (empty without obstacles).
+    fn obstacle_owners(&self) -> Vec<Option<usize>> {
+        if self.obstacles.is_empty() {
+            return Vec::new();
+        }
+        let mut owner = vec![None; self.grid.num_cells()];
+        for (k, o) in self.obstacles.iter().enumerate() {
+            o.cells_at(&self.grid, &o.offset)
+                .into_iter()
+                .for_each(|c| owner[c] = Some(k));
+        }
+        owner
+    }
+
     /// Markings of the current positions. With the band, fluid cells below the surface stay
     /// fluid without particles ([`band::kept_cells`]), and then particles are exchanged with
     /// the deep (alg. band, line 9).
@@ -418,12 +432,22 @@ impl<const D: usize> Simulation<D> {
         });
         // Where each obstacle would be after this step, and the cells it would newly occupy
         // (C_new_solid) with their clearing distance (def. clear_dist).
-        let targets: Vec<Vector<D>> = self.obstacles.iter().map(|o| o.target(grid, dt)).collect();
+        let owner = self.obstacle_owners();
+        let targets: Vec<(Vector<D>, bool)> = self
+            .obstacles
+            .iter()
+            .enumerate()
+            .map(|(k, o)| {
+                o.target(grid, dt, |c| {
+                    self.static_solid[c] || owner[c].is_some_and(|j| j != k)
+                })
+            })
+            .collect();
         let wanted: Vec<Vec<usize>> = self
             .obstacles
             .iter()
             .zip(&targets)
-            .map(|(o, t)| {
+            .map(|(o, (t, _))| {
                 let mut cells = o.cells_at(grid, t);
                 cells.retain(|&c| !self.solid[c]);
                 cells
@@ -504,7 +528,12 @@ impl<const D: usize> Simulation<D> {
                 .collect();
             for (k, o) in self.obstacles.iter_mut().enumerate() {
                 if !rep.blocked[k] {
-                    o.offset = targets[k];
+                    let (to, stopped) = targets[k];
+                    o.offset = to;
+                    if stopped {
+                        // It ran into a static solid or another obstacle: it rests there.
+                        o.velocity = Vector::zeros();
+                    }
                 }
                 o.accelerate(grid, &c.gravity, dt, in_water[k]);
             }

@@ -89,8 +89,15 @@ impl<const D: usize> Obstacle<D> {
         self.region_at(&self.offset).bounds().0[1]
     }
 
-    /// Where one step at its velocity takes it: `offset + v dt`, stopped at the tank walls.
-    pub fn target(&self, grid: &Grid<D>, dt: f64) -> Vector<D> {
+    /// Where one step at its velocity takes it: `offset + v dt`, stopped at the tank walls and
+    /// short of the first cell for which `blocks` holds (static solids, other obstacles). The
+    /// second value says whether such a cell stopped it; the walls slide, the cells stop.
+    pub fn target(
+        &self,
+        grid: &Grid<D>,
+        dt: f64,
+        blocks: impl Fn(usize) -> bool,
+    ) -> (Vector<D>, bool) {
         let mut t = self.offset + self.velocity * dt;
         let (lo, hi) = self.region_at(&t).bounds();
         for k in 0..D {
@@ -100,7 +107,24 @@ impl<const D: usize> Obstacle<D> {
                 t[k] -= hi[k] - grid.dims[k] as f64;
             }
         }
-        t
+        let fits = |s: f64| {
+            let at = self.offset + (t - self.offset) * s;
+            !self.region_at(&at).cells(grid).any(&blocks)
+        };
+        if fits(1.0) {
+            return (t, false);
+        }
+        // Less than a cell to go: bisect for the farthest fraction of the way that fits.
+        let (mut ok, mut bad) = (0.0, 1.0);
+        for _ in 0..30 {
+            let mid = (ok + bad) / 2.0;
+            if fits(mid) {
+                ok = mid;
+            } else {
+                bad = mid;
+            }
+        }
+        (self.offset + (t - self.offset) * ok, true)
     }
 
     /// Updates the velocity after a step of `dt` (gravity `g`, cells/s^2), `in_water` when the
