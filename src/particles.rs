@@ -63,7 +63,7 @@ impl<const D: usize> SpiralBlock<D> {
         use std::f64::consts::{FRAC_PI_2, TAU};
         let (dx, dy) = (x[0] - self.center[0], x[1] - self.center[1]);
         let half = self.width / 2.0;
-        if dx.abs() <= half && dy >= self.radius {
+        if dx.abs() <= half && dy >= self.radius - half {
             return true;
         }
         let rho = dx.hypot(dy);
@@ -77,6 +77,10 @@ impl<const D: usize> SpiralBlock<D> {
     }
 }
 
+fn in_box<const D: usize>(x: &Vector<D>, min: &Vector<D>, max: &Vector<D>) -> bool {
+    (0..D).all(|k| x[k] >= min[k] && x[k] <= max[k])
+}
+
 /// The pitch of a [`SpiralBlock`] of this outer radius and number of turns (any length unit).
 pub fn pitch(radius: f64, turns: f64) -> f64 {
     radius / (turns + 0.5)
@@ -85,11 +89,9 @@ pub fn pitch(radius: f64, turns: f64) -> f64 {
 impl<const D: usize> Region<D> {
     pub fn contains(&self, x: &Vector<D>) -> bool {
         match self {
-            Region::Box { min, max } => (0..D).all(|k| x[k] >= min[k] && x[k] <= max[k]),
+            Region::Box { min, max } => in_box(x, min, max),
             Region::Ball { center, radius } => (x - center).norm_squared() <= radius * radius,
-            Region::Spiral(s) => {
-                (0..D).all(|k| x[k] >= s.min[k] && x[k] <= s.max[k]) && !s.channel_contains(x)
-            }
+            Region::Spiral(s) => in_box(x, &s.min, &s.max) && !s.channel_contains(x),
         }
     }
 
@@ -314,18 +316,36 @@ mod tests {
             (area / expected - 1.0).abs() < 0.02,
             "channel area {area}, width x length {expected}"
         );
-        // The centre line is in the channel, the middle of the walls between turns is not.
+        // Clockwise from the top: the centre line passes right of the centre a quarter turn
+        // in (and again a turn later), below it half a turn in, left of it three quarters in;
+        // the walls between lie halfway. Pitch 12.8, width 6.4.
         let at = |r: f64, angle: f64| {
             Vector::<2>::new(s.center[0] + r * angle.cos(), s.center[1] + r * angle.sin())
         };
-        for angle in [0.3, 1.0, 2.0, 3.0, 4.0, 5.0] {
-            let t = (std::f64::consts::FRAC_PI_2 - angle).rem_euclid(std::f64::consts::TAU);
-            let r = s.radius - s.pitch() * t / std::f64::consts::TAU;
-            assert!(s.channel_contains(&at(r, angle)), "centre line at {angle}");
-            assert!(
-                !s.channel_contains(&at(r + s.pitch() / 2.0, angle)),
-                "wall at {angle}"
-            );
+        use std::f64::consts::{FRAC_PI_2, PI};
+        for (angle, channel, wall) in [
+            (0.0, vec![22.4, 9.6], vec![28.8, 16.0, 3.2]),
+            (-FRAC_PI_2, vec![19.2], vec![25.6, 12.8]),
+            (PI, vec![16.0], vec![22.4, 9.6]),
+        ] {
+            for r in channel {
+                assert!(
+                    s.channel_contains(&at(r, angle)),
+                    "channel at r {r}, angle {angle}"
+                );
+            }
+            for r in wall {
+                assert!(
+                    !s.channel_contains(&at(r, angle)),
+                    "wall at r {r}, angle {angle}"
+                );
+            }
+        }
+        // The mouth meets the channel at its full width.
+        let quarter = s.width / 4.0;
+        for dx in [-quarter, quarter] {
+            let x = s.center + Vector::<2>::new(dx, s.radius - quarter);
+            assert!(s.channel_contains(&x), "mouth at {dx}");
         }
     }
 

@@ -228,7 +228,7 @@ pub struct RegionFile {
     /// Spiral: how many times the channel winds around the centre.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub turns: Option<f64>,
-    /// Spiral: the channel's width, metres; at least one cell, and the walls between turns
+    /// Spiral: the channel's width, metres; at least two cells, and the walls between turns
     /// (`radius / (turns + 1/2) - width`) too.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub width: Option<f64>,
@@ -377,7 +377,7 @@ impl Scene {
                 center: vec(r.center.as_deref().unwrap()),
                 radius: r.radius.unwrap() / h,
             },
-            _ => Region::Spiral(SpiralBlock {
+            "spiral" => Region::Spiral(SpiralBlock {
                 min: vec(r.min.as_deref().unwrap()),
                 max: vec(r.max.as_deref().unwrap()),
                 center: vec(r.center.as_deref().unwrap()),
@@ -385,6 +385,7 @@ impl Scene {
                 turns: r.turns.unwrap(),
                 width: r.width.unwrap() / h,
             }),
+            other => unreachable!("shape '{other}' passed the scene checks"),
         };
         let dims: [usize; D] = std::array::from_fn(|k| self.dims[k]);
         let per_axis = ppc_per_axis(s.ppc, D).unwrap();
@@ -733,19 +734,26 @@ fn check(source: &str, file: SceneFile) -> Result<Scene> {
                 positive(format!("{key}.radius"), rad)?;
                 positive(format!("{key}.turns"), turns)?;
                 positive(format!("{key}.width"), width)?;
-                if width < h {
+                // Rasterised by cell centres, a channel or wall under two cells across can
+                // break into pockets where it runs diagonally, or leak into the next turn.
+                if width < 2.0 * h {
                     return Err(err(
                         &format!("{key}.width"),
-                        format!("{width} m is narrower than a cell ({h:.4} m)"),
+                        format!(
+                            "{width} m is narrower than two cells ({:.4} m): the channel \
+                             would break into pockets",
+                            2.0 * h
+                        ),
                     ));
                 }
                 let wall = particles::pitch(rad, turns) - width;
-                if wall < h {
+                if wall < 2.0 * h {
                     return Err(err(
                         &key,
                         format!(
-                            "the walls between turns are {wall:.4} m thick, thinner than a cell \
-                             ({h:.4} m): fewer turns, a narrower channel or a larger radius"
+                            "the walls between turns are {wall:.4} m thick, thinner than two \
+                             cells ({:.4} m): fewer turns, a narrower channel or a larger radius",
+                            2.0 * h
                         ),
                     ));
                 }

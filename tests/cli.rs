@@ -128,10 +128,12 @@ fn bad_band_settings_are_rejected() {
 #[test]
 fn bad_solids_and_obstacles_are_rejected() {
     let with = |extra: &str| format!("{GOOD}{extra}");
+    // At 64 cells, two cells are 3.1 cm.
     let spiral = |keys: &str| {
         with(&format!(
             "[[solid]]\nshape = \"spiral\"\nmin = [0.0, 0.5]\nmax = [1.0, 1.0]\n{keys}\n"
         ))
+        .replace("cells = 8", "cells = 64")
     };
     rejects(
         "spiral-fluid",
@@ -145,18 +147,37 @@ fn bad_solids_and_obstacles_are_rejected() {
     );
     rejects(
         "spiral-narrow",
-        &spiral("center = [0.5, 0.75]\nradius = 0.2\nturns = 0.5\nwidth = 0.1"),
-        &["solid[0].width", "narrower than a cell"],
+        &spiral("center = [0.5, 0.75]\nradius = 0.2\nturns = 0.5\nwidth = 0.02"),
+        &["solid[0].width", "narrower than two cells"],
     );
     rejects(
         "spiral-walls",
-        &spiral("center = [0.5, 0.75]\nradius = 0.2\nturns = 1.5\nwidth = 0.13"),
-        &["solid[0]", "walls between turns", "thinner than a cell"],
+        &spiral("center = [0.5, 0.75]\nradius = 0.2\nturns = 1.5\nwidth = 0.08"),
+        &["solid[0]", "walls between turns", "thinner than two cells"],
     );
     rejects(
         "spiral-outside",
-        &spiral("center = [0.5, 0.6]\nradius = 0.3\nturns = 0.5\nwidth = 0.13"),
+        &spiral("center = [0.5, 0.6]\nradius = 0.2\nturns = 0.5\nwidth = 0.05"),
         &["solid[0]", "channel leaves the box on axis 1"],
+    );
+    let good_spiral = "center = [0.5, 0.75]\nradius = 0.2\nturns = 0.5\nwidth = 0.05";
+    rejects(
+        "spiral-3d",
+        &spiral(good_spiral)
+            .replace("dim = 2", "dim = 3")
+            .replace("duration = 0.05", "duration = 0.05\nppc = 8")
+            .replace("size = [1.0, 1.0]", "size = [1.0, 1.0, 1.0]")
+            .replace("[0.0, 0.0]", "[0.0, 0.0, 0.0]")
+            .replace("[0.5, 0.5]", "[0.5, 0.5, 0.5]"),
+        &["solid[0].shape", "static 2D solid"],
+    );
+    rejects(
+        "spiral-obstacle",
+        &spiral("center = [0.5, 0.75]\nradius = 0.2").replace(
+            "[[solid]]",
+            "[[obstacle]]\nname = \"s\"\nvelocity = [0.0, 0.0]",
+        ),
+        &["obstacle[0].shape", "static 2D solid"],
     );
     rejects(
         "box-radius",

@@ -3,6 +3,7 @@
 //! Every step checks the invariants inside `step` (no particle in a solid, cell bounds after
 //! the correction, counts conserved, all finite).
 
+use cellflip::grid::Vector;
 use cellflip::scene::{Overrides, Scene};
 use cellflip::sim::Simulation;
 
@@ -192,29 +193,7 @@ fn obstacles_come_to_rest_on_static_solids_and_on_each_other_2d_and_3d() {
             v(0.0, 0.0, 0.0),
         );
         let scene = Scene::parse("rest scene", &text, &Overrides::default()).unwrap();
-        let mut sim = Simulation::<D>::new(scene.config::<D>());
-        let mut static_solid = vec![false; sim.grid.num_cells()];
-        for r in &sim.config.solids {
-            r.cells(&sim.grid).for_each(|c| static_solid[c] = true);
-        }
-        let mut last = vec![];
-        while sim.time_secs < scene.duration_secs() {
-            sim.step()
-                .unwrap_or_else(|e| panic!("{D}D step {}: {e}", sim.steps + 1));
-            let mut owner = vec![usize::MAX; sim.grid.num_cells()];
-            for (k, o) in sim.obstacles.iter().enumerate() {
-                for c in o.cells_at(&sim.grid, &o.offset) {
-                    assert!(
-                        !static_solid[c],
-                        "{D}D step {}: {} in the shelf",
-                        sim.steps, o.name
-                    );
-                    assert_eq!(owner[c], usize::MAX, "{D}D step {}: overlap", sim.steps);
-                    owner[c] = k;
-                }
-            }
-            last.push(sim.obstacles.iter().map(|o| o.bottom()).collect::<Vec<_>>());
-        }
+        let (sim, last) = run_apart::<D>(&scene);
         // Shelf top at 8 cells; the box is 3 cells tall.
         let (b, ball) = (sim.obstacles[0].bottom(), sim.obstacles[1].bottom());
         assert!((7.5..=8.5).contains(&b), "{D}D: the box rests at {b}");
@@ -222,16 +201,98 @@ fn obstacles_come_to_rest_on_static_solids_and_on_each_other_2d_and_3d() {
             (b + 2.5..=b + 3.5).contains(&ball),
             "{D}D: the ball rests at {ball}, box at {b}"
         );
-        // At rest: nothing moved over the last ten steps.
+        // At rest: nothing moved over the last ten steps, and they say so.
         assert!(last.len() > 10);
         let end = last.len() - 1;
         assert!(
             last[end - 10..].iter().all(|x| x == &last[end]),
             "{D}D: still moving"
         );
+        for o in &sim.obstacles {
+            assert_eq!(o.velocity.norm(), 0.0, "{D}D: {} at rest", o.name);
+        }
     }
     check::<2>();
     check::<3>();
+}
+
+#[test]
+fn obstacles_moving_head_on_meet_without_overlapping_2d_and_3d() {
+    fn check<const D: usize>() {
+        let v = |x: f64, y: f64, z: f64| {
+            if D == 2 {
+                format!("[{x}, {y}]")
+            } else {
+                format!("[{x}, {y}, {z}]")
+            }
+        };
+        // Two boxes a cell apart (0.05 m) close in on each other at 1 m/s each, in the air.
+        let boxes = |name: &str, x0: f64, x1: f64, vx: f64| {
+            format!(
+                "[[obstacle]]\nname = \"{name}\"\nshape = \"box\"\nmin = {}\nmax = {}\n\
+                 velocity = {}\n",
+                v(x0, 0.5, 0.3),
+                v(x1, 0.7, 0.7),
+                v(vx, 0.0, 0.0)
+            )
+        };
+        let text = format!(
+            "name = \"head-on\"\ndim = {D}\n[domain]\nsize = {}\ncells = 20\n\
+             [simulation]\nmethod = \"ccp\"\nduration = 0.3\nppc = {}\nmax_dt = 0.02\n\
+             [[fluid]]\nshape = \"box\"\nmin = {}\nmax = {}\n{}{}",
+            v(1.0, 1.0, 1.0),
+            1 << D,
+            v(0.0, 0.0, 0.0),
+            v(1.0, 0.1, 1.0),
+            boxes("a", 0.2, 0.4, 1.0),
+            boxes("b", 0.45, 0.65, -1.0),
+        );
+        let scene = Scene::parse("head-on scene", &text, &Overrides::default()).unwrap();
+        let (sim, _) = run_apart::<D>(&scene);
+        // They met: no free cell is left between their cells.
+        let columns = |k: usize| {
+            let o = &sim.obstacles[k];
+            let x: Vec<usize> = o
+                .cells_at(&sim.grid, &o.offset)
+                .into_iter()
+                .map(|c| sim.grid.cell_coords(c)[0])
+                .collect();
+            (*x.iter().min().unwrap(), *x.iter().max().unwrap())
+        };
+        let ((_, a_right), (b_left, _)) = (columns(0), columns(1));
+        assert_eq!(a_right + 1, b_left, "{D}D: columns between them stay free");
+    }
+    check::<2>();
+    check::<3>();
+}
+
+/// Runs `scene`, checking after every step that no obstacle covers a cell of a static solid
+/// or of another obstacle; returns the simulation and the obstacles' offsets after each step.
+fn run_apart<const D: usize>(scene: &Scene) -> (Simulation<D>, Vec<Vec<Vector<D>>>) {
+    let mut sim = Simulation::<D>::new(scene.config::<D>());
+    let mut static_solid = vec![false; sim.grid.num_cells()];
+    for r in &sim.config.solids {
+        r.cells(&sim.grid).for_each(|c| static_solid[c] = true);
+    }
+    let mut offsets = vec![];
+    while sim.time_secs < scene.duration_secs() {
+        sim.step()
+            .unwrap_or_else(|e| panic!("{D}D step {}: {e}", sim.steps + 1));
+        let mut owner = vec![usize::MAX; sim.grid.num_cells()];
+        for (k, o) in sim.obstacles.iter().enumerate() {
+            for c in o.cells_at(&sim.grid, &o.offset) {
+                assert!(
+                    !static_solid[c],
+                    "{D}D step {}: {} in a static solid",
+                    sim.steps, o.name
+                );
+                assert_eq!(owner[c], usize::MAX, "{D}D step {}: overlap", sim.steps);
+                owner[c] = k;
+            }
+        }
+        offsets.push(sim.obstacles.iter().map(|o| o.offset).collect());
+    }
+    (sim, offsets)
 }
 
 /// A scene with water `depth` deep and one obstacle, in 2D or 3D, at `cells` per axis.

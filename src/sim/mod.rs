@@ -207,20 +207,6 @@ impl<const D: usize> Simulation<D> {
             .filter(|_| self.config.method == Method::Ccp)
     }
 
-    /// Which obstacle covers each cell now, if any (empty without obstacles).
-    fn obstacle_owners(&self) -> Vec<Option<usize>> {
-        if self.obstacles.is_empty() {
-            return Vec::new();
-        }
-        let mut owner = vec![None; self.grid.num_cells()];
-        for (k, o) in self.obstacles.iter().enumerate() {
-            o.cells_at(&self.grid, &o.offset)
-                .into_iter()
-                .for_each(|c| owner[c] = Some(k));
-        }
-        owner
-    }
-
     /// Markings of the current positions. With the band, fluid cells below the surface stay
     /// fluid without particles ([`band::kept_cells`]), and then particles are exchanged with
     /// the deep (alg. band, line 9).
@@ -432,22 +418,26 @@ impl<const D: usize> Simulation<D> {
         });
         // Where each obstacle would be after this step, and the cells it would newly occupy
         // (C_new_solid) with their clearing distance (def. clear_dist).
-        let owner = self.obstacle_owners();
-        let targets: Vec<(Vector<D>, bool)> = self
-            .obstacles
-            .iter()
-            .enumerate()
-            .map(|(k, o)| {
-                o.target(grid, dt, |c| {
+        // One after the other, each clear of the others where they are and where those
+        // before it go.
+        let mut targets = Vec::with_capacity(self.obstacles.len());
+        if !self.obstacles.is_empty() {
+            let mut owner = solids::owners(grid, &self.obstacles);
+            for (k, o) in self.obstacles.iter().enumerate() {
+                let t = o.target(grid, dt, |c| {
                     self.static_solid[c] || owner[c].is_some_and(|j| j != k)
-                })
-            })
-            .collect();
+                });
+                o.cells_at(grid, &t)
+                    .into_iter()
+                    .for_each(|c| owner[c] = Some(k));
+                targets.push(t);
+            }
+        }
         let wanted: Vec<Vec<usize>> = self
             .obstacles
             .iter()
             .zip(&targets)
-            .map(|(o, (t, _))| {
+            .map(|(o, t)| {
                 let mut cells = o.cells_at(grid, t);
                 cells.retain(|&c| !self.solid[c]);
                 cells
@@ -526,16 +516,25 @@ impl<const D: usize> Simulation<D> {
                 .zip(&wanted)
                 .map(|(o, w)| touches_fluid(w) || touches_fluid(&o.cells_at(grid, &o.offset)))
                 .collect();
-            for (k, o) in self.obstacles.iter_mut().enumerate() {
-                if !rep.blocked[k] {
-                    let (to, stopped) = targets[k];
-                    o.offset = to;
-                    if stopped {
-                        // It ran into a static solid or another obstacle: it rests there.
-                        o.velocity = Vector::zeros();
-                    }
+            for (o, (to, blocked)) in self
+                .obstacles
+                .iter_mut()
+                .zip(targets.iter().zip(&rep.blocked))
+            {
+                if !blocked {
+                    o.offset = *to;
                 }
-                o.accelerate(grid, &c.gravity, dt, in_water[k]);
+            }
+            let owner = solids::owners(grid, &self.obstacles);
+            for (k, o) in self.obstacles.iter_mut().enumerate() {
+                o.accelerate(
+                    grid,
+                    &c.gravity,
+                    dt,
+                    in_water[k],
+                    |c| self.static_solid[c],
+                    |c| owner[c].is_some_and(|j| j != k),
+                );
             }
             (self.solid, self.solid_vel, self.moving) =
                 rasterise(&self.grid, &self.static_solid, &self.obstacles);
@@ -610,11 +609,11 @@ fn rasterise<const D: usize>(
     let mut solid = static_solid.to_vec();
     let mut vel = vec![Vector::zeros(); n];
     let mut moving = vec![false; n];
-    for o in obstacles {
-        for c in o.cells_at(grid, &o.offset) {
+    for (c, k) in solids::owners(grid, obstacles).into_iter().enumerate() {
+        if let Some(k) = k {
             solid[c] = true;
-            vel[c] = o.boundary_velocity();
-            moving[c] = o.velocity != Vector::<D>::zeros();
+            vel[c] = obstacles[k].boundary_velocity();
+            moving[c] = obstacles[k].velocity != Vector::<D>::zeros();
         }
     }
     (solid, vel, moving)

@@ -2,7 +2,8 @@
 //!
 //! An obstacle is a box or a ball rasterised to solid cells (cells whose centre it contains)
 //! every step; its velocity is the pressure boundary condition (eq. solid_boundary), or zero
-//! in the zero-velocity variant. The time step keeps it within one cell per step. Each step it
+//! in the zero-velocity variant. The time step keeps it within one cell per step, and it stops
+//! at the tank walls, static solids and other obstacles ([`Obstacle::target`]). Each step it
 //! intends to move by `v dt`; the cells it would newly occupy are `C_new_solid`. How a method
 //! decides whether it may move is the [`ObstacleMode`]:
 //!
@@ -89,65 +90,95 @@ impl<const D: usize> Obstacle<D> {
         self.region_at(&self.offset).bounds().0[1]
     }
 
-    /// Where one step at its velocity takes it: `offset + v dt`, stopped at the tank walls and
-    /// short of the first cell for which `blocks` holds (static solids, other obstacles). The
-    /// second value says whether such a cell stopped it; the walls slide, the cells stop.
-    pub fn target(
-        &self,
-        grid: &Grid<D>,
-        dt: f64,
-        blocks: impl Fn(usize) -> bool,
-    ) -> (Vector<D>, bool) {
-        let mut t = self.offset + self.velocity * dt;
-        let (lo, hi) = self.region_at(&t).bounds();
+    /// Whether the obstacle at `offset` leaves the tank or covers a cell for which `blocks`
+    /// holds.
+    fn hits(&self, grid: &Grid<D>, offset: &Vector<D>, blocks: &impl Fn(usize) -> bool) -> bool {
+        let r = self.region_at(offset);
+        let (lo, hi) = r.bounds();
+        (0..D).any(|k| lo[k] < 0.0 || hi[k] > grid.dims[k] as f64) || r.cells(grid).any(blocks)
+    }
+
+    /// Where one step at its velocity takes it: `offset + v dt`, one axis after the other, each
+    /// stopped at the tank walls and short of the first cell for which `blocks` holds (static
+    /// solids, other obstacles). So it slides along what stops it on one axis.
+    pub fn target(&self, grid: &Grid<D>, dt: f64, blocks: impl Fn(usize) -> bool) -> Vector<D> {
+        let mut at = self.offset;
         for k in 0..D {
-            if lo[k] < 0.0 && self.velocity[k] < 0.0 {
-                t[k] -= lo[k];
-            } else if hi[k] > grid.dims[k] as f64 && self.velocity[k] > 0.0 {
-                t[k] -= hi[k] - grid.dims[k] as f64;
+            let (lo, hi) = self.region_at(&at).bounds();
+            let d = (self.velocity[k] * dt).clamp(-lo[k].max(0.0), grid.dims[k] as f64 - hi[k]);
+            if d == 0.0 {
+                continue;
             }
-        }
-        let fits = |s: f64| {
-            let at = self.offset + (t - self.offset) * s;
-            !self.region_at(&at).cells(grid).any(&blocks)
-        };
-        if fits(1.0) {
-            return (t, false);
-        }
-        // Less than a cell to go: bisect for the farthest fraction of the way that fits.
-        let (mut ok, mut bad) = (0.0, 1.0);
-        for _ in 0..30 {
-            let mid = (ok + bad) / 2.0;
-            if fits(mid) {
-                ok = mid;
-            } else {
-                bad = mid;
+            let along = |s: f64| {
+                let mut x = at;
+                x[k] += d * s;
+                x
+            };
+            // Quarter-cell samples, so that no obstacle a cell thick skips over a blocked
+            // cell, then bisection between the last sample that fits and the first that hits.
+            let samples = (d.abs() * 4.0).ceil().max(1.0) as usize;
+            let first_hit = (1..=samples)
+                .map(|i| i as f64 / samples as f64)
+                .find(|&s| self.hits(grid, &along(s), &blocks));
+            let Some(bad) = first_hit else {
+                at = along(1.0);
+                continue;
+            };
+            let (mut ok, mut bad) = (bad - 1.0 / samples as f64, bad);
+            for _ in 0..40 {
+                let mid = (ok + bad) / 2.0;
+                if self.hits(grid, &along(mid), &blocks) {
+                    bad = mid;
+                } else {
+                    ok = mid;
+                }
             }
+            at = along(ok);
         }
-        (self.offset + (t - self.offset) * ok, true)
+        at
     }
 
     /// Updates the velocity after a step of `dt` (gravity `g`, cells/s^2), `in_water` when the
-    /// obstacle touches fluid. A velocity into a tank wall it rests on is dropped.
-    pub fn accelerate(&mut self, grid: &Grid<D>, g: &Vector<D>, dt: f64, in_water: bool) {
-        if let Motion::Falling {
-            terminal_speed,
-            drag,
-        } = self.motion
-        {
-            if in_water {
-                let down = g.try_normalize(0.0).unwrap_or_else(Vector::zeros);
-                let v_t = down * terminal_speed;
-                self.velocity += (v_t - self.velocity) * (1.0 - (-drag * dt).exp());
-            } else {
-                self.velocity += g * dt;
+    /// obstacle touches fluid. Then it rests on what it touches: the components of its
+    /// velocity that would take it into a tank wall or a cell of `fixed` (static solids) are
+    /// dropped, and for a falling obstacle also those into a cell of `others` (the other
+    /// obstacles). A lid of constant velocity keeps pressing on another obstacle, and goes on
+    /// once that one has moved away.
+    pub fn accelerate(
+        &mut self,
+        grid: &Grid<D>,
+        g: &Vector<D>,
+        dt: f64,
+        in_water: bool,
+        fixed: impl Fn(usize) -> bool,
+        others: impl Fn(usize) -> bool,
+    ) {
+        let falling = match self.motion {
+            Motion::Falling {
+                terminal_speed,
+                drag,
+            } => {
+                if in_water {
+                    let down = g.try_normalize(0.0).unwrap_or_else(Vector::zeros);
+                    let v_t = down * terminal_speed;
+                    self.velocity += (v_t - self.velocity) * (1.0 - (-drag * dt).exp());
+                } else {
+                    self.velocity += g * dt;
+                }
+                true
             }
-        }
-        let (lo, hi) = self.region_at(&self.offset).bounds();
+            Motion::Constant => false,
+        };
+        // Targets stop within 1e-10 cells of what stopped them; a probe 1e-6 cells on touches it.
+        const PROBE: f64 = 1e-6;
         for k in 0..D {
-            let at_low = lo[k] <= 1e-9 && self.velocity[k] < 0.0;
-            let at_high = hi[k] >= grid.dims[k] as f64 - 1e-9 && self.velocity[k] > 0.0;
-            if at_low || at_high {
+            if self.velocity[k] == 0.0 {
+                continue;
+            }
+            let mut x = self.offset;
+            x[k] += PROBE * self.velocity[k].signum();
+            let blocked = |c| fixed(c) || (falling && others(c));
+            if self.hits(grid, &x, &blocked) {
                 self.velocity[k] = 0.0;
             }
         }
@@ -161,6 +192,17 @@ impl<const D: usize> Obstacle<D> {
             self.velocity
         }
     }
+}
+
+/// Which obstacle covers each cell, if any.
+pub fn owners<const D: usize>(grid: &Grid<D>, obstacles: &[Obstacle<D>]) -> Vec<Option<usize>> {
+    let mut owner = vec![None; grid.num_cells()];
+    for (k, o) in obstacles.iter().enumerate() {
+        o.region_at(&o.offset)
+            .cells(grid)
+            .for_each(|c| owner[c] = Some(k));
+    }
+    owner
 }
 
 /// The clearing distance of def. clear_dist: for each cell of `new_solid`, its breadth-first
