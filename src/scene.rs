@@ -674,17 +674,12 @@ fn check(source: &str, file: SceneFile) -> Result<Scene> {
                 _ => q.join(""),
             }
         };
-        let missing: Vec<&str> = given
-            .iter()
-            .filter(|(n, g)| !g && wanted.contains(n))
-            .map(|(n, _)| *n)
-            .collect();
         let extra: Vec<&str> = given
             .iter()
             .filter(|(n, g)| *g && !wanted.contains(n))
             .map(|(n, _)| *n)
             .collect();
-        if !missing.is_empty() {
+        if given.iter().any(|(n, g)| !g && wanted.contains(n)) {
             return Err(err(
                 key,
                 format!("a {shape} needs {}", quoted(wanted.to_vec())),
