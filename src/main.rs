@@ -16,9 +16,10 @@ fn main() {
 fn dispatch(cli: Cli) -> Result<()> {
     match cli.command {
         Command::List => {
+            let width = scene::BUILT_IN.iter().map(|(n, _)| n.len()).max().unwrap_or(0);
             for (name, text) in scene::BUILT_IN {
                 let s = scene::Scene::parse(name, text, &Default::default())?;
-                println!("{name:<18} {}D  {}", s.dim(), s.file.description);
+                println!("{name:<width$}  {}D  {}", s.dim(), s.file.description);
             }
             Ok(())
         }
