@@ -16,7 +16,11 @@ fn main() {
 fn dispatch(cli: Cli) -> Result<()> {
     match cli.command {
         Command::List => {
-            let width = scene::BUILT_IN.iter().map(|(n, _)| n.len()).max().unwrap_or(0);
+            let width = scene::BUILT_IN
+                .iter()
+                .map(|(n, _)| n.len())
+                .max()
+                .unwrap_or(0);
             for (name, text) in scene::BUILT_IN {
                 let s = scene::Scene::parse(name, text, &Default::default())?;
                 println!("{name:<width$}  {}D  {}", s.dim(), s.file.description);

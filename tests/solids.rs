@@ -156,6 +156,28 @@ fn ccp_squeezes_the_water_through_the_spiral_until_every_cell_holds_mu() {
 }
 
 #[test]
+fn a_lid_flush_with_both_walls_moves_when_the_cell_size_is_inexact() {
+    // At 49 cells, 1 m / (1 m / 49) = 49.00000000000001 cells: the lid starts an ulp past
+    // the right wall. It used to panic in the wall clamp, or to freeze on every axis.
+    let scene = Scene::load(
+        "compress-2d",
+        &Overrides {
+            cells: Some(49),
+            duration: Some(0.2),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let (r, sim) = run::<2>(&scene);
+    let top = sim.obstacles[0].shape.bounds().0[1];
+    assert!(
+        r.bottom < top - 1.0,
+        "the lid stayed at {} of {top}",
+        r.bottom
+    );
+}
+
+#[test]
 fn obstacles_come_to_rest_on_static_solids_and_on_each_other_2d_and_3d() {
     fn check<const D: usize>() {
         let v = |x, y, z| point(D, x, y, z);

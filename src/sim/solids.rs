@@ -22,6 +22,11 @@ use std::collections::VecDeque;
 /// `lambda_penalty` of eq. solid_penalty (the paper's 1000), in squared cells.
 pub const PENALTY: f64 = 1000.0;
 
+/// How far past a wall an obstacle may be without leaving the tank, cells: a shape flush with
+/// a wall in metres can land an ulp past it in cells. Far below [`Obstacle::accelerate`]'s
+/// probe.
+const WALL_SLACK: f64 = 1e-9;
+
 /// How obstacles treat particles in their way.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ObstacleMode {
@@ -90,12 +95,13 @@ impl<const D: usize> Obstacle<D> {
         self.region_at(&self.offset).bounds().0[1]
     }
 
-    /// Whether the obstacle at `offset` leaves the tank or covers a cell for which `blocks`
-    /// holds.
+    /// Whether the obstacle at `offset` leaves the tank (by more than [`WALL_SLACK`]) or covers
+    /// a cell for which `blocks` holds.
     fn hits(&self, grid: &Grid<D>, offset: &Vector<D>, blocks: &impl Fn(usize) -> bool) -> bool {
         let r = self.region_at(offset);
         let (lo, hi) = r.bounds();
-        (0..D).any(|k| lo[k] < 0.0 || hi[k] > grid.dims[k] as f64) || r.cells(grid).any(blocks)
+        (0..D).any(|k| lo[k] < -WALL_SLACK || hi[k] > grid.dims[k] as f64 + WALL_SLACK)
+            || r.cells(grid).any(blocks)
     }
 
     /// Where one step at its velocity takes it: `offset + v dt`, one axis after the other, each
@@ -105,7 +111,10 @@ impl<const D: usize> Obstacle<D> {
         let mut at = self.offset;
         for k in 0..D {
             let (lo, hi) = self.region_at(&at).bounds();
-            let d = (self.velocity[k] * dt).clamp(-lo[k].max(0.0), grid.dims[k] as f64 - hi[k]);
+            // A shape flush with a wall may start an ulp past it (metres to cells): no step
+            // further, none back.
+            let room_up = (grid.dims[k] as f64 - hi[k]).max(0.0);
+            let d = (self.velocity[k] * dt).clamp(-lo[k].max(0.0), room_up);
             if d == 0.0 {
                 continue;
             }
@@ -114,17 +123,17 @@ impl<const D: usize> Obstacle<D> {
                 x[k] += d * s;
                 x
             };
-            // Quarter-cell samples, so that no obstacle a cell thick skips over a blocked
-            // cell, then bisection between the last sample that fits and the first that hits.
+            // Quarter-cell samples, so that no box a cell thick skips over a blocked cell (a
+            // ball may clip a corner; the end is always checked), then bisection between the
+            // last sample that fits and the first that hits.
             let samples = (d.abs() * 4.0).ceil().max(1.0) as usize;
             let first_hit = (1..=samples)
-                .map(|i| i as f64 / samples as f64)
-                .find(|&s| self.hits(grid, &along(s), &blocks));
-            let Some(bad) = first_hit else {
+                .find(|&i| self.hits(grid, &along(i as f64 / samples as f64), &blocks));
+            let Some(i) = first_hit else {
                 at = along(1.0);
                 continue;
             };
-            let (mut ok, mut bad) = (bad - 1.0 / samples as f64, bad);
+            let (mut ok, mut bad) = ((i - 1) as f64 / samples as f64, i as f64 / samples as f64);
             for _ in 0..40 {
                 let mid = (ok + bad) / 2.0;
                 if self.hits(grid, &along(mid), &blocks) {
