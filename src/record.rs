@@ -511,22 +511,8 @@ impl Recorder {
             let centre = self.world(r.center().as_slice());
             trail.push(centre);
             let half: [f32; 3] = std::array::from_fn(|k| (b[k] - a[k]).abs() / 2.0);
-            // Obstacles are boxes or balls (scene checks); a spiral would be drawn as its box.
+            // Balls as a point of their radius; boxes (obstacles are boxes or balls) as boxes.
             match (&r, D) {
-                (Region::Box { .. } | Region::Spiral(_), 2) => self.rec.log(
-                    path.as_str(),
-                    &rerun::Boxes2D::from_centers_and_half_sizes(
-                        [(centre[0], centre[1])],
-                        [(half[0], half[1])],
-                    )
-                    .with_colors(color)
-                    .with_draw_order(25.0),
-                )?,
-                (Region::Box { .. } | Region::Spiral(_), _) => self.rec.log(
-                    path.as_str(),
-                    &rerun::Boxes3D::from_centers_and_half_sizes([centre], [half])
-                        .with_colors(color),
-                )?,
                 (Region::Ball { radius, .. }, 2) => self.rec.log(
                     path.as_str(),
                     &rerun::Points2D::new([(centre[0], centre[1])])
@@ -538,6 +524,20 @@ impl Recorder {
                     path.as_str(),
                     &rerun::Points3D::new([centre])
                         .with_radii([*radius as f32])
+                        .with_colors(color),
+                )?,
+                (_, 2) => self.rec.log(
+                    path.as_str(),
+                    &rerun::Boxes2D::from_centers_and_half_sizes(
+                        [(centre[0], centre[1])],
+                        [(half[0], half[1])],
+                    )
+                    .with_colors(color)
+                    .with_draw_order(25.0),
+                )?,
+                _ => self.rec.log(
+                    path.as_str(),
+                    &rerun::Boxes3D::from_centers_and_half_sizes([centre], [half])
                         .with_colors(color),
                 )?,
             }

@@ -17,43 +17,29 @@ use anyhow::{anyhow, bail, Context, Result};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
+/// `(name, text)` of each scene file `scenes/<name>.toml`, embedded into the binary.
+macro_rules! built_in {
+    ($($name:literal),* $(,)?) => {
+        &[$(($name, include_str!(concat!("../scenes/", $name, ".toml")))),*]
+    };
+}
+
 /// The built-in scenes, embedded from `scenes/`.
-pub const BUILT_IN: &[(&str, &str)] = &[
-    ("dam-2d", include_str!("../scenes/dam-2d.toml")),
-    ("dam-1ppc-2d", include_str!("../scenes/dam-1ppc-2d.toml")),
-    ("dam-3d", include_str!("../scenes/dam-3d.toml")),
-    ("compress-2d", include_str!("../scenes/compress-2d.toml")),
-    ("spiral-2d", include_str!("../scenes/spiral-2d.toml")),
-    (
-        "falling-obstacle-2d",
-        include_str!("../scenes/falling-obstacle-2d.toml"),
-    ),
-    (
-        "falling-obstacle-3d",
-        include_str!("../scenes/falling-obstacle-3d.toml"),
-    ),
-    (
-        "falling-obstacle-zero-bc-2d",
-        include_str!("../scenes/falling-obstacle-zero-bc-2d.toml"),
-    ),
-    (
-        "large-obstacle-2d",
-        include_str!("../scenes/large-obstacle-2d.toml"),
-    ),
-    (
-        "large-obstacle-3d",
-        include_str!("../scenes/large-obstacle-3d.toml"),
-    ),
-    ("drop-2d", include_str!("../scenes/drop-2d.toml")),
-    ("drop-3d", include_str!("../scenes/drop-3d.toml")),
-    (
-        "hydrostatic-2d",
-        include_str!("../scenes/hydrostatic-2d.toml"),
-    ),
-    (
-        "martin-moyce-2d",
-        include_str!("../scenes/martin-moyce-2d.toml"),
-    ),
+pub const BUILT_IN: &[(&str, &str)] = built_in![
+    "dam-2d",
+    "dam-1ppc-2d",
+    "dam-3d",
+    "compress-2d",
+    "spiral-2d",
+    "falling-obstacle-2d",
+    "falling-obstacle-3d",
+    "falling-obstacle-zero-bc-2d",
+    "large-obstacle-2d",
+    "large-obstacle-3d",
+    "drop-2d",
+    "drop-3d",
+    "hydrostatic-2d",
+    "martin-moyce-2d",
 ];
 
 /// A scene file as written.
@@ -917,28 +903,39 @@ fn check(source: &str, file: SceneFile) -> Result<Scene> {
 fn obstacles_start_clear<const D: usize>(scene: &Scene) -> Result<(), (String, String)> {
     let config = scene.config::<D>();
     let grid = Grid::new(config.dims);
-    let mut owner: Vec<Option<String>> = vec![None; grid.num_cells()];
+    // What holds each cell: a static solid or an obstacle, by index.
+    enum Holder {
+        Solid(usize),
+        Obstacle(usize),
+    }
+    let mut holder: Vec<Option<Holder>> = (0..grid.num_cells()).map(|_| None).collect();
     for (i, r) in config.solids.iter().enumerate() {
         r.cells(&grid)
-            .for_each(|c| owner[c] = Some(format!("solid[{i}]")));
+            .for_each(|c| holder[c] = Some(Holder::Solid(i)));
     }
     for (i, o) in config.obstacles.iter().enumerate() {
-        for c in o.cells_at(&grid, &o.offset) {
-            if let Some(other) = &owner[c] {
-                return Err((
-                    format!("obstacle[{i}]"),
-                    format!(
-                        "'{}' starts in a cell of {other} (cell {:?}); obstacles must start \
-                         clear of solids and of each other",
-                        o.name,
-                        grid.cell_coords(c)
-                    ),
-                ));
-            }
+        let cells = o.cells_at(&grid, &o.offset);
+        if let Some(&c) = cells.iter().find(|&&c| holder[c].is_some()) {
+            let other = match holder[c] {
+                Some(Holder::Solid(j)) => format!("solid[{j}]"),
+                Some(Holder::Obstacle(j)) => {
+                    format!("obstacle[{j}] '{}'", config.obstacles[j].name)
+                }
+                None => unreachable!(),
+            };
+            return Err((
+                format!("obstacle[{i}]"),
+                format!(
+                    "'{}' starts in a cell of {other} (cell {:?}); obstacles must start \
+                     clear of solids and of each other",
+                    o.name,
+                    grid.cell_coords(c)
+                ),
+            ));
         }
-        for c in o.cells_at(&grid, &o.offset) {
-            owner[c] = Some(format!("obstacle[{i}] '{}'", o.name));
-        }
+        cells
+            .into_iter()
+            .for_each(|c| holder[c] = Some(Holder::Obstacle(i)));
     }
     Ok(())
 }

@@ -162,8 +162,13 @@ impl<const D: usize> Simulation<D> {
             config.jitter,
             &mut rng,
         );
-        let markings =
-            Markings::compute_keeping(&grid, &particles.pos, &solid, None, Some(&moving));
+        let markings = Markings::compute_keeping(
+            &grid,
+            &particles.pos,
+            &solid,
+            None,
+            (!config.obstacles.is_empty()).then_some(&moving[..]),
+        );
         let total = particles.len();
         let mut sim = Self {
             target_volume: total as f64 / config.mu() as f64,
@@ -219,7 +224,8 @@ impl<const D: usize> Simulation<D> {
             &self.particles.pos,
             &self.solid,
             keep.as_deref(),
-            Some(&self.moving),
+            // Without obstacles nothing moves: no need to look at every cell's neighbours.
+            (!self.obstacles.is_empty()).then_some(&self.moving[..]),
         );
         band.map(|b| {
             band::exchange_with_deep(
