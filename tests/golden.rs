@@ -1,0 +1,81 @@
+//! Results change only on purpose: a digest of the whole state and of every step's report
+//! (all but timings), chained over a fixed number of steps, for every built-in scene with its
+//! default method and with flip, and for the band variants. The digests live in
+//! `tests/golden_digests.txt`; after a change that must alter results, regenerate them with
+//! `CELLFLIP_BLESS=1 cargo test --release --test golden` and say why in the commit.
+
+mod common;
+
+use cellflip::scene::{Overrides, BUILT_IN};
+use common::{digest_run, load};
+
+/// The runs: (scene, method override, band override, steps). 3D scenes run at 16 cells along
+/// their shortest axis.
+fn cases() -> Vec<(String, Option<&'static str>, Option<&'static str>, u64)> {
+    let mut v = vec![];
+    for (name, _) in BUILT_IN {
+        let s = load(name, &Overrides::default());
+        let steps = if s.dim() == 2 { 60 } else { 12 };
+        v.push((name.to_string(), None, None, steps));
+        if s.method.name() != "flip" {
+            v.push((name.to_string(), Some("flip"), None, steps));
+        }
+    }
+    // The emitter starts at 2.5 s; the band variants on the 2D dam.
+    v.push(("dam-2d".into(), None, None, 330));
+    v.push(("dam-2d".into(), None, Some("paths"), 60));
+    v.push(("dam-2d".into(), None, Some("one-way"), 8));
+    v.push(("dam-2d".into(), None, Some("full"), 8));
+    v
+}
+
+fn digest(name: &str, method: Option<&str>, band: Option<&str>, steps: u64) -> String {
+    let mut o = Overrides {
+        method: method.map(Into::into),
+        band: band.map(Into::into),
+        ..Default::default()
+    };
+    let s = load(name, &o);
+    if s.dim() == 3 {
+        let (lo, hi) = (s.dims.iter().min().unwrap(), s.dims.iter().max().unwrap());
+        o.cells = Some(16 * hi / lo);
+        let s = load(name, &o);
+        return digest_run::<3>(&s, steps);
+    }
+    digest_run::<2>(&s, steps)
+}
+
+const FILE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/golden_digests.txt");
+
+#[test]
+fn every_scene_gives_the_recorded_digest() {
+    let lines: Vec<String> = cases()
+        .into_iter()
+        .map(|(name, method, band, steps)| {
+            let d = digest(&name, method, band, steps);
+            format!(
+                "{name} method={} band={} steps={steps} {d}",
+                method.unwrap_or("default"),
+                band.unwrap_or("default")
+            )
+        })
+        .collect();
+    if std::env::var_os("CELLFLIP_BLESS").is_some() {
+        std::fs::write(FILE, lines.join("\n") + "\n").unwrap();
+        return;
+    }
+    let want = std::fs::read_to_string(FILE).expect("tests/golden_digests.txt");
+    let want: Vec<&str> = want.lines().collect();
+    let changed: Vec<String> = lines
+        .iter()
+        .zip(&want)
+        .filter(|(a, b)| a != b)
+        .map(|(a, b)| format!("  now  {a}\n  was  {b}"))
+        .collect();
+    assert_eq!(lines.len(), want.len(), "the list of runs changed");
+    assert!(
+        changed.is_empty(),
+        "results changed (regenerate with CELLFLIP_BLESS=1 only if on purpose):\n{}",
+        changed.join("\n")
+    );
+}
