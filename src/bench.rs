@@ -1,11 +1,15 @@
 //! `cellflip bench`: median per-stage step times and peak memory of a scene at several
-//! resolutions. A measurement to read, never a pass/fail test.
+//! resolutions (and band settings), through the one runner. A measurement to read, never a
+//! pass/fail test.
 
 use crate::cli::BenchArgs;
+use crate::methods::{median, MethodOption};
 use crate::metrics::Stage;
+use crate::runner::{Limit, Runner};
 use crate::scene::{Overrides, Scene};
+use crate::sim::correct::band::BandMode;
 use crate::sim::Simulation;
-use anyhow::Result;
+use anyhow::{bail, Result};
 use std::time::Duration;
 
 /// Peak resident memory of this process so far (Linux `VmHWM`), in MiB.
@@ -16,12 +20,10 @@ pub fn peak_memory_mib() -> Option<f64> {
     Some(kib / 1024.0)
 }
 
-fn median(mut v: Vec<Duration>) -> Duration {
-    v.sort();
-    v[v.len() / 2]
-}
-
 pub fn bench(args: &BenchArgs) -> Result<()> {
+    if args.steps == 0 {
+        bail!("--steps: must be at least 1");
+    }
     println!(
         "scene {}, {} measured steps per resolution after {} warm-up steps, {} threads",
         args.scene,
@@ -29,45 +31,36 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         args.warmup,
         rayon::current_num_threads()
     );
-    let bands: Vec<Option<String>> = if args.band.is_empty() {
-        vec![None]
-    } else {
-        args.band.iter().cloned().map(Some).collect()
+    let bands: Vec<Option<BandMode>> = match args.band.is_empty() {
+        true => vec![None],
+        false => args.band.iter().map(|b| Some(*b)).collect(),
     };
     for &res in &args.res {
-        let mut results: Vec<(String, Measured)> = vec![];
+        let mut results: Vec<(&str, Measured)> = vec![];
         for band in &bands {
             let overrides = Overrides {
                 cells: Some(res),
-                method: args.method.clone(),
-                band: band.clone(),
+                method: args.method,
+                band: *band,
                 ..Default::default()
             };
             let scene = Scene::load(&args.scene, &overrides)?;
+            let given = [
+                (MethodOption::Band, band.is_some()),
+                (MethodOption::CrossCheck, args.cross_check),
+            ];
+            let given: Vec<_> = given.iter().filter(|g| g.1).map(|g| g.0).collect();
+            scene
+                .method
+                .check_given(&given)
+                .map_err(anyhow::Error::msg)?;
             let m = match scene.dim() {
                 2 => bench_dim::<2>(&scene, args)?,
                 _ => bench_dim::<3>(&scene, args)?,
             };
-            let name = scene.band.map_or("none", |b| b.variant.name()).to_string();
-            results.push((name, m));
+            results.push((scene.method.band.name(), m));
         }
-        if let Some(((first, base), rest)) = results.split_first().filter(|(_, r)| !r.is_empty()) {
-            println!(
-                "
-  at {res} cells, relative to band {first}:"
-            );
-            for (name, m) in rest {
-                println!(
-                    "  band {name}: step time ratio {:.2} ({:.1} / {:.1} ms); particles held {} vs {} ({:.1}%)",
-                    m.step.as_secs_f64() / base.step.as_secs_f64(),
-                    m.step.as_secs_f64() * 1e3,
-                    base.step.as_secs_f64() * 1e3,
-                    m.particles,
-                    base.particles,
-                    100.0 * m.particles as f64 / base.particles.max(1) as f64
-                );
-            }
-        }
+        print_band_ratios(res, &results);
     }
     Ok(())
 }
@@ -82,134 +75,52 @@ struct Measured {
 
 fn bench_dim<const D: usize>(scene: &Scene, args: &BenchArgs) -> Result<Measured> {
     let mut config = scene.config::<D>();
-    config.correction.cross_check = args.cross_check;
-    let mut sim = Simulation::<D>::new(config);
-    for _ in 0..args.warmup {
-        sim.step()?;
-    }
-    let mut solver_times = vec![];
-    let mut other_times = vec![];
-    let mut per_stage: Vec<Vec<Duration>> = vec![vec![]; Stage::ALL.len()];
-    let mut totals = vec![];
-    let mut iters = vec![];
-    let mut band_gaps: Vec<(&str, Vec<f64>)> = vec![];
-    let mut second_times = vec![];
-    for _ in 0..args.steps {
-        let rep = sim.step()?;
-        if let Some(c) = &rep.correction {
-            solver_times.push(c.solver_time);
-            if let Some(t) = c.cross_check_time {
-                other_times.push(t);
-            }
-            if let Some(b) = &c.band {
-                second_times.push(b.second_time);
-                for (v, o) in &b.other_objectives {
-                    let gap = o.as_ref().map_or(f64::NAN, |o| {
-                        (o - b.objective) / b.objective.abs().max(1e-12)
-                    });
-                    match band_gaps.iter_mut().find(|(n, _)| *n == v.name()) {
-                        Some((_, g)) => g.push(gap),
-                        None => band_gaps.push((v.name(), vec![gap])),
-                    }
-                }
-            }
-        }
-        for s in Stage::ALL {
-            per_stage[s as usize].push(rep.times.get(s));
-        }
-        totals.push(rep.times.total());
-        iters.push(rep.pcg.iterations);
-    }
-    iters.sort();
-    let band = match sim.band() {
-        Some(b) => format!(
-            ", band {} (R = {}): n_deep {} ({:.1}% of the fluid's particles held)",
-            b.variant.name(),
-            b.r,
-            sim.n_deep,
-            100.0 * sim.particles.len() as f64 / (sim.particles.len() + sim.n_deep).max(1) as f64
-        ),
-        None => String::new(),
-    };
+    config.method.cross_check = args.cross_check;
+    let mut runner = Runner::new(Simulation::<D>::new(config));
+    runner.run(Limit::Steps(args.warmup), || false, |_, _| Ok(()))?;
+    runner.reset_summary();
+    runner.run(
+        Limit::Steps(args.warmup + args.steps),
+        || false,
+        |_, _| Ok(()),
+    )?;
+    let (sim, s) = (&runner.sim.state, &runner.summary);
     println!(
-        "\n{} at {:?} cells ({}), {} particles, {} fluid cells, median PCG iterations {}{band}",
+        "\n{} at {:?} cells ({}), {} particles, {} fluid cells, median PCG iterations {}",
         scene.name(),
         sim.grid.dims,
-        scene.method.name(),
+        scene.method.kind.name(),
         sim.particles.len(),
         sim.markings.fluid_cells(),
-        iters[iters.len() / 2]
+        median(&s.pcg_iterations).unwrap_or(0)
     );
     println!("  {:<10} {:>12}", "stage", "median ms");
-    for s in Stage::ALL {
+    for st in Stage::ALL {
         println!(
             "  {:<10} {:>12.2}",
-            s.name(),
-            median(per_stage[s as usize].clone()).as_secs_f64() * 1e3
+            st.name(),
+            s.stage_median(st).as_secs_f64() * 1e3
         );
     }
-    let step = median(totals.clone());
+    let step = s.step_median();
     println!("  {:<10} {:>12.2}", "step", step.as_secs_f64() * 1e3);
-    let correct = &per_stage[Stage::Correct as usize];
-    if !solver_times.is_empty() {
-        let mut share: Vec<f64> = correct
-            .iter()
-            .zip(&totals)
-            .map(|(c, t)| c.as_secs_f64() / t.as_secs_f64())
-            .collect();
-        share.sort_by(f64::total_cmp);
-        let share = if other_times.is_empty() {
-            format!(
-                "; correction stage {:.1}% of the step (median of per-step shares)",
-                100.0 * share[share.len() / 2]
-            )
-        } else {
-            String::new() // the stage also timed the cross-check
-        };
+    let shares: Vec<f64> = s
+        .step_times
+        .iter()
+        .map(|t| t.get(Stage::Correct).as_secs_f64() / t.total().as_secs_f64())
+        .collect();
+    if s.stage_total(Stage::Correct) > Duration::ZERO {
         println!(
-            "  correction: {} solver median {:.2} ms{share}",
-            scene.correction.solver.name(),
-            median(solver_times.clone()).as_secs_f64() * 1e3,
+            "  correction stage: {:.1}% of the step (median of per-step shares{})",
+            100.0 * median(&shares).unwrap_or(0.0),
+            if args.cross_check {
+                "; includes the cross-check"
+            } else {
+                ""
+            }
         );
     }
-    if !other_times.is_empty() {
-        let mut ratios: Vec<f64> = other_times
-            .iter()
-            .zip(&solver_times)
-            .map(|(o, s)| o.as_secs_f64() / s.as_secs_f64().max(1e-9))
-            .collect();
-        ratios.sort_by(f64::total_cmp);
-        println!(
-            "  same problems, other solver: median {:.2} ms; ratio other / {} median {:.0}x (min {:.0}x, max {:.0}x)",
-            median(other_times).as_secs_f64() * 1e3,
-            scene.correction.solver.name(),
-            ratios[ratios.len() / 2],
-            ratios[0],
-            ratios[ratios.len() - 1]
-        );
-    }
-    if !second_times.is_empty() && band_gaps.is_empty() {
-        println!(
-            "  band second step (one-way solve or path search): median {:.2} ms",
-            median(second_times).as_secs_f64() * 1e3
-        );
-    }
-    let variant = sim.band().map_or("", |b| b.variant.name());
-    for (v, mut g) in band_gaps {
-        let failed = g.iter().filter(|x| x.is_nan()).count();
-        g.retain(|x| !x.is_nan());
-        g.sort_by(f64::total_cmp);
-        match (g.first(), g.last()) {
-            (Some(lo), Some(hi)) => println!(
-                "  band {v} on the same problems: objective {:+.3}% .. {:+.3}% (median {:+.3}%) relative to {variant}; failed on {failed} of {} steps",
-                100.0 * lo,
-                100.0 * hi,
-                100.0 * g[g.len() / 2],
-                g.len() + failed
-            ),
-            _ => println!("  band {v} on the same problems: failed on all {failed} steps"),
-        }
-    }
+    s.method_lines.iter().for_each(|l| println!("  {l}"));
     if let Some(m) = peak_memory_mib() {
         println!("  peak memory (process so far): {m:.0} MiB");
     }
@@ -217,4 +128,23 @@ fn bench_dim<const D: usize>(scene: &Scene, args: &BenchArgs) -> Result<Measured
         step,
         particles: sim.particles.len(),
     })
+}
+
+/// Each band setting's step time and particles against the first's.
+fn print_band_ratios(res: usize, results: &[(&str, Measured)]) {
+    let Some(((first, base), rest)) = results.split_first().filter(|(_, r)| !r.is_empty()) else {
+        return;
+    };
+    println!("\n  at {res} cells, relative to band {first}:");
+    for (name, m) in rest {
+        println!(
+            "  band {name}: step time ratio {:.2} ({:.1} / {:.1} ms); particles held {} vs {} ({:.1}%)",
+            m.step.as_secs_f64() / base.step.as_secs_f64(),
+            m.step.as_secs_f64() * 1e3,
+            base.step.as_secs_f64() * 1e3,
+            m.particles,
+            base.particles,
+            100.0 * m.particles as f64 / base.particles.max(1) as f64
+        );
+    }
 }

@@ -1,5 +1,10 @@
 //! Command-line definitions (clap) and nothing else.
 
+use crate::methods::MethodKind;
+use crate::sim::correct::band::BandMode;
+use crate::sim::correct::problem::Directions;
+use crate::sim::correct::Solver;
+use crate::sim::solids::ObstacleMode;
 use clap::{Args, Parser, Subcommand};
 use std::path::PathBuf;
 
@@ -39,8 +44,8 @@ pub struct RunArgs {
     /// A built-in scene name (see `cellflip list`) or the path of a scene .toml file.
     pub scene: String,
     /// The fluid method (overrides the scene's `simulation.method`).
-    #[arg(long)]
-    pub method: Option<String>,
+    #[arg(long, value_enum)]
+    pub method: Option<MethodKind>,
     /// Number of steps to run (instead of the scene's duration).
     #[arg(long, conflicts_with = "duration")]
     pub steps: Option<u64>,
@@ -57,22 +62,22 @@ pub struct RunArgs {
     #[arg(long)]
     pub seed: Option<u64>,
     /// Solver of the ccp correction: flow (exact min-cost flow) or simplex (the LP reference).
-    #[arg(long)]
-    pub solver: Option<String>,
-    /// Candidate moves of the correction: von-neumann (paper) or moore.
-    #[arg(long)]
-    pub directions: Option<String>,
+    #[arg(long, value_enum)]
+    pub solver: Option<Solver>,
+    /// Candidate moves of the ccp correction: von-neumann (paper) or moore.
+    #[arg(long, value_enum)]
+    pub directions: Option<Directions>,
     /// Band method of ccp (overrides `simulation.band`): none, paths (the paper's), one-way or
     /// full (an integer program: small grids only).
-    #[arg(long)]
-    pub band: Option<String>,
+    #[arg(long, value_enum)]
+    pub band: Option<BandMode>,
     /// Band interface depth R; the band is R + 1 cells thick (overrides `simulation.band_r`).
     #[arg(long, value_name = "R")]
     pub band_r: Option<u32>,
     /// How obstacles pass particles (overrides `simulation.obstacle`): couple (ccp), or for
     /// the other methods naive (wait for free cells) or ignore (move regardless).
-    #[arg(long)]
-    pub obstacle: Option<String>,
+    #[arg(long, value_enum)]
+    pub obstacle: Option<ObstacleMode>,
     /// Solve every correction with both solvers and report their largest objective difference;
     /// with a band, run every band variant on each step's problem and record their objectives.
     #[arg(long)]
@@ -109,12 +114,12 @@ pub struct BenchArgs {
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
     pub warmup: u64,
     /// The fluid method.
-    #[arg(long)]
-    pub method: Option<String>,
-    /// Band methods to compare, comma-separated (none, paths, one-way, full); the step-time
-    /// ratio to the first is printed [default: the scene's].
-    #[arg(long, value_delimiter = ',')]
-    pub band: Vec<String>,
+    #[arg(long, value_enum)]
+    pub method: Option<MethodKind>,
+    /// Band methods of ccp to compare, comma-separated (none, paths, one-way, full); the
+    /// step-time ratio to the first is printed [default: the scene's].
+    #[arg(long, value_enum, value_delimiter = ',')]
+    pub band: Vec<BandMode>,
     /// Method ccp: also solve every correction with the other solver and compare their times;
     /// with a band, run all band variants on each problem and compare their objectives.
     #[arg(long)]

@@ -7,10 +7,12 @@
 pub mod bench;
 pub mod cli;
 pub mod grid;
+pub mod methods;
 pub mod metrics;
 pub mod particles;
 pub mod record;
 pub mod run;
+pub mod runner;
 pub mod scene;
 pub mod sim;
 pub mod solvers;

@@ -25,6 +25,10 @@ fn dispatch(cli: Cli) -> Result<()> {
                 let s = scene::Scene::parse(name, text, &Default::default())?;
                 println!("{name:<width$}  {}D  {}", s.dim(), s.file.description);
             }
+            println!("\nmethods (--method):");
+            for m in cellflip::methods::MethodKind::ALL {
+                println!("  {:<8}  {}", m.name(), m.info().about);
+            }
             Ok(())
         }
         Command::Run(args) => run::run(&args),

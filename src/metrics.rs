@@ -97,7 +97,7 @@ impl std::error::Error for InvariantViolation {}
 
 impl std::fmt::Display for InvariantViolation {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.0)
+        write!(f, "invariant broken: {}", self.0)
     }
 }
 

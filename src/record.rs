@@ -2,15 +2,18 @@
 //!
 //! World units are cells. In 2D the world is drawn as an image (x right, rows down), so
 //! positions are logged as `(x, ny - y)`: gravity points down the screen and each particle lies
-//! over its cell of the `world/grid/markings` image. In 3D, y is up (`RIGHT_HAND_Y_UP`).
-//! Entity paths are listed in the README and in [`ENTITY_PATHS`].
+//! over its cell of the `world/grid/markings` image. That conversion happens in one place,
+//! [`Canvas::world`]; every drawing goes through the canvas's point, box, arrow, strip and
+//! class-layer helpers, which pick the 2D or 3D archetype. In 3D, y is up
+//! (`RIGHT_HAND_Y_UP`). Entity paths are listed in the README.
+//!
+//! Methods log their own reports through the [`Log`] trait, which names no rerun type.
 
 use crate::grid::Vector;
 use crate::metrics::Stage;
 use crate::particles::Region;
 use crate::scene::Scene;
-use crate::sim::correct::band::BandCorrection;
-use crate::sim::markings::{DepthLevel, MarkingClass, Markings};
+use crate::sim::markings::{DepthLevel, MarkingClass};
 use crate::sim::{Simulation, StepReport};
 use anyhow::{anyhow, Result};
 use rerun::blueprint::{
@@ -22,104 +25,76 @@ use std::cell::{Cell, RefCell};
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-/// Every entity a run logs (the ones under `metrics/` with their leaves).
-pub const ENTITY_PATHS: &[&str] = &[
-    "scene",
-    "world",
-    "world/domain",
-    "world/particles",
-    "world/grid/markings",
-    "metrics/volume_percent",
-    "metrics/particles",
-    "metrics/dt",
-    "metrics/max_speed",
-    "metrics/pcg/iterations",
-    "metrics/pcg/residual",
-    "metrics/time/<stage>",
-    "log",
-];
-
-/// What method `ccp` logs besides [`ENTITY_PATHS`].
-pub const CORRECTION_ENTITY_PATHS: &[&str] = &[
-    "world/corrector/moves",
-    "metrics/correction/objective",
-    "metrics/correction/moved",
-    "metrics/correction/overfull_before",
-    "metrics/correction/solver_ms",
-    "metrics/correction/augmentations",
-];
-
-/// What the band method (`--band`) logs besides the above.
-pub const BAND_ENTITY_PATHS: &[&str] = &[
-    "world/grid/depth",
-    "world/corrector/paths",
-    "metrics/band/n_in",
-    "metrics/band/n_out",
-    "metrics/band/s_in",
-    "metrics/band/s_out",
-    "metrics/band/n_move",
-    "metrics/band/paths",
-    "metrics/band/find_calls",
-    "metrics/band/path_ms",
-    "metrics/band/n_deep",
-    "metrics/band/band_particles",
-    "metrics/band/removed",
-    "metrics/band/added",
-    "metrics/band/objective/<variant>",
-];
-
-/// What scenes with obstacles (sec. 7) log besides the above.
-pub const OBSTACLE_ENTITY_PATHS: &[&str] = &[
-    "world/obstacles/<name>",
-    "world/obstacles/<name>/trail",
-    "world/obstacles/new_solid",
-    "metrics/obstacle/<name>/height",
-    "metrics/obstacle/<name>/speed",
-    "metrics/obstacle/<name>/blocked",
-];
-
-/// Writes one run to an `.rrd` file.
-pub struct Recorder {
-    rec: RecordingStream,
-    dims: Vec<usize>,
-    max_speed: f64,
-    last_flush: Cell<Instant>,
-    /// Every obstacle's centres so far (world coordinates), for its trail.
-    trails: RefCell<Vec<Vec<[f32; 3]>>>,
+/// What a method may log and draw, in grid units; implemented by the recorder's [`Canvas`].
+pub trait Log<const D: usize> {
+    /// A scalar time series, every step.
+    fn scalar(&mut self, path: &str, value: f64);
+    /// A warning in the log, prefixed with the step.
+    fn warn(&mut self, message: &str);
+    /// Class ids with their labels and colours (RGBA) for `path` and below, logged once.
+    fn classes(&mut self, path: &str, classes: &[(u16, &'static str, [u8; 4])]);
+    /// One class id per cell: in 2D an image over the grid, in 3D points at the centres of the
+    /// cells whose class is not in `hidden_3d`.
+    fn cell_classes(
+        &mut self,
+        path: &str,
+        class: &dyn Fn(usize) -> u8,
+        hidden_3d: &[u8],
+        layer: Layer,
+    );
+    /// Arrows from the first point to the second of each pair (an empty batch clears).
+    fn arrows(&mut self, path: &str, from_to: &[(Vector<D>, Vector<D>)], style: Style);
+    /// Line strips through points, each with its colour and label (an empty batch clears).
+    fn strips(
+        &mut self,
+        path: &str,
+        strips: &[Vec<Vector<D>>],
+        colors: &[[u8; 3]],
+        labels: Vec<String>,
+        style: Style,
+    );
 }
 
-fn blueprint(dim: usize) -> Blueprint {
-    let world: rerun::blueprint::ContainerLike = if dim == 2 {
-        Spatial2DView::new("world").with_origin("world").into()
-    } else {
-        Spatial3DView::new("world").with_origin("world").into()
-    };
-    Blueprint::new(
-        Horizontal::new([
-            world,
-            Vertical::new([
-                TimeSeriesView::new("volume %")
-                    .with_origin("metrics/volume_percent")
-                    .into(),
-                TimeSeriesView::new("stage times (ms)")
-                    .with_origin("metrics/time")
-                    .into(),
-                TimeSeriesView::new("pressure solve")
-                    .with_origin("metrics/pcg")
-                    .into(),
-                TimeSeriesView::new("correction")
-                    .with_origin("metrics/correction")
-                    .into(),
-                TimeSeriesView::new("band")
-                    .with_origin("metrics/band")
-                    .into(),
-                TextLogView::new("log").with_origin("log").into(),
-                TextDocumentView::new("scene").with_origin("scene").into(),
-            ])
-            .into(),
-        ])
-        .with_column_shares([2.0, 1.0]),
-    )
+/// How a drawing looks: its colour, radius (cells) and, in 2D, its draw order.
+#[derive(Clone, Copy, Debug)]
+pub struct Style {
+    pub color: [u8; 3],
+    pub radius: f32,
+    pub order: f32,
+}
+
+/// How a layer of cells is drawn: its draw order in 2D, its points' radius in 3D (cells).
+#[derive(Clone, Copy, Debug)]
+pub struct Layer {
+    pub order: f32,
+    pub radius_3d: f32,
+}
+
+/// The band levels (sec. band_method) as classes: label and colour of each [`DepthLevel`].
+pub fn depth_level_classes() -> Vec<(u16, &'static str, [u8; 4])> {
+    DepthLevel::ALL
+        .iter()
+        .map(|l| {
+            let rgba = match l {
+                DepthLevel::NotFluid => [0, 0, 0, 0],
+                DepthLevel::Surface => [60, 180, 75, 120],
+                DepthLevel::Band => [120, 190, 240, 110],
+                DepthLevel::Interface => [240, 200, 40, 170],
+                DepthLevel::Deep => [20, 40, 120, 140],
+            };
+            (*l as u16, l.label(), rgba)
+        })
+        .collect()
+}
+
+fn class_color(c: MarkingClass) -> [u8; 4] {
+    match c {
+        MarkingClass::Empty => [0, 0, 0, 0],
+        MarkingClass::Surface => [60, 180, 75, 140],
+        MarkingClass::Inner => [30, 70, 160, 110],
+        MarkingClass::Bubble => [230, 50, 50, 160],
+        MarkingClass::Solid => [128, 128, 128, 255],
+    }
 }
 
 /// Colour ramp for speeds: dark blue at rest, through cyan, to white at the speed bound.
@@ -139,43 +114,43 @@ fn speed_color(speed: f64, max: f64) -> [u8; 3] {
     }
 }
 
-fn class_color(c: MarkingClass) -> rerun::Rgba32 {
-    match c {
-        MarkingClass::Empty => rerun::Rgba32::from_unmultiplied_rgba(0, 0, 0, 0),
-        MarkingClass::Surface => rerun::Rgba32::from_unmultiplied_rgba(60, 180, 75, 140),
-        MarkingClass::Inner => rerun::Rgba32::from_unmultiplied_rgba(30, 70, 160, 110),
-        MarkingClass::Bubble => rerun::Rgba32::from_unmultiplied_rgba(230, 50, 50, 160),
-        MarkingClass::Solid => rerun::Rgba32::from_unmultiplied_rgba(128, 128, 128, 255),
-    }
+fn rgba(c: [u8; 4]) -> rerun::Rgba32 {
+    rerun::Rgba32::from_unmultiplied_rgba(c[0], c[1], c[2], c[3])
 }
 
-/// The band level of a cell (not fluid for empty and solid cells).
-fn level_of(m: &Markings, c: usize, r: u32) -> DepthLevel {
-    if m.is_fluid(c) {
-        m.level(c, r)
+fn blueprint(dim: usize) -> Blueprint {
+    let world: rerun::blueprint::ContainerLike = if dim == 2 {
+        Spatial2DView::new("world").with_origin("world").into()
     } else {
-        DepthLevel::NotFluid
-    }
+        Spatial3DView::new("world").with_origin("world").into()
+    };
+    let series = |name: &str, origin: &str| TimeSeriesView::new(name).with_origin(origin).into();
+    Blueprint::new(
+        Horizontal::new([
+            world,
+            Vertical::new([
+                series("volume %", "metrics/volume_percent"),
+                series("stage times (ms)", "metrics/time"),
+                series("pressure solve", "metrics/pcg"),
+                series("correction", "metrics/correction"),
+                series("band", "metrics/band"),
+                TextLogView::new("log").with_origin("log").into(),
+                TextDocumentView::new("scene").with_origin("scene").into(),
+            ])
+            .into(),
+        ])
+        .with_column_shares([2.0, 1.0]),
+    )
 }
 
-fn level_color(l: DepthLevel) -> rerun::Rgba32 {
-    match l {
-        DepthLevel::NotFluid => rerun::Rgba32::from_unmultiplied_rgba(0, 0, 0, 0),
-        DepthLevel::Surface => rerun::Rgba32::from_unmultiplied_rgba(60, 180, 75, 120),
-        DepthLevel::Band => rerun::Rgba32::from_unmultiplied_rgba(120, 190, 240, 110),
-        DepthLevel::Interface => rerun::Rgba32::from_unmultiplied_rgba(240, 200, 40, 170),
-        DepthLevel::Deep => rerun::Rgba32::from_unmultiplied_rgba(20, 40, 120, 140),
-    }
-}
-
-/// Path colour by cost: green for paths that lower the objective, red for those that raise it.
-fn cost_color(cost: f64, scale: f64) -> [u8; 3] {
-    let t = (cost / scale.max(1e-12)).clamp(-1.0, 1.0);
-    if t < 0.0 {
-        [40, (120.0 - 100.0 * t) as u8, 60]
-    } else {
-        [(120.0 + 135.0 * t) as u8, 60, 40]
-    }
+/// Writes one run to an `.rrd` file.
+pub struct Recorder {
+    rec: RecordingStream,
+    dims: Vec<usize>,
+    max_speed: f64,
+    last_flush: Cell<Instant>,
+    /// Every obstacle's centres so far (world coordinates), for its trail.
+    trails: RefCell<Vec<Vec<[f32; 3]>>>,
 }
 
 impl Recorder {
@@ -194,7 +169,7 @@ impl Recorder {
             scene.name(),
             scene.file.description,
             scene.source,
-            scene.method.name(),
+            scene.method.kind.name(),
             scene.file.simulation.seed,
             env!("CARGO_PKG_VERSION"),
             scene.resolved_toml()
@@ -209,529 +184,129 @@ impl Recorder {
         })
     }
 
-    /// Static data: the class colours, the domain, the view coordinates.
+    fn canvas<const D: usize>(&self, sim: &Simulation<D>) -> Canvas<'_, D> {
+        self.rec.set_time_sequence("step", sim.state.steps as i64);
+        self.rec.set_duration_secs("sim_time", sim.state.time_secs);
+        Canvas {
+            rec: &self.rec,
+            ny: self.dims[1] as f32,
+            dims: std::array::from_fn(|k| self.dims[k]),
+            step: sim.state.steps,
+            result: Ok(()),
+        }
+    }
+
+    /// Static data: the class colours, the domain, the view coordinates, the method's layers.
     pub fn log_setup<const D: usize>(&self, sim: &Simulation<D>) {
-        let classes: Vec<(u16, &str, rerun::Rgba32)> = MarkingClass::ALL
+        let mut c = self.canvas(sim);
+        let classes: Vec<(u16, &str, [u8; 4])> = MarkingClass::ALL
             .iter()
-            .map(|c| (*c as u16, c.label(), class_color(*c)))
+            .map(|k| (*k as u16, k.label(), class_color(*k)))
             .collect();
-        let d = &self.dims;
-        let result = (|| -> rerun::RecordingStreamResult<()> {
-            self.rec
-                .log_static("world", &rerun::AnnotationContext::new(classes))?;
-            if sim.band().is_some() {
-                let levels: Vec<(u16, &str, rerun::Rgba32)> = DepthLevel::ALL
-                    .iter()
-                    .map(|l| (*l as u16, l.label(), level_color(*l)))
-                    .collect();
-                self.rec
-                    .log_static("world/grid/depth", &rerun::AnnotationContext::new(levels))?;
-            }
-            if D == 2 {
-                self.rec.log_static(
-                    "world/domain",
-                    &rerun::Boxes2D::from_mins_and_sizes(
-                        [(0.0f32, 0.0)],
-                        [(d[0] as f32, d[1] as f32)],
-                    )
-                    .with_colors([[200u8, 200, 200]]),
-                )?;
-            } else {
-                self.rec
-                    .log_static("world", &rerun::ViewCoordinates::RIGHT_HAND_Y_UP())?;
-                let half = (d[0] as f32 / 2.0, d[1] as f32 / 2.0, d[2] as f32 / 2.0);
-                self.rec.log_static(
-                    "world/domain",
-                    &rerun::Boxes3D::from_centers_and_half_sizes([half], [half])
-                        .with_colors([[200u8, 200, 200]])
-                        .with_fill_mode(rerun::FillMode::MajorWireframe),
-                )?;
-            }
-            self.rec.log_static(
-                "log",
-                &rerun::TextLog::new(format!(
-                    "{} particles on {:?} cells, mu = {}",
-                    sim.particles.len(),
-                    sim.grid.dims,
-                    sim.config.mu()
-                ))
-                .with_level(rerun::TextLogLevel::INFO),
-            )
-        })();
-        self.report(result);
+        c.classes("world", &classes);
+        if D == 3 {
+            let r = self
+                .rec
+                .log_static("world", &rerun::ViewCoordinates::RIGHT_HAND_Y_UP());
+            c.keep(r);
+        }
+        let d = sim.state.grid.dims;
+        c.boxes(
+            "world/domain",
+            &Vector::<D>::zeros(),
+            &Vector::<D>::from_fn(|k, _| d[k] as f64),
+            [200, 200, 200],
+            true,
+        );
+        let s = &sim.state;
+        let msg = format!(
+            "{} particles on {:?} cells, mu = {}",
+            s.particles.len(),
+            d,
+            s.config.mu()
+        );
+        let r = self.rec.log_static(
+            "log",
+            &rerun::TextLog::new(msg).with_level(rerun::TextLogLevel::INFO),
+        );
+        c.keep(r);
+        sim.method.record_setup(&mut c);
+        self.report(c.result);
     }
 
-    fn set_time<const D: usize>(&self, sim: &Simulation<D>) {
-        self.rec.set_time_sequence("step", sim.steps as i64);
-        self.rec.set_duration_secs("sim_time", sim.time_secs);
-    }
-
-    /// The state after a step: particles and markings when `full`, metrics when `rep` is given.
+    /// The state after a step: particles, markings and obstacles when `full`, metrics when
+    /// `rep` is given.
     pub fn log_step<const D: usize>(
         &self,
         sim: &Simulation<D>,
         rep: Option<&StepReport<D>>,
         full: bool,
     ) {
-        self.set_time(sim);
-        let mu = sim.config.mu();
-        let result = (|| -> rerun::RecordingStreamResult<()> {
-            if full {
-                let colors: Vec<[u8; 3]> = sim
-                    .particles
-                    .vel
-                    .iter()
-                    .map(|v| speed_color(v.norm(), self.max_speed))
-                    .collect();
-                let marks = &sim.markings;
-                if D == 2 {
-                    let ny = self.dims[1] as f32;
-                    let pos: Vec<[f32; 2]> = sim
-                        .particles
-                        .pos
-                        .iter()
-                        .map(|x| [x[0] as f32, ny - x[1] as f32])
-                        .collect();
-                    self.rec.log(
-                        "world/particles",
-                        &rerun::Points2D::new(pos)
-                            .with_colors(colors)
-                            .with_radii([0.12f32])
-                            .with_draw_order(10.0),
-                    )?;
-                    self.log_class_image("world/grid/markings", 0.0, |c| marks.class(c, mu) as u8)?;
-                    if let Some(b) = sim.band() {
-                        self.log_class_image("world/grid/depth", 1.0, |c| {
-                            level_of(marks, c, b.r) as u8
-                        })?;
-                    }
-                } else {
-                    let pos: Vec<[f32; 3]> = sim
-                        .particles
-                        .pos
-                        .iter()
-                        .map(|x| [x[0] as f32, x[1] as f32, x[2] as f32])
-                        .collect();
-                    self.rec.log(
-                        "world/particles",
-                        &rerun::Points3D::new(pos)
-                            .with_colors(colors)
-                            .with_radii([0.15f32]),
-                    )?;
-                    let cells: Vec<(usize, MarkingClass)> = (0..marks.kind.len())
-                        .map(|c| (c, marks.class(c, mu)))
-                        .filter(|(_, k)| *k != MarkingClass::Empty && *k != MarkingClass::Inner)
-                        .collect();
-                    let centers: Vec<[f32; 3]> = cells
-                        .iter()
-                        .map(|(c, _)| {
-                            let x = sim.grid.center(sim.grid.cell_coords(*c));
-                            [x[0] as f32, x[1] as f32, x[2] as f32]
-                        })
-                        .collect();
-                    let ids: Vec<rerun::components::ClassId> = cells
-                        .iter()
-                        .map(|(_, k)| rerun::components::ClassId::from(*k as u16))
-                        .collect();
-                    self.rec.log(
-                        "world/grid/markings",
-                        &rerun::Points3D::new(centers)
-                            .with_class_ids(ids)
-                            .with_radii([0.3f32]),
-                    )?;
-                    if let Some(b) = sim.band() {
-                        let (centers, ids): (Vec<[f32; 3]>, Vec<rerun::components::ClassId>) =
-                            (0..marks.kind.len())
-                                .filter(|&c| marks.is_fluid(c))
-                                .map(|c| {
-                                    let x = sim.grid.center(sim.grid.cell_coords(c));
-                                    (
-                                        [x[0] as f32, x[1] as f32, x[2] as f32],
-                                        rerun::components::ClassId::from(
-                                            level_of(marks, c, b.r) as u16
-                                        ),
-                                    )
-                                })
-                                .unzip();
-                        self.rec.log(
-                            "world/grid/depth",
-                            &rerun::Points3D::new(centers)
-                                .with_class_ids(ids)
-                                .with_radii([0.2f32]),
-                        )?;
-                    }
-                }
+        let mut c = self.canvas(sim);
+        let s = &sim.state;
+        if full {
+            let colors = s
+                .particles
+                .vel
+                .iter()
+                .map(|v| speed_color(v.norm(), self.max_speed))
+                .collect();
+            let look = PointLook {
+                radius: if D == 2 { 0.12 } else { 0.15 },
+                order: 10.0,
+                labels: None,
+            };
+            c.points("world/particles", &s.particles.pos, colors, look);
+            let mu = s.config.mu();
+            let hidden = [MarkingClass::Empty as u8, MarkingClass::Inner as u8];
+            c.cell_classes(
+                "world/grid/markings",
+                &|cell| s.markings.class(cell, mu) as u8,
+                &hidden,
+                Layer {
+                    order: 0.0,
+                    radius_3d: 0.3,
+                },
+            );
+            self.log_obstacles(&mut c, sim);
+        }
+        if let Some(rep) = rep {
+            log_metrics(&mut c, sim, rep);
+            if full && !s.solids.obstacles.is_empty() {
+                log_new_solid(&mut c, sim, &rep.new_solid);
             }
-            if full {
-                self.log_obstacles(sim)?;
-            }
-            if let Some(rep) = rep {
-                let h = sim.config.cell_size_m;
-                let scalar = |path: &str, v: f64| self.rec.log(path, &rerun::Scalars::single(v));
-                scalar("metrics/volume_percent", rep.volume_percent)?;
-                scalar("metrics/particles", sim.particles.len() as f64)?;
-                scalar("metrics/dt", rep.dt_secs)?;
-                scalar("metrics/max_speed", rep.max_speed * h)?;
-                scalar("metrics/pcg/iterations", rep.pcg.iterations as f64)?;
-                scalar("metrics/pcg/residual", rep.pcg.residual)?;
-                for s in Stage::ALL {
-                    scalar(
-                        &format!("metrics/time/{}", s.name()),
-                        rep.times.get(s).as_secs_f64() * 1e3,
-                    )?;
-                }
-                if let Some(c) = &rep.correction {
-                    scalar("metrics/correction/objective", c.objective)?;
-                    scalar("metrics/correction/moved", c.moves.len() as f64)?;
-                    scalar(
-                        "metrics/correction/overfull_before",
-                        c.overfull_before as f64,
-                    )?;
-                    scalar(
-                        "metrics/correction/solver_ms",
-                        c.solver_time.as_secs_f64() * 1e3,
-                    )?;
-                    scalar("metrics/correction/augmentations", c.augmentations as f64)?;
-                    match &c.cross_check {
-                        Some(Ok(d)) => scalar("metrics/correction/cross_check", *d)?,
-                        Some(Err(e)) => self.rec.log(
-                            "log",
-                            &rerun::TextLog::new(format!(
-                                "step {}: cross-check solver failed: {e}",
-                                sim.steps
-                            ))
-                            .with_level(rerun::TextLogLevel::WARN),
-                        )?,
-                        None => {}
-                    }
-                    if let Some(f) = &c.fallback {
-                        self.rec.log(
-                            "log",
-                            &rerun::TextLog::new(format!("step {}: {f}", sim.steps))
-                                .with_level(rerun::TextLogLevel::WARN),
-                        )?;
-                    }
-                    if full {
-                        self.log_moves(&c.moves)?;
-                    }
-                    if let Some(b) = &c.band {
-                        self.log_band(sim, b, full)?;
-                    }
-                }
-                for (o, &blocked) in sim.obstacles.iter().zip(&rep.blocked) {
-                    let m = format!("metrics/obstacle/{}", o.name);
-                    scalar(&format!("{m}/height"), o.bottom() * h)?;
-                    scalar(&format!("{m}/speed"), o.velocity.norm() * h)?;
-                    scalar(&format!("{m}/blocked"), blocked as u8 as f64)?;
-                }
-                if full && !sim.obstacles.is_empty() {
-                    self.log_new_solid(sim, &rep.new_solid)?;
-                }
-                if let Some(x) = &rep.deep {
-                    scalar("metrics/band/n_deep", sim.n_deep as f64)?;
-                    scalar("metrics/band/band_particles", sim.particles.len() as f64)?;
-                    scalar("metrics/band/removed", x.removed as f64)?;
-                    scalar("metrics/band/added", x.added as f64)?;
-                    if x.unplaced > 0 {
-                        self.rec.log(
-                            "log",
-                            &rerun::TextLog::new(format!(
-                                "step {}: the band interface had no room for {} of the deep's excess particles (kept in n_deep)",
-                                sim.steps, x.unplaced
-                            ))
-                            .with_level(rerun::TextLogLevel::WARN),
-                        )?;
-                    }
-                }
-                if rep.dt_shortened {
-                    self.rec.log(
-                        "log",
-                        &rerun::TextLog::new(format!(
-                            "step {}: time step shortened to {:.3e} s after the projection (max speed {:.3} m/s)",
-                            sim.steps,
-                            rep.dt_secs,
-                            rep.max_speed * h
-                        ))
-                        .with_level(rerun::TextLogLevel::DEBUG),
-                    )?;
-                }
-            }
-            Ok(())
-        })();
-        self.report(result);
+            rep.method.record(s, &mut c, full);
+        }
+        self.report(c.result);
         self.flush_now_and_then();
     }
 
-    /// A 2D `SegmentationImage` of one class id per cell (rows down: row 0 is the top).
-    fn log_class_image(
-        &self,
-        path: &str,
-        draw_order: f32,
-        class: impl Fn(usize) -> u8,
-    ) -> rerun::RecordingStreamResult<()> {
-        let (w, h) = (self.dims[0], self.dims[1]);
-        let mut img = vec![0u8; w * h];
-        for c in 0..w * h {
-            // Cell index c = x + w y (axis 0 fastest).
-            let (x, y) = (c % w, c / w);
-            img[(h - 1 - y) * w + x] = class(c);
-        }
-        self.rec.log(
-            path,
-            &rerun::SegmentationImage::new(
-                img,
-                rerun::ImageFormat::segmentation([w as u32, h as u32], rerun::ChannelDatatype::U8),
-            )
-            .with_draw_order(draw_order),
-        )
-    }
-
-    /// World coordinates of a point in cells (2D: rows down).
-    fn world(&self, x: &[f64]) -> [f32; 3] {
-        if x.len() == 2 {
-            [x[0] as f32, self.dims[1] as f32 - x[1] as f32, 0.0]
-        } else {
-            [x[0] as f32, x[1] as f32, x[2] as f32]
-        }
-    }
-
     /// Each obstacle's shape where it is now, and its trail (its centre over the steps).
-    fn log_obstacles<const D: usize>(
-        &self,
-        sim: &Simulation<D>,
-    ) -> rerun::RecordingStreamResult<()> {
+    fn log_obstacles<const D: usize>(&self, c: &mut Canvas<'_, D>, sim: &Simulation<D>) {
         let mut trails = self.trails.borrow_mut();
-        trails.resize(sim.obstacles.len(), vec![]);
-        let color = [[230u8, 90, 40]];
-        for (o, trail) in sim.obstacles.iter().zip(trails.iter_mut()) {
+        let obstacles = &sim.state.solids.obstacles;
+        trails.resize(obstacles.len(), vec![]);
+        let color = [230u8, 90, 40];
+        for (o, trail) in obstacles.iter().zip(trails.iter_mut()) {
             let path = format!("world/obstacles/{}", o.name);
             let r = o.region_at(&o.offset);
-            let (lo, hi) = r.bounds();
-            let (a, b) = (self.world(lo.as_slice()), self.world(hi.as_slice()));
-            let centre = self.world(r.center().as_slice());
-            trail.push(centre);
-            let half: [f32; 3] = std::array::from_fn(|k| (b[k] - a[k]).abs() / 2.0);
-            // Balls as a point of their radius; boxes (obstacles are boxes or balls) as boxes.
-            match (&r, D) {
-                (Region::Ball { radius, .. }, 2) => self.rec.log(
-                    path.as_str(),
-                    &rerun::Points2D::new([(centre[0], centre[1])])
-                        .with_radii([*radius as f32])
-                        .with_colors(color)
-                        .with_draw_order(25.0),
-                )?,
-                (Region::Ball { radius, .. }, _) => self.rec.log(
-                    path.as_str(),
-                    &rerun::Points3D::new([centre])
-                        .with_radii([*radius as f32])
-                        .with_colors(color),
-                )?,
-                (_, 2) => self.rec.log(
-                    path.as_str(),
-                    &rerun::Boxes2D::from_centers_and_half_sizes(
-                        [(centre[0], centre[1])],
-                        [(half[0], half[1])],
-                    )
-                    .with_colors(color)
-                    .with_draw_order(25.0),
-                )?,
-                _ => self.rec.log(
-                    path.as_str(),
-                    &rerun::Boxes3D::from_centers_and_half_sizes([centre], [half])
-                        .with_colors(color),
-                )?,
+            match &r {
+                Region::Ball { center, radius } => {
+                    let look = PointLook {
+                        radius: *radius as f32,
+                        order: 25.0,
+                        labels: None,
+                    };
+                    c.points(&path, &[*center], vec![color], look)
+                }
+                _ => {
+                    let (lo, hi) = r.bounds();
+                    c.boxes(&path, &lo, &hi, color, false)
+                }
             }
-            let trail_path = format!("{path}/trail");
-            if D == 2 {
-                let strip: Vec<[f32; 2]> = trail.iter().map(|p| [p[0], p[1]]).collect();
-                self.rec.log(
-                    trail_path.as_str(),
-                    &rerun::LineStrips2D::new([strip])
-                        .with_colors(color)
-                        .with_draw_order(24.0),
-                )?;
-            } else {
-                self.rec.log(
-                    trail_path.as_str(),
-                    &rerun::LineStrips3D::new([trail.clone()]).with_colors(color),
-                )?;
-            }
+            trail.push(c.world(&r.center()));
+            c.strip_world(&format!("{path}/trail"), trail, color);
         }
-        Ok(())
-    }
-
-    /// The cells obstacles wanted this step (`C_new_solid`), labelled with their clearing
-    /// distance (an empty batch clears the previous step's).
-    fn log_new_solid<const D: usize>(
-        &self,
-        sim: &Simulation<D>,
-        cells: &[(usize, u32)],
-    ) -> rerun::RecordingStreamResult<()> {
-        let centres: Vec<[f32; 3]> = cells
-            .iter()
-            .map(|(c, _)| self.world(sim.grid.center(sim.grid.cell_coords(*c)).as_slice()))
-            .collect();
-        let labels: Vec<String> = cells.iter().map(|(_, d)| d.to_string()).collect();
-        let color = [[255u8, 200, 0]];
-        if D == 2 {
-            let pts: Vec<[f32; 2]> = centres.iter().map(|p| [p[0], p[1]]).collect();
-            self.rec.log(
-                "world/obstacles/new_solid",
-                &rerun::Points2D::new(pts)
-                    .with_labels(labels)
-                    .with_radii([0.3f32])
-                    .with_colors(color)
-                    .with_draw_order(26.0),
-            )
-        } else {
-            self.rec.log(
-                "world/obstacles/new_solid",
-                &rerun::Points3D::new(centres)
-                    .with_labels(labels)
-                    .with_radii([0.3f32])
-                    .with_colors(color),
-            )
-        }
-    }
-
-    /// The band correction's scalars and, when `full`, its paths as line strips through cell
-    /// centres, coloured by cost (an empty batch clears the previous step's paths).
-    fn log_band<const D: usize>(
-        &self,
-        sim: &Simulation<D>,
-        b: &BandCorrection<D>,
-        full: bool,
-    ) -> rerun::RecordingStreamResult<()> {
-        let scalar = |path: &str, v: f64| self.rec.log(path, &rerun::Scalars::single(v));
-        scalar("metrics/band/n_in", b.n_in as f64)?;
-        scalar("metrics/band/n_out", b.n_out as f64)?;
-        scalar("metrics/band/s_in", b.s_in as f64)?;
-        scalar("metrics/band/s_out", b.s_out as f64)?;
-        scalar("metrics/band/n_move", b.n_move as f64)?;
-        scalar("metrics/band/paths", b.paths_applied as f64)?;
-        scalar("metrics/band/find_calls", b.find_calls as f64)?;
-        scalar("metrics/band/path_ms", b.second_time.as_secs_f64() * 1e3)?;
-        scalar(
-            &format!("metrics/band/objective/{}", b.variant.name()),
-            b.objective,
-        )?;
-        for (v, o) in &b.other_objectives {
-            match o {
-                Ok(o) => scalar(&format!("metrics/band/objective/{}", v.name()), *o)?,
-                Err(e) => self.rec.log(
-                    "log",
-                    &rerun::TextLog::new(format!(
-                        "step {}: band variant {} failed on this step's problem: {e}",
-                        sim.steps,
-                        v.name()
-                    ))
-                    .with_level(rerun::TextLogLevel::WARN),
-                )?,
-            }
-        }
-        if let Some(f) = &b.failure {
-            self.rec.log(
-                "log",
-                &rerun::TextLog::new(format!(
-                    "step {}: band {}: {f}",
-                    sim.steps,
-                    b.variant.name()
-                ))
-                .with_level(rerun::TextLogLevel::WARN),
-            )?;
-        }
-        if !full {
-            return Ok(());
-        }
-        let scale = b.paths.iter().map(|p| p.cost.abs()).fold(0.0, f64::max);
-        let colors: Vec<[u8; 3]> = b.paths.iter().map(|p| cost_color(p.cost, scale)).collect();
-        let labels: Vec<String> = b.paths.iter().map(|p| format!("{:.3}", p.cost)).collect();
-        if D == 2 {
-            let ny = self.dims[1] as f32;
-            let strips: Vec<Vec<[f32; 2]>> = b
-                .paths
-                .iter()
-                .map(|p| {
-                    p.cells
-                        .iter()
-                        .map(|x| [x[0] as f32, ny - x[1] as f32])
-                        .collect()
-                })
-                .collect();
-            self.rec.log(
-                "world/corrector/paths",
-                &rerun::LineStrips2D::new(strips)
-                    .with_colors(colors)
-                    .with_labels(labels)
-                    .with_radii([0.08f32])
-                    .with_draw_order(30.0),
-            )
-        } else {
-            let strips: Vec<Vec<[f32; 3]>> = b
-                .paths
-                .iter()
-                .map(|p| {
-                    p.cells
-                        .iter()
-                        .map(|x| [x[0] as f32, x[1] as f32, x[2] as f32])
-                        .collect()
-                })
-                .collect();
-            self.rec.log(
-                "world/corrector/paths",
-                &rerun::LineStrips3D::new(strips)
-                    .with_colors(colors)
-                    .with_labels(labels)
-                    .with_radii([0.08f32]),
-            )
-        }
-    }
-
-    /// Arrows from `x_hat` to `x` for the particles the correction sent to another cell (an
-    /// empty batch clears the previous step's arrows).
-    fn log_moves<const D: usize>(
-        &self,
-        moves: &[(Vector<D>, Vector<D>)],
-    ) -> rerun::RecordingStreamResult<()> {
-        let color = [[255u8, 80, 200]];
-        if D == 2 {
-            let ny = self.dims[1] as f32;
-            let origins: Vec<[f32; 2]> = moves
-                .iter()
-                .map(|(a, _)| [a[0] as f32, ny - a[1] as f32])
-                .collect();
-            let vectors: Vec<[f32; 2]> = moves
-                .iter()
-                .map(|(a, b)| [(b[0] - a[0]) as f32, (a[1] - b[1]) as f32])
-                .collect();
-            self.rec.log(
-                "world/corrector/moves",
-                &rerun::Arrows2D::from_vectors(vectors)
-                    .with_origins(origins)
-                    .with_colors(color)
-                    .with_radii([0.04f32])
-                    .with_draw_order(20.0),
-            )
-        } else {
-            let f = |v: &Vector<D>| [v[0] as f32, v[1] as f32, v[2] as f32];
-            let origins: Vec<[f32; 3]> = moves.iter().map(|(a, _)| f(a)).collect();
-            let vectors: Vec<[f32; 3]> = moves.iter().map(|(a, b)| f(&(b - a))).collect();
-            self.rec.log(
-                "world/corrector/moves",
-                &rerun::Arrows3D::from_vectors(vectors)
-                    .with_origins(origins)
-                    .with_colors(color)
-                    .with_radii([0.05f32]),
-            )
-        }
-    }
-
-    fn text<const D: usize>(&self, sim: &Simulation<D>, level: &'static str, msg: &str) {
-        self.set_time(sim);
-        let r = self
-            .rec
-            .log("log", &rerun::TextLog::new(msg).with_level(level));
-        self.report(r);
     }
 
     pub fn warn<const D: usize>(&self, sim: &Simulation<D>, msg: &str) {
@@ -742,7 +317,13 @@ impl Recorder {
         self.text(sim, rerun::TextLogLevel::ERROR, msg);
     }
 
-    /// A failed log call is not worth stopping a simulation for; say so once on stderr.
+    fn text<const D: usize>(&self, sim: &Simulation<D>, level: &'static str, msg: &str) {
+        let mut c = self.canvas(sim);
+        c.text(msg, level);
+        self.report(c.result);
+    }
+
+    /// A failed log call is not worth stopping a simulation for; say so on stderr.
     fn report(&self, r: rerun::RecordingStreamResult<()>) {
         if let Err(e) = r {
             eprintln!("warning: recording: {e}");
@@ -764,5 +345,291 @@ impl Recorder {
         self.rec.flush_blocking().map_err(|e| anyhow!("{e}"))?;
         drop(self.rec);
         Ok(())
+    }
+}
+
+/// The scalars every method has, and each obstacle's.
+fn log_metrics<const D: usize>(c: &mut Canvas<'_, D>, sim: &Simulation<D>, rep: &StepReport<D>) {
+    let s = &sim.state;
+    let h = s.config.cell_size_m;
+    c.scalar("metrics/volume_percent", rep.volume_percent);
+    c.scalar("metrics/particles", s.particles.len() as f64);
+    c.scalar("metrics/dt", rep.dt_secs);
+    c.scalar("metrics/max_speed", rep.max_speed * h);
+    c.scalar("metrics/pcg/iterations", rep.pcg.iterations as f64);
+    c.scalar("metrics/pcg/residual", rep.pcg.residual);
+    for st in Stage::ALL {
+        let ms = rep.times.get(st).as_secs_f64() * 1e3;
+        c.scalar(&format!("metrics/time/{}", st.name()), ms);
+    }
+    for (o, &blocked) in s.solids.obstacles.iter().zip(&rep.blocked) {
+        let m = format!("metrics/obstacle/{}", o.name);
+        c.scalar(&format!("{m}/height"), o.bottom() * h);
+        c.scalar(&format!("{m}/speed"), o.velocity.norm() * h);
+        c.scalar(&format!("{m}/blocked"), blocked as u8 as f64);
+    }
+    if rep.dt_shortened {
+        let msg = format!(
+            "step {}: time step shortened to {:.3e} s after the projection (max speed {:.3} m/s)",
+            s.steps,
+            rep.dt_secs,
+            rep.max_speed * h
+        );
+        c.text(&msg, rerun::TextLogLevel::DEBUG);
+    }
+}
+
+/// The cells obstacles wanted this step (`C_new_solid`), labelled with their clearing
+/// distance (an empty batch clears the previous step's).
+fn log_new_solid<const D: usize>(
+    c: &mut Canvas<'_, D>,
+    sim: &Simulation<D>,
+    cells: &[(usize, u32)],
+) {
+    let g = &sim.state.grid;
+    let centres: Vec<Vector<D>> = cells
+        .iter()
+        .map(|(k, _)| g.center(g.cell_coords(*k)))
+        .collect();
+    let labels = cells.iter().map(|(_, d)| d.to_string()).collect();
+    let look = PointLook {
+        radius: 0.3,
+        order: 26.0,
+        labels: Some(labels),
+    };
+    c.points(
+        "world/obstacles/new_solid",
+        &centres,
+        vec![[255, 200, 0]],
+        look,
+    );
+}
+
+/// How points look: radius (cells), draw order in 2D, labels.
+struct PointLook {
+    radius: f32,
+    order: f32,
+    labels: Option<Vec<String>>,
+}
+
+/// Draws on the recording at one step, in 2D or 3D; keeps the first error.
+pub struct Canvas<'a, const D: usize> {
+    rec: &'a RecordingStream,
+    dims: [usize; D],
+    ny: f32,
+    step: u64,
+    result: rerun::RecordingStreamResult<()>,
+}
+
+impl<const D: usize> Canvas<'_, D> {
+    fn keep(&mut self, r: rerun::RecordingStreamResult<()>) {
+        if self.result.is_ok() {
+            self.result = r;
+        }
+    }
+
+    /// World coordinates of a point in cells: in 2D rows down, `(x, ny - y, 0)`.
+    fn world(&self, x: &Vector<D>) -> [f32; 3] {
+        if D == 2 {
+            [x[0] as f32, self.ny - x[1] as f32, 0.0]
+        } else {
+            [x[0] as f32, x[1] as f32, x[2] as f32]
+        }
+    }
+
+    fn world_all(&self, xs: &[Vector<D>]) -> Vec<[f32; 3]> {
+        xs.iter().map(|x| self.world(x)).collect()
+    }
+
+    fn text(&mut self, msg: &str, level: &'static str) {
+        let r = self
+            .rec
+            .log("log", &rerun::TextLog::new(msg).with_level(level));
+        self.keep(r);
+    }
+
+    /// Points with one colour each (or one for all), one radius, and labels if given.
+    fn points(&mut self, path: &str, xs: &[Vector<D>], colors: Vec<[u8; 3]>, look: PointLook) {
+        let p = self.world_all(xs);
+        let r = if D == 2 {
+            let p2 = p.iter().map(|p| [p[0], p[1]]);
+            let mut pts = rerun::Points2D::new(p2)
+                .with_colors(colors)
+                .with_radii([look.radius])
+                .with_draw_order(look.order);
+            if let Some(l) = look.labels {
+                pts = pts.with_labels(l);
+            }
+            self.rec.log(path, &pts)
+        } else {
+            let mut pts = rerun::Points3D::new(p)
+                .with_colors(colors)
+                .with_radii([look.radius]);
+            if let Some(l) = look.labels {
+                pts = pts.with_labels(l);
+            }
+            self.rec.log(path, &pts)
+        };
+        self.keep(r);
+    }
+
+    /// An axis-aligned box from `lo` to `hi` (cells): the tank (`domain`: static, 3D as a
+    /// wireframe, under everything in 2D) or an obstacle (per step, over the particles).
+    fn boxes(&mut self, path: &str, lo: &Vector<D>, hi: &Vector<D>, color: [u8; 3], domain: bool) {
+        let (a, b) = (self.world(lo), self.world(hi));
+        let centre: [f32; 3] = std::array::from_fn(|k| (a[k] + b[k]) / 2.0);
+        let half: [f32; 3] = std::array::from_fn(|k| (b[k] - a[k]).abs() / 2.0);
+        let r = match (D, domain) {
+            (2, _) => {
+                let b = rerun::Boxes2D::from_centers_and_half_sizes(
+                    [(centre[0], centre[1])],
+                    [(half[0], half[1])],
+                )
+                .with_colors([color]);
+                if domain {
+                    self.rec.log_static(path, &b)
+                } else {
+                    self.rec.log(path, &b.with_draw_order(25.0))
+                }
+            }
+            (_, true) => {
+                let b = rerun::Boxes3D::from_centers_and_half_sizes([centre], [half])
+                    .with_colors([color])
+                    .with_fill_mode(rerun::FillMode::MajorWireframe);
+                self.rec.log_static(path, &b)
+            }
+            _ => {
+                let b = rerun::Boxes3D::from_centers_and_half_sizes([centre], [half]);
+                self.rec.log(path, &b.with_colors([color]))
+            }
+        };
+        self.keep(r);
+    }
+
+    /// One line strip through world points.
+    fn strip_world(&mut self, path: &str, pts: &[[f32; 3]], color: [u8; 3]) {
+        let r = if D == 2 {
+            let strip: Vec<[f32; 2]> = pts.iter().map(|p| [p[0], p[1]]).collect();
+            let s = rerun::LineStrips2D::new([strip]).with_colors([color]);
+            self.rec.log(path, &s.with_draw_order(24.0))
+        } else {
+            let s = rerun::LineStrips3D::new([pts.to_vec()]).with_colors([color]);
+            self.rec.log(path, &s)
+        };
+        self.keep(r);
+    }
+}
+
+impl<const D: usize> Log<D> for Canvas<'_, D> {
+    fn scalar(&mut self, path: &str, value: f64) {
+        let r = self.rec.log(path, &rerun::Scalars::single(value));
+        self.keep(r);
+    }
+
+    fn warn(&mut self, message: &str) {
+        let msg = format!("step {}: {message}", self.step);
+        self.text(&msg, rerun::TextLogLevel::WARN);
+    }
+
+    fn classes(&mut self, path: &str, classes: &[(u16, &'static str, [u8; 4])]) {
+        let c: Vec<(u16, &str, rerun::Rgba32)> = classes
+            .iter()
+            .map(|(id, l, c)| (*id, *l, rgba(*c)))
+            .collect();
+        let r = self.rec.log_static(path, &rerun::AnnotationContext::new(c));
+        self.keep(r);
+    }
+
+    fn cell_classes(
+        &mut self,
+        path: &str,
+        class: &dyn Fn(usize) -> u8,
+        hidden_3d: &[u8],
+        layer: Layer,
+    ) {
+        let n: usize = self.dims.iter().product();
+        let r = if D == 2 {
+            // Cell index c = x + w y (axis 0 fastest); image row 0 is the top.
+            let (w, h) = (self.dims[0], self.dims[1]);
+            let mut img = vec![0u8; n];
+            for c in 0..n {
+                img[(h - 1 - c / w) * w + c % w] = class(c);
+            }
+            let format =
+                rerun::ImageFormat::segmentation([w as u32, h as u32], rerun::ChannelDatatype::U8);
+            let image = rerun::SegmentationImage::new(img, format).with_draw_order(layer.order);
+            self.rec.log(path, &image)
+        } else {
+            let grid = crate::grid::Grid::new(self.dims);
+            let (centres, ids): (Vec<[f32; 3]>, Vec<rerun::components::ClassId>) = (0..n)
+                .map(|c| (c, class(c)))
+                .filter(|(_, k)| !hidden_3d.contains(k))
+                .map(|(c, k)| {
+                    (
+                        self.world(&grid.center(grid.cell_coords(c))),
+                        rerun::components::ClassId::from(k as u16),
+                    )
+                })
+                .unzip();
+            let pts = rerun::Points3D::new(centres).with_class_ids(ids);
+            let pts = pts.with_radii([layer.radius_3d]);
+            self.rec.log(path, &pts)
+        };
+        self.keep(r);
+    }
+
+    fn arrows(&mut self, path: &str, from_to: &[(Vector<D>, Vector<D>)], style: Style) {
+        let origins: Vec<[f32; 3]> = from_to.iter().map(|(a, _)| self.world(a)).collect();
+        let vectors: Vec<[f32; 3]> = from_to
+            .iter()
+            .zip(&origins)
+            .map(|((_, b), o)| {
+                let w = self.world(b);
+                std::array::from_fn(|k| w[k] - o[k])
+            })
+            .collect();
+        let r = if D == 2 {
+            let two = |v: &[[f32; 3]]| v.iter().map(|p| [p[0], p[1]]).collect::<Vec<_>>();
+            let a = rerun::Arrows2D::from_vectors(two(&vectors)).with_origins(two(&origins));
+            let a = a.with_colors([style.color]).with_radii([style.radius]);
+            self.rec.log(path, &a.with_draw_order(style.order))
+        } else {
+            let a = rerun::Arrows3D::from_vectors(vectors).with_origins(origins);
+            self.rec.log(
+                path,
+                &a.with_colors([style.color]).with_radii([style.radius]),
+            )
+        };
+        self.keep(r);
+    }
+
+    fn strips(
+        &mut self,
+        path: &str,
+        strips: &[Vec<Vector<D>>],
+        colors: &[[u8; 3]],
+        labels: Vec<String>,
+        style: Style,
+    ) {
+        let world: Vec<Vec<[f32; 3]>> = strips.iter().map(|s| self.world_all(s)).collect();
+        let r = if D == 2 {
+            let two: Vec<Vec<[f32; 2]>> = world
+                .iter()
+                .map(|s| s.iter().map(|p| [p[0], p[1]]).collect())
+                .collect();
+            let l = rerun::LineStrips2D::new(two)
+                .with_colors(colors.to_vec())
+                .with_labels(labels);
+            self.rec.log(
+                path,
+                &l.with_radii([style.radius]).with_draw_order(style.order),
+            )
+        } else {
+            let l = rerun::LineStrips3D::new(world)
+                .with_colors(colors.to_vec())
+                .with_labels(labels);
+            self.rec.log(path, &l.with_radii([style.radius]))
+        };
+        self.keep(r);
     }
 }

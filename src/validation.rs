@@ -2,6 +2,7 @@
 //! (surge front and residual column height) and water at rest. Used by the tests and by
 //! `cellflip validate`, so the README's figures and the tests come from the same code.
 
+use crate::runner::{Limit, Runner};
 use crate::scene::{Overrides, Scene};
 use crate::sim::Simulation;
 use anyhow::{anyhow, Context, Result};
@@ -90,37 +91,42 @@ pub fn martin_moyce(overrides: &Overrides, shift_t: f64) -> Result<MartinMoyce> 
     let scene = Scene::load("martin-moyce-2d", overrides)?;
     let front_data = parse_csv(SURGE_FRONT_CSV).context("martin_moyce_1952.csv")?;
     let height_data = parse_csv(COLUMN_HEIGHT_CSV).context("martin_moyce_1952_height.csv")?;
-    let mut sim = Simulation::<2>::new(scene.config::<2>());
-    let h = sim.config.cell_size_m;
+    let sim = Simulation::<2>::new(scene.config::<2>());
+    let h = sim.state.config.cell_size_m;
     let a = COLUMN_WIDTH_M;
     let t_front = (2.0 * G / a).sqrt();
     let t_height = (G / a).sqrt();
     let t_end =
         (front_data.last().unwrap().0 / t_front).max(height_data.last().unwrap().0 / t_height);
+    // Surge front: furthest particle within a/4 of the floor; column: highest particle in the
+    // first cell column. In metres.
     let observe = |sim: &Simulation<2>| {
+        let pos = &sim.state.particles.pos;
         let floor = 0.25 * a / h;
-        let front = sim
-            .particles
-            .pos
+        let front = pos
             .iter()
             .filter(|x| x[1] < floor)
             .map(|x| x[0])
             .fold(0.0, f64::max);
-        let column = sim
-            .particles
-            .pos
+        let column = pos
             .iter()
             .filter(|x| x[0] < 1.0)
             .map(|x| x[1])
             .fold(0.0, f64::max);
-        (sim.time_secs, front * h, column * h)
+        (sim.state.time_secs, front * h, column * h)
     };
     let mut series = vec![observe(&sim)];
-    while sim.time_secs < t_end {
-        sim.step()
-            .map_err(|e| anyhow!("martin-moyce-2d step {}: {e}", sim.steps + 1))?;
-        series.push(observe(&sim));
-    }
+    let mut runner = Runner::new(sim);
+    runner
+        .run(
+            Limit::SimSeconds(t_end),
+            || false,
+            |sim, _| {
+                series.push(observe(sim));
+                Ok(())
+            },
+        )
+        .context("martin-moyce-2d")?;
     let fronts: Vec<(f64, f64)> = series
         .iter()
         .map(|(t, f, _)| (t * t_front + shift_t, f / a))
@@ -142,7 +148,7 @@ pub fn martin_moyce(overrides: &Overrides, shift_t: f64) -> Result<MartinMoyce> 
         front: rows(&front_data, &fronts),
         height: rows(&height_data, &heights),
         shift_t,
-        steps: sim.steps,
+        steps: runner.sim.state.steps,
         cells_per_a: a / h,
     })
 }
@@ -158,30 +164,17 @@ pub struct Hydrostatic {
 
 pub fn hydrostatic(steps: u64) -> Result<Hydrostatic> {
     let scene = Scene::load("hydrostatic-2d", &Overrides::default())?;
-    let mut sim = Simulation::<2>::new(scene.config::<2>());
-    let depth_m = sim
-        .particles
-        .pos
-        .iter()
-        .map(|x| x[1])
-        .fold(0.0, f64::max)
-        .ceil()
-        * sim.config.cell_size_m;
-    let (mut vmin, mut vmax) = (sim.volume_percent(), sim.volume_percent());
-    for _ in 0..steps {
-        let rep = sim
-            .step()
-            .map_err(|e| anyhow!("hydrostatic-2d step {}: {e}", sim.steps + 1))?;
-        vmin = vmin.min(rep.volume_percent);
-        vmax = vmax.max(rep.volume_percent);
-    }
-    let vmax_speed = sim
-        .particles
-        .vel
-        .iter()
-        .map(|v| v.norm())
-        .fold(0.0, f64::max)
-        * sim.config.cell_size_m;
+    let mut runner = Runner::new(Simulation::<2>::new(scene.config::<2>()));
+    let s = &runner.sim.state;
+    let top = s.particles.pos.iter().map(|x| x[1]).fold(0.0, f64::max);
+    let depth_m = top.ceil() * s.config.cell_size_m;
+    runner
+        .run(Limit::Steps(steps), || false, |_, _| Ok(()))
+        .context("hydrostatic-2d")?;
+    let s = &runner.sim.state;
+    let speed = s.particles.vel.iter().map(|v| v.norm()).fold(0.0, f64::max);
+    let vmax_speed = speed * s.config.cell_size_m;
+    let (vmin, vmax) = (runner.summary.volume_min, runner.summary.volume_max);
     Ok(Hydrostatic {
         speed_fraction: vmax_speed / (G * depth_m).sqrt(),
         volume_min: vmin,

@@ -2,13 +2,19 @@
 //! and 3D, feasibility of all three band corrections, their objectives against each other, and
 //! a known-answer case of fig. path.
 
+mod common;
+
 use cellflip::grid::{Grid, Vector};
+use cellflip::methods::MethodKind;
 use cellflip::metrics::check_cell_counts;
-use cellflip::scene::{Overrides, Scene};
-use cellflip::sim::correct::band::{BandContext, BandVariant};
+use cellflip::runner::Limit;
+use cellflip::scene::Overrides;
+use cellflip::sim::band::Band;
+use cellflip::sim::correct::band::{BandContext, BandMode, BandVariant};
 use cellflip::sim::correct::{correct, CorrectionSettings};
 use cellflip::sim::markings::{DepthLevel, Markings};
 use cellflip::sim::Simulation;
+use common::{ccp, load, run_config};
 
 /// Runs `steps` steps of a scene with method ccp and the given band, checking every step: the
 /// invariants (inside `step`: cell bounds after the correction, particles plus `n_deep` equal
@@ -17,28 +23,27 @@ use cellflip::sim::Simulation;
 /// Returns the volume of every step and the simulation.
 fn run_band<const D: usize>(
     name: &str,
-    band: &str,
+    band: BandMode,
     overrides: Overrides,
     steps: u64,
     cross_check: bool,
 ) -> (Vec<f64>, Simulation<D>) {
     let overrides = Overrides {
-        method: Some("ccp".into()),
-        band: Some(band.into()),
+        method: Some(MethodKind::Ccp),
+        band: Some(band),
         ..overrides
     };
-    let scene = Scene::load(name, &overrides).unwrap();
+    let scene = load(name, &overrides);
     let mut config = scene.config::<D>();
-    config.correction.cross_check = cross_check;
-    let mut sim = Simulation::<D>::new(config);
-    let r = sim.band().expect("a band").r;
-    let mut volumes = vec![sim.volume_percent()];
-    for _ in 0..steps {
-        let rep = sim
-            .step()
-            .unwrap_or_else(|e| panic!("{name} ({band}) step {}: {e}", sim.steps + 1));
-        let at = format!("{name} ({band}) step {}", sim.steps);
-        let c = rep.correction.as_ref().unwrap();
+    config.method.cross_check = cross_check;
+    let geometry = Band {
+        r: config.method.band_r,
+    };
+    let mut volumes = vec![Simulation::new(config.clone()).state.volume_percent()];
+    let runner = run_config::<D>(config, Limit::Steps(steps), |sim, rep| {
+        let s = &sim.state;
+        let at = format!("{name} ({}) step {}", band.name(), s.steps);
+        let c = &ccp(rep).correction;
         assert!(c.fallback.is_none(), "{at}: {:?}", c.fallback);
         let b = c.band.as_ref().expect("band report");
         assert!(b.failure.is_none(), "{at}: {:?}", b.failure);
@@ -48,17 +53,19 @@ fn run_band<const D: usize>(
             b.net_in,
             b.alpha
         );
-        let deep = rep.deep.unwrap();
-        assert_eq!(deep.unplaced, 0, "{at}: no room in the interface");
         assert_eq!(
-            sim.particles.len() + sim.n_deep,
-            sim.total_particles,
+            ccp(rep).deep.unwrap().unplaced,
+            0,
+            "{at}: no room in the interface"
+        );
+        let n_deep = sim.method.imaginary_particles();
+        assert_eq!(s.particles.len() + n_deep, s.total_particles, "{at}");
+        assert!(
+            geometry
+                .particle_in_deep(&s.grid, &s.markings, &s.particles.pos)
+                .is_none(),
             "{at}"
         );
-        for x in &sim.particles.pos {
-            let cell = sim.grid.cell_index_of(x);
-            assert_ne!(sim.markings.level(cell, r), DepthLevel::Deep, "{at}");
-        }
         if cross_check {
             for (v, o) in &b.other_objectives {
                 let o = o
@@ -75,8 +82,8 @@ fn run_band<const D: usize>(
             }
         }
         volumes.push(rep.volume_percent);
-    }
-    (volumes, sim)
+    });
+    (volumes, runner.sim)
 }
 
 fn min(v: &[f64]) -> f64 {
@@ -86,18 +93,21 @@ fn min(v: &[f64]) -> f64 {
 #[test]
 fn band_conserves_volume_over_a_long_2d_run() {
     // The whole dam-2d with its emitter (8 s, about 1200 steps), R = 6 as in the paper.
-    let (v, sim) = run_band::<2>("dam-2d", "paths", Overrides::default(), 1200, false);
+    let (v, sim) = run_band::<2>("dam-2d", BandMode::Paths, Overrides::default(), 1200, false);
     assert!(min(&v) >= 100.0 - 1e-9, "volume fell to {}%", min(&v));
     // The emitter filled exactly half the tank, counting the deep's particles.
-    assert_eq!(sim.total_particles, sim.grid.num_cells() / 2 * 4);
-    assert!(sim.n_deep > 0);
+    assert_eq!(
+        sim.state.total_particles,
+        sim.state.grid.num_cells() / 2 * 4
+    );
+    assert!(sim.method.imaginary_particles() > 0);
 }
 
 #[test]
 fn band_conserves_volume_over_a_long_3d_run() {
     let (v, sim) = run_band::<3>(
         "dam-3d",
-        "paths",
+        BandMode::Paths,
         Overrides {
             cells: Some(32),
             band_r: Some(3),
@@ -107,10 +117,10 @@ fn band_conserves_volume_over_a_long_3d_run() {
         false,
     );
     assert!(min(&v) >= 100.0 - 1e-9, "volume fell to {}%", min(&v));
-    assert!(sim.n_deep > 0);
+    assert!(sim.method.imaginary_particles() > 0);
     let (v, _) = run_band::<3>(
         "drop-3d",
-        "paths",
+        BandMode::Paths,
         Overrides {
             cells: Some(24),
             ..Default::default()
@@ -129,11 +139,11 @@ fn all_three_band_variants_stay_feasible_and_full_is_the_optimum_2d() {
         band_r: Some(2),
         ..Default::default()
     };
-    for band in ["paths", "one-way", "full"] {
+    for band in [BandMode::Paths, BandMode::OneWay, BandMode::Full] {
         let (v, _) = run_band::<2>("dam-2d", band, small.clone(), 80, true);
         assert!(
             min(&v) >= 100.0 - 1e-9,
-            "{band}: volume fell to {}%",
+            "{band:?}: volume fell to {}%",
             min(&v)
         );
     }
@@ -146,34 +156,29 @@ fn all_three_band_variants_stay_feasible_3d() {
         band_r: Some(1),
         ..Default::default()
     };
-    for band in ["paths", "one-way", "full"] {
+    for band in [BandMode::Paths, BandMode::OneWay, BandMode::Full] {
         run_band::<3>("dam-3d", band, small.clone(), 30, true);
     }
 }
 
 #[test]
 fn the_band_holds_fewer_particles_than_the_fluid_on_dam_3d() {
-    let at = |band: &str| {
-        let scene = Scene::load(
-            "dam-3d",
-            &Overrides {
-                cells: Some(100),
-                band: Some(band.into()),
-                ..Default::default()
-            },
-        )
-        .unwrap();
-        Simulation::<3>::new(scene.config::<3>())
+    let at = |band| {
+        let o = Overrides {
+            cells: Some(100),
+            band: Some(band),
+            ..Default::default()
+        };
+        let sim = Simulation::<3>::new(load("dam-3d", &o).config::<3>());
+        (sim.state.particles.len(), sim.method.imaginary_particles())
     };
-    let full = at("none");
-    let band = at("paths");
-    assert_eq!(full.n_deep, 0);
-    assert_eq!(band.particles.len() + band.n_deep, full.particles.len());
-    let ratio = band.particles.len() as f64 / full.particles.len() as f64;
+    let (full, full_deep) = at(BandMode::None);
+    let (band, band_deep) = at(BandMode::Paths);
+    assert_eq!(full_deep, 0);
+    assert_eq!(band + band_deep, full);
+    let ratio = band as f64 / full as f64;
     println!(
-        "dam-3d at 100^3, R = 6: {} of {} particles held ({:.1}%)",
-        band.particles.len(),
-        full.particles.len(),
+        "dam-3d at 100^3, R = 6: {band} of {full} particles held ({:.1}%)",
         100.0 * ratio
     );
     assert!(ratio < 0.75, "{ratio}");

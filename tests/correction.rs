@@ -2,12 +2,17 @@
 //! instances and real steps, the guarantees of eq. problem3 in 2D and 3D, and the paper's
 //! volume claims.
 
+mod common;
+
 use cellflip::grid::{Grid, Vector};
-use cellflip::scene::{Overrides, Scene};
+use cellflip::methods::MethodKind;
+use cellflip::runner::Limit;
+use cellflip::scene::Overrides;
+use cellflip::sim::correct::band::BandMode;
 use cellflip::sim::correct::problem::{self, Directions};
 use cellflip::sim::markings::Markings;
-use cellflip::sim::Simulation;
 use cellflip::solvers::{lp, min_cost_flow};
+use common::{ccp, load, run_config};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
@@ -130,7 +135,8 @@ fn flow_work_grows_with_conflicts_not_particles() {
     );
 }
 
-/// Runs a scene with method ccp; every step checks eq. problem3's guarantees (inside `step`).
+/// Runs a scene with method ccp; every step checks eq. problem3's guarantees (inside `step`),
+/// that no solver failed, and with `cross_check` that flow and simplex found the same optimum.
 fn run_ccp<const D: usize>(
     name: &str,
     overrides: Overrides,
@@ -138,38 +144,26 @@ fn run_ccp<const D: usize>(
     cross_check: bool,
 ) -> Vec<f64> {
     let overrides = Overrides {
-        method: Some("ccp".into()),
+        method: Some(MethodKind::Ccp),
         ..overrides
     };
-    let scene = Scene::load(name, &overrides).unwrap();
-    let mut config = scene.config::<D>();
-    config.correction.cross_check = cross_check;
-    let mut sim = Simulation::<D>::new(config);
-    let mut volumes = vec![sim.volume_percent()];
-    for _ in 0..steps {
-        let rep = sim
-            .step()
-            .unwrap_or_else(|e| panic!("{name} step {}: {e}", sim.steps + 1));
-        let c = rep.correction.expect("ccp corrects every step");
-        assert!(
-            c.fallback.is_none(),
-            "{name} step {}: {:?}",
-            sim.steps,
-            c.fallback
-        );
+    let mut config = load(name, &overrides).config::<D>();
+    config.method.cross_check = cross_check;
+    let mut volumes = vec![];
+    run_config::<D>(config, Limit::Steps(steps), |sim, rep| {
+        let at = format!("{name} step {}", sim.state.steps);
+        let c = &ccp(rep).correction;
+        assert!(c.fallback.is_none(), "{at}: {:?}", c.fallback);
         if cross_check {
             let d = c
                 .cross_check
+                .clone()
                 .unwrap()
-                .unwrap_or_else(|e| panic!("{name} step {}: {e}", sim.steps));
-            assert!(
-                d <= 1e-9,
-                "{name} step {}: objectives differ by {d:e}",
-                sim.steps
-            );
+                .unwrap_or_else(|e| panic!("{at}: {e}"));
+            assert!(d <= 1e-9, "{at}: objectives differ by {d:e}");
         }
         volumes.push(rep.volume_percent);
-    }
+    });
     volumes
 }
 
@@ -192,7 +186,7 @@ fn volume_never_drops_below_100_percent_2d() {
 fn one_particle_per_cell_keeps_exactly_100_percent() {
     let v = run_ccp::<2>("dam-1ppc-2d", Overrides::default(), 300, false);
     for (step, x) in v.iter().enumerate() {
-        assert!((x - 100.0).abs() < 1e-9, "step {step}: {x}%");
+        assert!((x - 100.0).abs() < 1e-9, "step {}: {x}%", step + 1);
     }
 }
 
@@ -210,7 +204,7 @@ fn volume_never_drops_below_100_percent_3d() {
         "drop-3d",
         Overrides {
             cells: Some(12),
-            band: Some("none".into()),
+            band: Some(BandMode::None),
             ..small
         },
         10,

@@ -6,33 +6,35 @@
 
 mod common;
 
+use cellflip::methods::MethodKind;
 use cellflip::scene::{Overrides, BUILT_IN};
+use cellflip::sim::correct::band::BandMode;
 use common::{digest_run, load};
 
 /// The runs: (scene, method override, band override, steps). 3D scenes run at 16 cells along
 /// their shortest axis.
-fn cases() -> Vec<(String, Option<&'static str>, Option<&'static str>, u64)> {
+fn cases() -> Vec<(String, Option<MethodKind>, Option<BandMode>, u64)> {
     let mut v = vec![];
     for (name, _) in BUILT_IN {
         let s = load(name, &Overrides::default());
         let steps = if s.dim() == 2 { 60 } else { 12 };
         v.push((name.to_string(), None, None, steps));
-        if s.method.name() != "flip" {
-            v.push((name.to_string(), Some("flip"), None, steps));
+        if s.method.kind != MethodKind::Flip {
+            v.push((name.to_string(), Some(MethodKind::Flip), None, steps));
         }
     }
     // The emitter starts at 2.5 s; the band variants on the 2D dam.
     v.push(("dam-2d".into(), None, None, 330));
-    v.push(("dam-2d".into(), None, Some("paths"), 60));
-    v.push(("dam-2d".into(), None, Some("one-way"), 8));
-    v.push(("dam-2d".into(), None, Some("full"), 8));
+    v.push(("dam-2d".into(), None, Some(BandMode::Paths), 60));
+    v.push(("dam-2d".into(), None, Some(BandMode::OneWay), 8));
+    v.push(("dam-2d".into(), None, Some(BandMode::Full), 8));
     v
 }
 
-fn digest(name: &str, method: Option<&str>, band: Option<&str>, steps: u64) -> String {
+fn digest(name: &str, method: Option<MethodKind>, band: Option<BandMode>, steps: u64) -> String {
     let mut o = Overrides {
-        method: method.map(Into::into),
-        band: band.map(Into::into),
+        method,
+        band,
         ..Default::default()
     };
     let s = load(name, &o);
@@ -55,8 +57,8 @@ fn every_scene_gives_the_recorded_digest() {
             let d = digest(&name, method, band, steps);
             format!(
                 "{name} method={} band={} steps={steps} {d}",
-                method.unwrap_or("default"),
-                band.unwrap_or("default")
+                method.map_or("default", |m| m.name()),
+                band.map_or("default", |b| b.name())
             )
         })
         .collect();

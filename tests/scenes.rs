@@ -1,35 +1,34 @@
 //! Every built-in scene runs with its invariants intact (checked inside every step), in 2D and
 //! 3D; emitters reach their target; runs are deterministic.
 
+mod common;
+
+use cellflip::methods::MethodKind;
 use cellflip::scene::{Overrides, Scene, BUILT_IN};
 use cellflip::sim::Simulation;
+use common::{load, run};
 
-fn run<const D: usize>(name: &str, overrides: &Overrides, steps: u64) -> Simulation<D> {
-    let scene = Scene::load(name, overrides).unwrap();
-    let mut sim = Simulation::<D>::new(scene.config::<D>());
+/// Runs a built-in scene, checking every step: a finite volume, a positive time step, a
+/// converged pressure solve, and nothing moving more than `cfl` cells (sec. grid_move).
+fn run_checked<const D: usize>(name: &str, overrides: &Overrides, steps: u64) -> Simulation<D> {
+    let scene = load(name, overrides);
+    let sim = Simulation::<D>::new(scene.config::<D>());
     sim.check_invariants().unwrap();
-    for _ in 0..steps {
-        let rep = sim
-            .step()
-            .unwrap_or_else(|e| panic!("{name} step {}: {e}", sim.steps + 1));
-        assert!(rep.volume_percent.is_finite() && rep.dt_secs > 0.0);
-        assert!(
-            rep.pcg.converged,
-            "{name} step {}: {:?}",
-            sim.steps, rep.pcg
-        );
-        // Nothing moves more than one cell per axis per step (sec. grid_move).
-        assert!(rep.max_speed * rep.dt_secs <= sim.config.cfl * (1.0 + 1e-12));
-    }
-    sim
+    run::<D>(&scene, Some(steps), |sim, rep| {
+        let at = format!("{name} step {}", sim.state.steps);
+        assert!(rep.volume_percent.is_finite() && rep.dt_secs > 0.0, "{at}");
+        assert!(rep.pcg.converged, "{at}: {:?}", rep.pcg);
+        let cfl = sim.state.config.cfl;
+        assert!(rep.max_speed * rep.dt_secs <= cfl * (1.0 + 1e-12), "{at}");
+    })
+    .sim
 }
 
 #[test]
 fn every_2d_scene_keeps_its_invariants() {
     for (name, _) in BUILT_IN {
-        let scene = Scene::load(name, &Overrides::default()).unwrap();
-        if scene.dim() == 2 {
-            run::<2>(name, &Overrides::default(), 60);
+        if load(name, &Overrides::default()).dim() == 2 {
+            run_checked::<2>(name, &Overrides::default(), 60);
         }
     }
 }
@@ -37,7 +36,7 @@ fn every_2d_scene_keeps_its_invariants() {
 #[test]
 fn every_3d_scene_keeps_its_invariants() {
     for (name, _) in BUILT_IN {
-        let scene = Scene::load(name, &Overrides::default()).unwrap();
+        let scene = load(name, &Overrides::default());
         if scene.dim() == 3 {
             // 20 cells along the shortest axis.
             let (lo, hi) = (
@@ -48,54 +47,46 @@ fn every_3d_scene_keeps_its_invariants() {
                 cells: Some(20 * hi / lo),
                 ..Default::default()
             };
-            let sim = run::<3>(name, &small, 40);
-            assert!(sim.particles.len() > 1000);
+            let sim = run_checked::<3>(name, &small, 40);
+            assert!(sim.state.particles.len() > 1000);
         }
     }
 }
 
 #[test]
 fn dam_2d_emitter_fills_exactly_half_the_tank() {
-    let scene = Scene::load("dam-2d", &Overrides::default()).unwrap();
-    let mut sim = Simulation::<2>::new(scene.config::<2>());
-    let seeded = sim.particles.len();
-    while sim.time_secs < scene.duration_secs() {
-        sim.step().unwrap();
-    }
-    let cells = sim.grid.num_cells();
-    assert_eq!(sim.particles.len(), 4 * cells / 2);
-    assert!(sim.particles.len() > seeded);
-    assert!((sim.target_volume - cells as f64 / 2.0).abs() < 1e-9);
+    let scene = load("dam-2d", &Overrides::default());
+    let seeded = Simulation::<2>::new(scene.config::<2>())
+        .state
+        .particles
+        .len();
+    let s = run::<2>(&scene, None, |_, _| {}).sim.state;
+    let cells = s.grid.num_cells();
+    assert_eq!(s.particles.len(), 4 * cells / 2);
+    assert!(s.particles.len() > seeded);
+    assert!((s.target_volume - cells as f64 / 2.0).abs() < 1e-9);
 }
 
 #[test]
 fn same_seed_gives_bit_identical_particles() {
-    let a = run::<2>("dam-2d", &Overrides::default(), 80);
-    let b = run::<2>("dam-2d", &Overrides::default(), 80);
-    assert_eq!(a.particles, b.particles);
-    let other = Overrides {
-        seed: Some(99),
-        ..Default::default()
+    let dam = |seed| {
+        let o = Overrides {
+            seed,
+            ..Default::default()
+        };
+        run_checked::<2>("dam-2d", &o, 80).state.particles
     };
-    let c = run::<2>("dam-2d", &other, 80);
-    assert_ne!(a.particles.pos, c.particles.pos);
-    let d3a = run::<3>(
-        "drop-3d",
-        &Overrides {
+    let a = dam(None);
+    assert_eq!(a, dam(None));
+    assert_ne!(a.pos, dam(Some(99)).pos);
+    let drop = || {
+        let o = Overrides {
             cells: Some(16),
             ..Default::default()
-        },
-        20,
-    );
-    let d3b = run::<3>(
-        "drop-3d",
-        &Overrides {
-            cells: Some(16),
-            ..Default::default()
-        },
-        20,
-    );
-    assert_eq!(d3a.particles, d3b.particles);
+        };
+        run_checked::<3>("drop-3d", &o, 20).state.particles
+    };
+    assert_eq!(drop(), drop());
 }
 
 #[test]
@@ -109,26 +100,43 @@ fn thread_count_does_not_change_the_result() {
             .num_threads(n)
             .build()
             .unwrap();
-        pool.install(|| run::<3>("dam-3d", &overrides, 15).particles)
+        pool.install(|| run_checked::<3>("dam-3d", &overrides, 15).state.particles)
     };
     assert_eq!(with_threads(1), with_threads(3));
 }
 
 #[test]
 fn a_non_finite_state_stops_the_step_with_an_error_not_a_panic() {
-    for method in ["flip", "ccp"] {
-        let scene = Scene::load(
-            "drop-2d",
-            &Overrides {
-                method: Some(method.into()),
-                ..Default::default()
-            },
-        )
-        .unwrap();
+    for method in [MethodKind::Flip, MethodKind::Ccp] {
+        let scene = load("drop-2d", &common::with(method, None));
         let mut sim = Simulation::<2>::new(scene.config::<2>());
         sim.step().unwrap();
-        sim.particles.vel[7][0] = f64::NAN;
+        sim.state.particles.vel[7][0] = f64::NAN;
         let err = sim.step().expect_err("a NaN velocity must not pass");
-        assert!(err.0.contains("not finite"), "{method}: {err}");
+        assert!(
+            format!("{err:#}").contains("not finite"),
+            "{method:?}: {err:#}"
+        );
+    }
+}
+
+#[test]
+fn every_method_runs_every_built_in_scene_for_a_few_steps() {
+    for (name, _) in BUILT_IN {
+        for &method in MethodKind::ALL {
+            let three = load(name, &Overrides::default()).dim() == 3;
+            let o = Overrides {
+                method: Some(method),
+                // 3D at 24 cells along the longest axis (whole cells for every 3D tank).
+                cells: three.then_some(24),
+                ..Default::default()
+            };
+            let scene =
+                Scene::load(name, &o).unwrap_or_else(|e| panic!("{name}, {method:?}: {e:#}"));
+            match three {
+                false => drop(run::<2>(&scene, Some(5), |_, _| {})),
+                true => drop(run::<3>(&scene, Some(3), |_, _| {})),
+            }
+        }
     }
 }

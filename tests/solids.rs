@@ -3,9 +3,16 @@
 //! Every step checks the invariants inside `step` (no particle in a solid, cell bounds after
 //! the correction, counts conserved, all finite).
 
+mod common;
+
 use cellflip::grid::Vector;
+use cellflip::methods::ccp::CcpReport;
+use cellflip::methods::MethodKind;
 use cellflip::scene::{Overrides, Scene};
+use cellflip::sim::correct::band::BandMode;
+use cellflip::sim::solids::ObstacleMode;
 use cellflip::sim::Simulation;
+use common::load;
 
 struct Run {
     volume_min: f64,
@@ -15,78 +22,66 @@ struct Run {
     steps: usize,
 }
 
+/// Runs `scene` to its end. With the band, every step checks that the band correction met its
+/// constraint and that the interface always had room for the deep's excess.
 fn run<const D: usize>(scene: &Scene) -> (Run, Simulation<D>) {
-    let mut sim = Simulation::<D>::new(scene.config::<D>());
-    let mut r = Run {
-        volume_min: f64::INFINITY,
-        bottom: 0.0,
-        blocked_steps: 0,
-        steps: 0,
+    let mut blocked_steps = 0;
+    let runner = common::run::<D>(scene, None, |sim, rep| {
+        let at = format!("{} step {}", scene.name(), sim.state.steps);
+        assert!(rep.volume_percent.is_finite(), "{at}");
+        if let Some(r) = rep.method_report::<CcpReport<D>>() {
+            if let Some(b) = &r.correction.band {
+                assert!(b.failure.is_none(), "{at}: {:?}", b.failure);
+            }
+            if let Some(x) = r.deep {
+                assert_eq!(x.unplaced, 0, "{at}");
+            }
+        }
+        blocked_steps += rep.blocked.first().copied().unwrap_or(false) as usize;
+    });
+    let r = Run {
+        volume_min: runner.summary.volume_min,
+        bottom: runner.sim.state.solids.obstacles[0].bottom(),
+        blocked_steps,
+        steps: runner.summary.steps as usize,
     };
-    while sim.time_secs < scene.duration_secs() {
-        let rep = sim
-            .step()
-            .unwrap_or_else(|e| panic!("{} step {}: {e}", scene.name(), sim.steps + 1));
-        assert!(rep.volume_percent.is_finite());
-        // With the band: every band correction met its constraint, and the interface always
-        // had room for the deep's excess.
-        if let Some(b) = rep.correction.as_ref().and_then(|c| c.band.as_ref()) {
-            assert!(
-                b.failure.is_none(),
-                "{} step {}: {:?}",
-                scene.name(),
-                sim.steps,
-                b.failure
-            );
-        }
-        if let Some(x) = rep.deep {
-            assert_eq!(x.unplaced, 0, "{} step {}", scene.name(), sim.steps);
-        }
-        r.volume_min = r.volume_min.min(rep.volume_percent);
-        r.blocked_steps += rep.blocked.first().copied().unwrap_or(false) as usize;
-        r.steps += 1;
-    }
-    r.bottom = sim.obstacles[0].bottom();
-    (r, sim)
+    (r, runner.sim)
 }
 
-fn scene(name: &str, method: &str, obstacle: Option<&str>) -> Scene {
-    Scene::load(
-        name,
-        &Overrides {
-            method: Some(method.into()),
-            obstacle: obstacle.map(str::to_string),
-            ..Default::default()
-        },
-    )
-    .unwrap()
+fn scene(name: &str, method: MethodKind, obstacle: Option<ObstacleMode>) -> Scene {
+    let o = Overrides {
+        method: Some(method),
+        obstacle,
+        ..Default::default()
+    };
+    load(name, &o)
 }
 
 #[test]
 fn ccp_compresses_exactly_to_mu_per_cell_and_the_baselines_do_not() {
-    let (ccp, sim) = run::<2>(&scene("compress-2d", "ccp", None));
+    let (ccp, sim) = run::<2>(&scene("compress-2d", MethodKind::Ccp, None));
     assert!(
         ccp.volume_min >= 100.0 - 1e-9,
         "ccp volume fell to {}%",
         ccp.volume_min
     );
     // Maximum compression: the particles fill whole rows below the lid, mu per cell.
-    let mu = sim.config.mu() as usize;
-    let width = sim.grid.dims[0];
-    let rows = sim.total_particles / (mu * width);
-    assert_eq!(rows * mu * width, sim.total_particles);
+    let mu = sim.state.config.mu() as usize;
+    let width = sim.state.grid.dims[0];
+    let rows = sim.state.total_particles / (mu * width);
+    assert_eq!(rows * mu * width, sim.state.total_particles);
     assert!(
         ccp.bottom > rows as f64 - 0.5 && ccp.bottom <= rows as f64 + 0.5,
         "the lid stopped at {} cells, full rows end at {rows}",
         ccp.bottom
     );
-    for c in 0..sim.grid.num_cells() {
-        if sim.grid.cell_coords(c)[1] < rows {
+    for c in 0..sim.state.grid.num_cells() {
+        if sim.state.grid.cell_coords(c)[1] < rows {
             assert_eq!(
-                sim.markings.count[c] as usize,
+                sim.state.markings.count[c] as usize,
                 mu,
                 "cell {:?}",
-                sim.grid.cell_coords(c)
+                sim.state.grid.cell_coords(c)
             );
         }
     }
@@ -97,14 +92,14 @@ fn ccp_compresses_exactly_to_mu_per_cell_and_the_baselines_do_not() {
 /// FLIP waiting for free cells halts again and again, and still loses volume (it packs
 /// particles more densely than mu).
 fn flip_loses_volume_or_halts(name: &str, ignore_keeps_below: f64) {
-    let (ignore, _) = run::<2>(&scene(name, "flip", Some("ignore")));
+    let (ignore, _) = run::<2>(&scene(name, MethodKind::Flip, Some(ObstacleMode::Ignore)));
     assert!(
         ignore.volume_min < ignore_keeps_below,
         "{name}: ignore kept {}%",
         ignore.volume_min
     );
     assert_eq!(ignore.blocked_steps, 0);
-    let (naive, _) = run::<2>(&scene(name, "flip", Some("naive")));
+    let (naive, _) = run::<2>(&scene(name, MethodKind::Flip, Some(ObstacleMode::Naive)));
     assert!(
         naive.volume_min < 95.0,
         "{name}: naive kept {}%",
@@ -119,7 +114,7 @@ fn flip_loses_volume_or_halts(name: &str, ignore_keeps_below: f64) {
 
 #[test]
 fn ccp_squeezes_the_water_through_the_spiral_until_every_cell_holds_mu() {
-    let (ccp, sim) = run::<2>(&scene("spiral-2d", "ccp", None));
+    let (ccp, sim) = run::<2>(&scene("spiral-2d", MethodKind::Ccp, None));
     assert!(
         ccp.volume_min >= 100.0 - 1e-9,
         "ccp volume fell to {}%",
@@ -127,22 +122,25 @@ fn ccp_squeezes_the_water_through_the_spiral_until_every_cell_holds_mu() {
     );
     // Maximum compression: every open cell below the lid, the whole channel included, holds
     // mu particles, except in the row right under the lid.
-    let mu = sim.config.mu();
-    let below: Vec<usize> = (0..sim.grid.num_cells())
-        .filter(|&c| !sim.solid[c] && (sim.grid.cell_coords(c)[1] as f64 + 1.0) < ccp.bottom)
+    let mu = sim.state.config.mu();
+    let below: Vec<usize> = (0..sim.state.grid.num_cells())
+        .filter(|&c| {
+            !sim.state.solids.solid[c]
+                && (sim.state.grid.cell_coords(c)[1] as f64 + 1.0) < ccp.bottom
+        })
         .collect();
     let short: Vec<_> = below
         .iter()
-        .filter(|&&c| sim.markings.count[c] < mu)
-        .map(|&c| sim.grid.cell_coords(c))
+        .filter(|&&c| sim.state.markings.count[c] < mu)
+        .map(|&c| sim.state.grid.cell_coords(c))
         .collect();
     assert!(short.is_empty(), "cells below the lid not full: {short:?}");
-    let width = sim.grid.dims[0];
+    let width = sim.state.grid.dims[0];
     assert!(
-        below.len() * mu as usize + width * mu as usize >= sim.total_particles,
+        below.len() * mu as usize + width * mu as usize >= sim.state.total_particles,
         "the lid stopped at {} cells with room for {} more rows below it",
         ccp.bottom,
-        (sim.total_particles - below.len() * mu as usize) / (width * mu as usize)
+        (sim.state.total_particles - below.len() * mu as usize) / (width * mu as usize)
     );
     // The water could go only as fast as the channel let it: the lid had to stay on most
     // steps.
@@ -169,7 +167,7 @@ fn a_lid_flush_with_both_walls_moves_when_the_cell_size_is_inexact() {
     )
     .unwrap();
     let (r, sim) = run::<2>(&scene);
-    let top = sim.obstacles[0].shape.bounds().0[1];
+    let top = sim.state.solids.obstacles[0].shape.bounds().0[1];
     assert!(
         r.bottom < top - 1.0,
         "the lid stayed at {} of {top}",
@@ -206,7 +204,10 @@ fn obstacles_come_to_rest_on_static_solids_and_on_each_other_2d_and_3d() {
         let scene = Scene::parse("rest scene", &text, &Overrides::default()).unwrap();
         let (sim, last) = run_apart::<D>(&scene);
         // Shelf top at 8 cells; the box is 3 cells tall.
-        let (b, ball) = (sim.obstacles[0].bottom(), sim.obstacles[1].bottom());
+        let (b, ball) = (
+            sim.state.solids.obstacles[0].bottom(),
+            sim.state.solids.obstacles[1].bottom(),
+        );
         assert!((7.5..=8.5).contains(&b), "{D}D: the box rests at {b}");
         assert!(
             (b + 2.5..=b + 3.5).contains(&ball),
@@ -219,7 +220,7 @@ fn obstacles_come_to_rest_on_static_solids_and_on_each_other_2d_and_3d() {
             last[end - 10..].iter().all(|x| x == &last[end]),
             "{D}D: still moving"
         );
-        for o in &sim.obstacles {
+        for o in &sim.state.solids.obstacles {
             assert_eq!(o.velocity.norm(), 0.0, "{D}D: {} at rest", o.name);
         }
     }
@@ -256,11 +257,11 @@ fn obstacles_moving_head_on_meet_without_overlapping_2d_and_3d() {
         let (sim, _) = run_apart::<D>(&scene);
         // They met: no free cell is left between their cells.
         let columns = |k: usize| {
-            let o = &sim.obstacles[k];
+            let o = &sim.state.solids.obstacles[k];
             let x: Vec<usize> = o
-                .cells_at(&sim.grid, &o.offset)
+                .cells_at(&sim.state.grid, &o.offset)
                 .into_iter()
-                .map(|c| sim.grid.cell_coords(c)[0])
+                .map(|c| sim.state.grid.cell_coords(c)[0])
                 .collect();
             (*x.iter().min().unwrap(), *x.iter().max().unwrap())
         };
@@ -274,30 +275,21 @@ fn obstacles_moving_head_on_meet_without_overlapping_2d_and_3d() {
 /// Runs `scene`, checking after every step that no obstacle covers a cell of a static solid
 /// or of another obstacle; returns the simulation and the obstacles' offsets after each step.
 fn run_apart<const D: usize>(scene: &Scene) -> (Simulation<D>, Vec<Vec<Vector<D>>>) {
-    let mut sim = Simulation::<D>::new(scene.config::<D>());
-    let mut static_solid = vec![false; sim.grid.num_cells()];
-    for r in &sim.config.solids {
-        r.cells(&sim.grid).for_each(|c| static_solid[c] = true);
-    }
     let mut offsets = vec![];
-    while sim.time_secs < scene.duration_secs() {
-        sim.step()
-            .unwrap_or_else(|e| panic!("{D}D step {}: {e}", sim.steps + 1));
-        let mut owner = vec![usize::MAX; sim.grid.num_cells()];
-        for (k, o) in sim.obstacles.iter().enumerate() {
-            for c in o.cells_at(&sim.grid, &o.offset) {
-                assert!(
-                    !static_solid[c],
-                    "{D}D step {}: {} in a static solid",
-                    sim.steps, o.name
-                );
-                assert_eq!(owner[c], usize::MAX, "{D}D step {}: overlap", sim.steps);
+    let runner = common::run::<D>(scene, None, |sim, _| {
+        let s = &sim.state;
+        let mut owner = vec![usize::MAX; s.grid.num_cells()];
+        for (k, o) in s.solids.obstacles.iter().enumerate() {
+            for c in o.cells_at(&s.grid, &o.offset) {
+                let at = format!("{D}D step {}", s.steps);
+                assert!(!s.solids.fixed[c], "{at}: {} in a static solid", o.name);
+                assert_eq!(owner[c], usize::MAX, "{at}: overlap");
                 owner[c] = k;
             }
         }
-        offsets.push(sim.obstacles.iter().map(|o| o.offset).collect());
-    }
-    (sim, offsets)
+        offsets.push(s.solids.obstacles.iter().map(|o| o.offset).collect());
+    });
+    (runner.sim, offsets)
 }
 
 /// A point or size in scene-file syntax: `[x, y]` in 2D, `[x, y, z]` in 3D.
@@ -392,8 +384,8 @@ fn a_lid_compresses_to_the_last_layer_in_3d() {
         "volume fell to {}%",
         r.volume_min
     );
-    let layer = sim.grid.dims[0] * sim.grid.dims[2] * sim.config.mu() as usize;
-    let rows = sim.total_particles.div_ceil(layer);
+    let layer = sim.state.grid.dims[0] * sim.state.grid.dims[2] * sim.state.config.mu() as usize;
+    let rows = sim.state.total_particles.div_ceil(layer);
     assert!(
         (r.bottom - rows as f64).abs() <= 0.5,
         "the lid stopped at {} cells; the particles need {rows} layers",
@@ -408,14 +400,14 @@ fn falling_obstacles_reach_the_floor_under_ccp_and_stall_or_trap_under_flip() {
         "falling-obstacle-zero-bc-2d",
         "large-obstacle-2d",
     ] {
-        reaches_the_floor(name, 2, &scene(name, "ccp", None));
-        let (naive, _) = run::<2>(&scene(name, "flip", Some("naive")));
+        reaches_the_floor(name, 2, &scene(name, MethodKind::Ccp, None));
+        let (naive, _) = run::<2>(&scene(name, MethodKind::Flip, Some(ObstacleMode::Naive)));
         assert!(
             naive.bottom > 2.0,
             "{name}: FLIP-naive reached {} cells",
             naive.bottom
         );
-        let (ignore, _) = run::<2>(&scene(name, "flip", Some("ignore")));
+        let (ignore, _) = run::<2>(&scene(name, MethodKind::Flip, Some(ObstacleMode::Ignore)));
         assert!(
             ignore.bottom <= 1.0,
             "{name}: FLIP-ignore stopped at {}",
@@ -432,15 +424,12 @@ fn falling_obstacles_reach_the_floor_under_ccp_and_stall_or_trap_under_flip() {
 #[test]
 fn falling_obstacles_reach_the_floor_in_3d_with_the_band() {
     for name in ["falling-obstacle-3d", "large-obstacle-3d"] {
-        let s = Scene::load(
-            name,
-            &Overrides {
-                cells: Some(if name == "large-obstacle-3d" { 36 } else { 16 }),
-                ..Default::default()
-            },
-        )
-        .unwrap();
-        assert!(s.band.is_some());
+        let o = Overrides {
+            cells: Some(if name == "large-obstacle-3d" { 36 } else { 16 }),
+            ..Default::default()
+        };
+        let s = load(name, &o);
+        assert_ne!(s.method.band, BandMode::None);
         reaches_the_floor(name, 3, &s);
     }
 }

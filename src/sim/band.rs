@@ -1,257 +1,158 @@
-//! The band method's bookkeeping (paper sec. band_method, alg. band): particles live only in a
-//! band of `R + 1` cells below the surface; the deep (`beta < -R`) is simulated on the grid and
-//! its particles are imaginary, counted in `n_deep`.
+//! The band of paper sec. band_method as geometry, for every method that keeps particles only
+//! near the surface: the depth levels of a band `R + 1` cells thick (fig. band: surface, band,
+//! band interface `C_-R`, deep `C_<-R`), the cells that stay fluid without particles, the
+//! velocity combination of alg. band line 1 and the advection of the grid velocity of line 5.
 //!
-//! After each correction and the new markings (alg. band, lines 8-9), particles that reached
-//! the deep are removed and counted, and when the deep holds more than it has room for,
-//! `n_excess = n_deep - mu |C_<-R|` particles are added to the band interface: its cells are
-//! visited in a seeded random order and filled up to `mu`, each new particle at a random point
-//! of its cell with the grid velocity there.
-//!
-//! One addition to the paper: the depth of a cell can rise by two levels in one step (the
-//! surface is found over the Moore neighbourhood, depth over the von Neumann one), so a deep
-//! cell can land in the band above the interface without particles, and would then turn empty
-//! and open a hole in the fluid. Such cells, former interface or deep cells that the new
-//! markings put above the interface, are filled from the excess along with the interface.
+//! What the deep holds is a method's business: method ccp counts its imaginary particles in
+//! `n_deep` ([`crate::sim::correct::deep`]).
 
 use crate::grid::{Grid, MacField, Vector};
-use crate::particles::Particles;
-use crate::sim::advect::CELL_MARGIN;
-use crate::sim::correct::band::BandVariant;
+use crate::methods::Known;
+use crate::sim::advect;
 use crate::sim::markings::{DepthLevel, Markings};
-use rand::seq::SliceRandom;
-use rand::Rng;
+use rayon::prelude::*;
 
-/// The band of method `ccp` (sec. band_method).
+/// A band `R + 1` cells thick: the interface is at depth `-R`, the deep below it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct BandSettings {
-    pub variant: BandVariant,
-    /// `R >= 1`: the band interface is at depth `-R`, the band is `R + 1` cells thick.
+pub struct Band {
+    /// `R >= 1`.
     pub r: u32,
 }
 
-/// Cells that stay fluid without particles in the next markings: every fluid cell below the
-/// surface. The deep's particles are imaginary, the interface may lose all of its own, and a
-/// former deep cell can rise into the band with none (a bubble in the band): none of these
-/// may turn empty, or a hole would open inside the fluid. (Without the band, inner cells keep
-/// their particles, so this changes nothing there.)
-pub fn kept_cells(markings: &Markings) -> Vec<bool> {
-    (0..markings.kind.len())
-        .map(|c| markings.is_fluid(c) && !markings.surface[c])
-        .collect()
-}
-
-/// The band interface and deep cells, `C_<=-R`.
-pub fn at_or_below_interface(markings: &Markings, r: u32) -> Vec<bool> {
-    (0..markings.kind.len())
-        .map(|c| markings.at_or_below_interface(c, r))
-        .collect()
-}
-
-/// What one exchange with the deep did.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct DeepExchange {
-    /// Particles that reached the deep and were removed.
-    pub removed: usize,
-    /// Particles added to the band interface from the deep's excess.
-    pub added: usize,
-    /// Excess particles for which the band interface had no room (kept in `n_deep`). The paper
-    /// says this never happens.
-    pub unplaced: usize,
-    /// Cells of the deep, and cells that excess particles may fill: the band interface and
-    /// former interface or deep cells now above it.
-    pub deep_cells: usize,
-    pub interface_cells: usize,
-}
-
-impl DeepExchange {
-    /// Both exchanges of one step together (after emission and after the correction); the
-    /// cell counts are the later one's.
-    pub fn merged(self, earlier: Option<DeepExchange>) -> Self {
-        let e = earlier.unwrap_or_default();
-        Self {
-            removed: self.removed + e.removed,
-            added: self.added + e.added,
-            unplaced: self.unplaced + e.unplaced,
-            ..self
-        }
-    }
-}
-
-/// Removes particles in deep cells (into `n_deep`) and fills the band interface from the
-/// deep's excess (alg. band, line 9), and with it the cells of `was_low` (the interface and
-/// deep of the previous markings) that are now above the interface. Keeps `markings.count` up
-/// to date; kinds and depths do not change.
-#[allow(clippy::too_many_arguments)]
-pub fn exchange_with_deep<const D: usize>(
-    grid: &Grid<D>,
-    particles: &mut Particles<D>,
-    markings: &mut Markings,
-    was_low: Option<&[bool]>,
-    r: u32,
-    mu: u32,
-    n_deep: &mut usize,
-    velocity: &MacField<D>,
-    rng: &mut impl Rng,
-) -> DeepExchange {
-    let level = |m: &Markings, c: usize| {
+impl Band {
+    /// The level of cell `c` (not fluid for empty and solid cells).
+    pub fn level(&self, m: &Markings, c: usize) -> DepthLevel {
         if m.is_fluid(c) {
-            m.level(c, r)
+            m.level(c, self.r)
         } else {
             DepthLevel::NotFluid
         }
-    };
-    let mut out = DeepExchange::default();
-    let before = particles.len();
-    let keep: Vec<bool> = particles
-        .pos
-        .iter()
-        .map(|x| level(markings, grid.cell_index_of(x)) != DepthLevel::Deep)
-        .collect();
-    let mut it = keep.iter();
-    particles.pos.retain(|_| *it.next().unwrap());
-    let mut it = keep.iter();
-    particles.vel.retain(|_| *it.next().unwrap());
-    out.removed = before - particles.len();
-    *n_deep += out.removed;
-    // Former interface or deep cells now above the interface first, then the interface.
-    let (mut risen, mut interface) = (vec![], vec![]);
-    for c in 0..markings.kind.len() {
-        match level(markings, c) {
-            DepthLevel::Deep => {
-                out.deep_cells += 1;
-                markings.count[c] = 0;
-            }
-            DepthLevel::Interface => interface.push(c),
-            DepthLevel::Band | DepthLevel::Surface if was_low.is_some_and(|k| k[c]) => {
-                risen.push(c)
-            }
-            _ => {}
-        }
     }
-    out.interface_cells = risen.len() + interface.len();
-    let capacity = mu as usize * out.deep_cells;
-    let mut excess = n_deep.saturating_sub(capacity);
-    if excess > 0 {
-        risen.shuffle(rng);
-        interface.shuffle(rng);
-        for &c in risen.iter().chain(&interface) {
-            if excess == 0 {
-                break;
-            }
-            let cell = grid.cell_coords(c);
-            while markings.count[c] < mu && excess > 0 {
-                let x = Vector::<D>::from_fn(|k, _| {
-                    cell[k] as f64 + rng.random_range(CELL_MARGIN..1.0 - CELL_MARGIN)
+
+    /// The band interface and deep cells, `C_<=-R`.
+    pub fn at_or_below_interface(&self, m: &Markings) -> Vec<bool> {
+        (0..m.kind.len())
+            .map(|c| m.at_or_below_interface(c, self.r))
+            .collect()
+    }
+
+    /// Cells that stay fluid without particles in the next markings: every fluid cell below
+    /// the surface. The deep's particles are imaginary, the interface may lose all of its own,
+    /// and a former deep cell can rise into the band with none (a bubble in the band): none of
+    /// these may turn empty, or a hole would open inside the fluid. (Without the band, inner
+    /// cells keep their particles, so this changes nothing there.)
+    pub fn kept_cells(m: &Markings) -> Vec<bool> {
+        (0..m.kind.len())
+            .map(|c| m.is_fluid(c) && !m.surface[c])
+            .collect()
+    }
+
+    /// The particle count emitters see: deep cells hold imaginary particles, so they count as
+    /// full (`mu`).
+    pub fn emitter_counts(&self, m: &Markings, mu: u32) -> Vec<u32> {
+        (0..m.kind.len())
+            .map(|c| match self.level(m, c) {
+                DepthLevel::Deep => mu,
+                _ => m.count[c],
+            })
+            .collect()
+    }
+
+    /// A real particle in the deep, if there is one (there must be none after the exchange
+    /// with the deep).
+    pub fn particle_in_deep<'a, const D: usize>(
+        &self,
+        grid: &Grid<D>,
+        m: &Markings,
+        pos: &'a [Vector<D>],
+    ) -> Option<&'a Vector<D>> {
+        pos.iter()
+            .find(|x| self.level(m, grid.cell_index_of(x)) == DepthLevel::Deep)
+    }
+
+    /// The velocity combination of alg. band line 1: faces next to a band interface or deep
+    /// cell (depth `<= -R`) take the grid velocity `grid_u` and count as known; the others
+    /// keep the particle velocity where particles gave weight.
+    pub fn combine_with_grid<const D: usize>(
+        &self,
+        grid: &Grid<D>,
+        u: &mut MacField<D>,
+        known: &mut Known<D>,
+        grid_u: &MacField<D>,
+        m: &Markings,
+    ) {
+        for a in 0..D {
+            u.comp[a]
+                .par_iter_mut()
+                .zip(known[a].par_iter_mut())
+                .enumerate()
+                .for_each(|(i, (v, k))| {
+                    let f = grid.face_coords(a, i);
+                    let mut below = false;
+                    for side in [0usize, 1] {
+                        // The cells on the two sides of face f along axis a: f - e_a and f.
+                        if (side == 0 && f[a] == 0) || (side == 1 && f[a] == grid.dims[a]) {
+                            continue;
+                        }
+                        let mut c = f;
+                        c[a] -= 1 - side;
+                        below |= m.at_or_below_interface(grid.cell_index(c), self.r);
+                    }
+                    if below {
+                        *v = grid_u.comp[a][i];
+                        *k = true;
+                    }
                 });
-                particles.push(x, velocity.interpolate(grid, &x));
-                markings.count[c] += 1;
-                excess -= 1;
-                out.added += 1;
-            }
         }
     }
-    *n_deep -= out.added;
-    out.unplaced = excess;
-    out
+
+    /// Alg. band line 5: the grid velocity advected semi-Lagrangian over `dt`. The next step
+    /// reads it next to the interface and the deep, which lie inside the fluid: the faces of
+    /// fluid cells are advected, the others keep `u`.
+    pub fn advect_grid_velocity<const D: usize>(
+        grid: &Grid<D>,
+        u: &MacField<D>,
+        dt: f64,
+        m: &Markings,
+    ) -> MacField<D> {
+        let needed: Vec<bool> = (0..grid.num_cells()).map(|c| m.is_fluid(c)).collect();
+        advect::advect_velocity(grid, u, dt, &needed)
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use rand::rngs::StdRng;
-    use rand::SeedableRng;
-
-    /// A full 10x10 block of fluid at mu = 1 in a 10x12 tank: the top row is surface, and with
-    /// R = 2 rows 6..=7 are band, row 7 the interface, rows 0..=6 deep.
-    fn block_2d() -> (Grid<2>, Particles<2>) {
-        let g = Grid::new([10, 12]);
-        let mut p = Particles::default();
-        for i in 0..10 {
-            for j in 0..10 {
-                p.push(g.center([i, j]), Vector::<2>::zeros());
-            }
-        }
-        (g, p)
-    }
+    use crate::sim::transfer::particles_to_grid;
 
     #[test]
-    fn deep_particles_are_removed_and_counted_2d() {
-        let (g, mut p) = block_2d();
-        let solid = vec![false; g.num_cells()];
-        let mut m = Markings::compute(&g, &p.pos, &solid);
-        let mut n_deep = 0;
-        let mut rng = StdRng::seed_from_u64(1);
-        let u = MacField::zeros(&g);
-        let x = exchange_with_deep(&g, &mut p, &mut m, None, 2, 1, &mut n_deep, &u, &mut rng);
-        // Surface row 9, band row 8, interface row 7: 30 particles stay, 70 go deep.
-        assert_eq!((x.removed, x.added, x.unplaced), (70, 0, 0));
-        assert_eq!((x.deep_cells, x.interface_cells), (70, 10));
-        assert_eq!((p.len(), n_deep), (30, 70));
-        assert!(m
-            .count
-            .iter()
-            .enumerate()
-            .all(|(c, &n)| n as usize == p.pos.iter().filter(|x| g.cell_index_of(x) == c).count()));
-    }
-
-    #[test]
-    fn excess_of_the_deep_fills_the_interface_up_to_mu_3d() {
-        // A 4x4x6 block at mu = 1, R = 1: top layer surface, layer 4 interface, 0..=3 deep.
+    fn band_faces_take_particles_and_faces_at_the_interface_take_the_grid_3d() {
+        // A full 4x4x6 column (the tank's whole footprint) at 1 ppc, R = 1: the top layer
+        // z = 5 is surface, z = 4 the interface, z <= 3 deep. Particles move at +1 along z, the
+        // grid at -7.
         let g = Grid::new([4, 4, 8]);
-        let mut p = Particles::default();
+        let mut pos = vec![];
         for c in 0..g.num_cells() {
             let cc = g.cell_coords(c);
             if cc[2] < 6 {
-                p.push(g.center(cc), Vector::<3>::zeros());
+                pos.push(g.center(cc));
             }
         }
-        // The block fills the tank's 4x4 footprint and walls make no surface: only its top
-        // layer (z = 5) is surface.
-        let solid = vec![false; g.num_cells()];
-        let mut m = Markings::compute(&g, &p.pos, &solid);
-        assert_eq!(m.level(g.cell_index([1, 1, 5]), 1), DepthLevel::Surface);
-        assert_eq!(m.level(g.cell_index([1, 1, 4]), 1), DepthLevel::Interface);
-        let mut rng = StdRng::seed_from_u64(7);
-        let mut u = MacField::zeros(&g);
-        u.comp[2].iter_mut().for_each(|v| *v = -3.0);
-        let mut n_deep = 0;
-        exchange_with_deep(&g, &mut p, &mut m, None, 1, 1, &mut n_deep, &u, &mut rng);
-        assert_eq!((p.len(), n_deep), (32, 64));
-        // Empty 5 interface cells and say the deep holds 5 more than its 64 cells: the 5 go
-        // back into the interface, one per empty cell, with the grid velocity.
-        let mut removed = 0;
-        let mut keep = vec![];
-        for x in &p.pos {
-            let cc = g.cell_coords(g.cell_index_of(x));
-            let drop = cc[2] == 4 && cc[0] == 0 && removed < 4 || cc == [3, 3, 4];
-            if drop {
-                removed += 1;
+        let vel = vec![Vector::<3>::new(0.0, 0.0, 1.0); pos.len()];
+        let m = Markings::compute(&g, &pos, &vec![false; g.num_cells()]);
+        let (mut u, mut known) = particles_to_grid(&g, &pos, &vel);
+        let mut grid_u = MacField::zeros(&g);
+        grid_u.comp[2].iter_mut().for_each(|v| *v = -7.0);
+        Band { r: 1 }.combine_with_grid(&g, &mut u, &mut known, &grid_u, &m);
+        for i in 0..g.num_faces(2) {
+            let f = g.face_coords(2, i);
+            match f[2] {
+                // Faces touching a cell at depth <= -1: grid velocity, known.
+                0..=5 => assert!(known[2][i] && u.comp[2][i] == -7.0, "{f:?}"),
+                // Between the surface layer and the air above: particle velocity.
+                6 => assert!(known[2][i] && (u.comp[2][i] - 1.0).abs() < 1e-12, "{f:?}"),
+                _ => assert!(!known[2][i], "{f:?}"),
             }
-            keep.push(!drop);
         }
-        assert_eq!(removed, 5);
-        let mut it = keep.iter();
-        p.pos.retain(|_| *it.next().unwrap());
-        p.vel.truncate(p.pos.len());
-        for c in [[0, 0, 4], [0, 1, 4], [0, 2, 4], [0, 3, 4], [3, 3, 4]] {
-            m.count[g.cell_index(c)] = 0;
-        }
-        n_deep += 5;
-        let x = exchange_with_deep(&g, &mut p, &mut m, None, 1, 1, &mut n_deep, &u, &mut rng);
-        assert_eq!((x.removed, x.added, x.unplaced), (0, 5, 0));
-        assert_eq!((p.len(), n_deep), (32, 64));
-        assert!(m.count.iter().all(|&n| n <= 1));
-        assert!(p
-            .vel
-            .iter()
-            .rev()
-            .take(5)
-            .all(|v| (v[2] + 3.0).abs() < 1e-12));
-        // With no room left, more excess stays in the deep and is reported.
-        n_deep += 2;
-        let x = exchange_with_deep(&g, &mut p, &mut m, None, 1, 1, &mut n_deep, &u, &mut rng);
-        assert_eq!((x.added, x.unplaced), (0, 2));
-        assert_eq!(n_deep, 66);
     }
 }

@@ -2,8 +2,39 @@
 //! over a time interval, until a total particle count is reached.
 
 use crate::grid::{Grid, Vector};
+use crate::methods::FluidMethod;
 use crate::particles::{stratified_samples, Particles, Region};
+use crate::sim::State;
 use rand::Rng;
+
+/// The emission stage: every emitter tops up its cells (the counts the method says emitters
+/// see, the markings' by default), and the particle total and `V*` grow with what was added.
+/// Returns how many particles were added.
+pub fn emit<const D: usize>(s: &mut State<D>, m: &dyn FluidMethod<D>) -> usize {
+    if s.config.emitters.is_empty() {
+        return 0;
+    }
+    let counts = m.emitter_counts(s);
+    let count = counts.as_deref().unwrap_or(&s.markings.count);
+    let c = &s.config;
+    let mut added = 0;
+    for e in &c.emitters {
+        added += e.emit(
+            &s.grid,
+            s.time_secs,
+            count,
+            m.imaginary_particles(),
+            &s.solids.solid,
+            c.per_axis,
+            c.jitter,
+            &mut s.particles,
+            &mut s.rng,
+        );
+    }
+    s.total_particles += added;
+    s.target_volume += added as f64 / c.mu() as f64;
+    added
+}
 
 /// An emitter in grid units.
 #[derive(Clone, Debug, PartialEq)]

@@ -7,7 +7,28 @@
 
 use crate::grid::{Grid, MacField, Vector};
 use crate::sim::markings::CellKind;
+use crate::sim::{transfer, State};
 use crate::solvers::pcg::{self, PcgSettings, PcgStats, StencilMatrix, NONE};
+
+/// The projection stage (alg. flip line 3): `u` made divergence-free on the fluid cells of
+/// the current markings to the scene's tolerance, then extrapolated two rings into the air and
+/// each component bounded by `max_speed`.
+pub fn project_stage<const D: usize>(s: &State<D>, u: &mut MacField<D>) -> PcgStats {
+    let c = &s.config;
+    let settings = PcgSettings {
+        tolerance: c.pressure_tolerance,
+        ..Default::default()
+    };
+    let (grid, kind, solids) = (&s.grid, &s.markings.kind, &s.solids);
+    let stats = project(grid, kind, &solids.solid, &solids.velocity, u, &settings);
+    let mut known = known_after_projection(grid, kind, &solids.solid);
+    transfer::extrapolate(grid, u, &mut known, 2);
+    for comp in u.comp.iter_mut() {
+        comp.iter_mut()
+            .for_each(|v| *v = v.clamp(-c.max_speed, c.max_speed));
+    }
+    stats
+}
 
 /// How a face is constrained.
 #[derive(Clone, Copy, Debug, PartialEq)]

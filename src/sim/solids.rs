@@ -17,6 +17,7 @@
 
 use crate::grid::{Grid, Vector};
 use crate::particles::Region;
+use crate::sim::markings::Markings;
 use std::collections::VecDeque;
 
 /// `lambda_penalty` of eq. solid_penalty (the paper's 1000), in squared cells.
@@ -28,10 +29,16 @@ pub const PENALTY: f64 = 1000.0;
 const WALL_SLACK: f64 = 1e-9;
 
 /// How obstacles treat particles in their way.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum,
+)]
+#[serde(rename_all = "kebab-case")]
 pub enum ObstacleMode {
+    /// Method ccp: through the correction (sec. 7).
     Couple,
+    /// Move regardless; the particles covered count as lost volume.
     Ignore,
+    /// Wait until the cells it would enter hold no particle.
     Naive,
 }
 
@@ -200,6 +207,200 @@ impl<const D: usize> Obstacle<D> {
         } else {
             self.velocity
         }
+    }
+}
+
+/// The solid cells of a simulation: static solids and obstacles, and how obstacles treat
+/// particles.
+#[derive(Clone, Debug)]
+pub struct Solids<const D: usize> {
+    /// Cells of the static solids.
+    pub fixed: Vec<bool>,
+    /// Solid cells: the static solids and the obstacles where they are now.
+    pub solid: Vec<bool>,
+    /// Velocity of each solid cell (zero for walls and static solids).
+    pub velocity: Vec<Vector<D>>,
+    /// Cells of moving obstacles (their fluid neighbours are surface).
+    pub moving: Vec<bool>,
+    /// The obstacles, at their current offsets.
+    pub obstacles: Vec<Obstacle<D>>,
+    pub mode: ObstacleMode,
+}
+
+/// What the obstacles intend in one step (sec. 7).
+#[derive(Clone, Debug)]
+pub struct ObstaclePlan<const D: usize> {
+    /// Where each would be after the step.
+    targets: Vec<Vector<D>>,
+    /// The cells each would newly occupy.
+    wanted: Vec<Vec<usize>>,
+    /// `C_new_solid` with the clearing distance of each cell (def. clear_dist).
+    pub new_solid: Vec<(usize, u32)>,
+    /// With `couple`: the cost of a particle in each cell (eq. solid_penalty2).
+    pub penalty: Option<Vec<f64>>,
+}
+
+impl<const D: usize> Solids<D> {
+    pub fn new(
+        grid: &Grid<D>,
+        fixed: &[Region<D>],
+        obstacles: &[Obstacle<D>],
+        mode: ObstacleMode,
+    ) -> Self {
+        let mut s = Self {
+            fixed: vec![false; grid.num_cells()],
+            solid: vec![],
+            velocity: vec![],
+            moving: vec![],
+            obstacles: obstacles.to_vec(),
+            mode,
+        };
+        for r in fixed {
+            r.cells(grid).for_each(|c| s.fixed[c] = true);
+        }
+        s.rasterise(grid);
+        s
+    }
+
+    /// Solid cells, their velocities and the moving ones: the static solids plus every
+    /// obstacle at its current offset.
+    fn rasterise(&mut self, grid: &Grid<D>) {
+        let n = grid.num_cells();
+        self.solid = self.fixed.clone();
+        self.velocity = vec![Vector::zeros(); n];
+        self.moving = vec![false; n];
+        for (c, k) in owners(grid, &self.obstacles).into_iter().enumerate() {
+            if let Some(k) = k {
+                let o = &self.obstacles[k];
+                self.solid[c] = true;
+                self.velocity[c] = o.boundary_velocity();
+                self.moving[c] = o.velocity != Vector::<D>::zeros();
+            }
+        }
+    }
+
+    /// The moving obstacles' cells, when there are obstacles (without them nothing moves, and
+    /// the markings need not look at every cell's neighbours).
+    pub fn moving_mask(&self) -> Option<&[bool]> {
+        (!self.obstacles.is_empty()).then_some(&self.moving[..])
+    }
+
+    /// Cells no particle may be in: every solid, or with `ignore` only the static ones
+    /// (particles an obstacle covers are lost volume then, not a broken invariant).
+    pub fn particle_free(&self) -> &[bool] {
+        match self.mode {
+            ObstacleMode::Ignore => &self.fixed,
+            _ => &self.solid,
+        }
+    }
+
+    /// Where each obstacle would be after a step of `dt`, and the cells it would newly occupy
+    /// (`C_new_solid`) with their clearing distance. One after the other, each clear of the
+    /// others where they are and where those before it go.
+    pub fn plan(&self, grid: &Grid<D>, dt: f64) -> ObstaclePlan<D> {
+        let mut plan = ObstaclePlan {
+            targets: Vec::with_capacity(self.obstacles.len()),
+            wanted: vec![],
+            new_solid: vec![],
+            penalty: None,
+        };
+        if self.obstacles.is_empty() {
+            return plan;
+        }
+        let mut owner = owners(grid, &self.obstacles);
+        for (k, o) in self.obstacles.iter().enumerate() {
+            let t = o.target(grid, dt, |c| {
+                self.fixed[c] || owner[c].is_some_and(|j| j != k)
+            });
+            o.cells_at(grid, &t)
+                .into_iter()
+                .for_each(|c| owner[c] = Some(k));
+            plan.targets.push(t);
+        }
+        plan.wanted = self
+            .obstacles
+            .iter()
+            .zip(&plan.targets)
+            .map(|(o, t)| {
+                let mut cells = o.cells_at(grid, t);
+                cells.retain(|&c| !self.solid[c]);
+                cells
+            })
+            .collect();
+        let mut new_solid = vec![false; grid.num_cells()];
+        plan.wanted
+            .iter()
+            .flatten()
+            .for_each(|&c| new_solid[c] = true);
+        let clear = clearing_distance(grid, &new_solid, &self.solid);
+        plan.new_solid = (0..grid.num_cells())
+            .filter(|&c| new_solid[c])
+            .map(|c| (c, clear[c]))
+            .collect();
+        if self.mode == ObstacleMode::Couple && !plan.new_solid.is_empty() {
+            plan.penalty = Some(penalties(&clear));
+        }
+        plan
+    }
+
+    /// Moves each obstacle to its target unless particles (at `pos`) hold cells it wants
+    /// (`couple`: after the correction; `naive`: after advection); with `ignore` it always
+    /// moves. Then each obstacle's velocity is updated (gravity `g`, in the water or not by
+    /// the `markings` of the step's start) and the solids rasterised again. Returns, per
+    /// obstacle, whether it had to stay.
+    pub fn advance(
+        &mut self,
+        grid: &Grid<D>,
+        plan: &ObstaclePlan<D>,
+        pos: &[Vector<D>],
+        markings: &Markings,
+        g: &Vector<D>,
+        dt: f64,
+    ) -> Vec<bool> {
+        if self.obstacles.is_empty() {
+            return vec![];
+        }
+        let mut occupied = vec![false; grid.num_cells()];
+        for x in pos {
+            occupied[grid.cell_index_of(x)] = true;
+        }
+        let blocked: Vec<bool> = plan
+            .wanted
+            .iter()
+            .map(|cells| self.mode != ObstacleMode::Ignore && cells.iter().any(|&k| occupied[k]))
+            .collect();
+        // In the water: fluid in or next to a cell the obstacle occupies or wants.
+        let touches_fluid = |cells: &[usize]| {
+            cells.iter().any(|&k| {
+                markings.is_fluid(k)
+                    || grid
+                        .moore_neighbors(grid.cell_coords(k))
+                        .any(|m| markings.is_fluid(grid.cell_index(m)))
+            })
+        };
+        let in_water: Vec<bool> = self
+            .obstacles
+            .iter()
+            .zip(&plan.wanted)
+            .map(|(o, w)| touches_fluid(w) || touches_fluid(&o.cells_at(grid, &o.offset)))
+            .collect();
+        for (o, (to, stays)) in self
+            .obstacles
+            .iter_mut()
+            .zip(plan.targets.iter().zip(&blocked))
+        {
+            if !stays {
+                o.offset = *to;
+            }
+        }
+        let owner = owners(grid, &self.obstacles);
+        let fixed = &self.fixed;
+        for (k, o) in self.obstacles.iter_mut().enumerate() {
+            let others = |c: usize| owner[c].is_some_and(|j| j != k);
+            o.accelerate(grid, g, dt, in_water[k], |c| fixed[c], others);
+        }
+        self.rasterise(grid);
+        blocked
     }
 }
 

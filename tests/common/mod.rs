@@ -1,9 +1,66 @@
-//! Helpers shared by the integration tests.
+//! Helpers shared by the integration tests: loading scenes, the one step loop (through the
+//! program's own runner), the golden digest, and recordings read back.
 
 #![allow(dead_code)]
 
+use cellflip::methods::ccp::CcpReport;
+use cellflip::methods::MethodKind;
+use cellflip::runner::{Limit, Runner};
 use cellflip::scene::{Overrides, Scene};
-use cellflip::sim::{Simulation, StepReport};
+use cellflip::sim::correct::band::BandMode;
+use cellflip::sim::{SimConfig, Simulation, StepReport};
+use std::collections::BTreeSet;
+use std::path::Path;
+
+pub fn load(name: &str, o: &Overrides) -> Scene {
+    Scene::load(name, o).unwrap_or_else(|e| panic!("{name}: {e:#}"))
+}
+
+/// Overrides of the method and the band.
+pub fn with(method: MethodKind, band: Option<BandMode>) -> Overrides {
+    Overrides {
+        method: Some(method),
+        band,
+        ..Default::default()
+    }
+}
+
+/// Steps `config` until `limit` with the program's runner (the invariants are checked inside
+/// every step); `check` sees the simulation and the report after each step. Panics naming the
+/// step when a step fails.
+pub fn run_config<const D: usize>(
+    config: SimConfig<D>,
+    limit: Limit,
+    mut check: impl FnMut(&Simulation<D>, &StepReport<D>),
+) -> Runner<D> {
+    let mut runner = Runner::new(Simulation::new(config));
+    runner
+        .run(
+            limit,
+            || false,
+            |sim, rep| {
+                check(sim, rep);
+                Ok(())
+            },
+        )
+        .unwrap_or_else(|e| panic!("{e:#}"));
+    runner
+}
+
+/// [`run_config`] on a scene, for `steps` steps or (`None`) the scene's duration.
+pub fn run<const D: usize>(
+    scene: &Scene,
+    steps: Option<u64>,
+    check: impl FnMut(&Simulation<D>, &StepReport<D>),
+) -> Runner<D> {
+    let limit = steps.map_or(Limit::SimSeconds(scene.duration_secs()), Limit::Steps);
+    run_config(scene.config::<D>(), limit, check)
+}
+
+/// The report of method ccp.
+pub fn ccp<const D: usize>(rep: &StepReport<D>) -> &CcpReport<D> {
+    rep.method_report::<CcpReport<D>>().expect("a ccp report")
+}
 
 /// FNV-1a over the bits of what it is fed: a digest that changes with any bit of the state.
 pub struct Digest(u64);
@@ -34,24 +91,28 @@ impl Digest {
 
 /// Feeds the whole state after a step: particles, markings, obstacles, clocks and counts.
 pub fn digest_state<const D: usize>(d: &mut Digest, sim: &Simulation<D>) {
-    for (x, v) in sim.particles.pos.iter().zip(&sim.particles.vel) {
+    let s = &sim.state;
+    for (x, v) in s.particles.pos.iter().zip(&s.particles.vel) {
         x.iter().chain(v.iter()).for_each(|c| d.f64(*c));
     }
-    let m = &sim.markings;
+    let m = &s.markings;
     for c in 0..m.kind.len() {
         d.u64(m.kind[c] as u64);
         d.u64(m.count[c] as u64);
         d.u64(m.surface[c] as u64);
         d.u64(m.depth[c] as u64);
     }
-    for o in &sim.obstacles {
-        o.offset.iter().chain(o.velocity.iter()).for_each(|c| d.f64(*c));
+    for o in &s.solids.obstacles {
+        o.offset
+            .iter()
+            .chain(o.velocity.iter())
+            .for_each(|c| d.f64(*c));
     }
-    d.f64(sim.time_secs);
-    d.u64(sim.steps);
-    d.u64(sim.total_particles as u64);
-    d.f64(sim.target_volume);
-    d.u64(sim.n_deep as u64);
+    d.f64(s.time_secs);
+    d.u64(s.steps);
+    d.u64(s.total_particles as u64);
+    d.f64(s.target_volume);
+    d.u64(sim.method.imaginary_particles() as u64);
 }
 
 /// Feeds a step's report, all but its timings.
@@ -63,7 +124,8 @@ pub fn digest_report<const D: usize>(d: &mut Digest, rep: &StepReport<D>) {
     d.f64(rep.max_speed);
     d.u64(rep.emitted as u64);
     d.f64(rep.volume_percent);
-    if let Some(c) = &rep.correction {
+    if let Some(r) = rep.method_report::<CcpReport<D>>() {
+        let c = &r.correction;
         d.f64(c.objective);
         d.u64(c.overfull_before as u64);
         d.u64(c.augmentations as u64);
@@ -83,10 +145,16 @@ pub fn digest_report<const D: usize>(d: &mut Digest, rep: &StepReport<D>) {
             d.u64(b.net_in as u64);
             d.u64(b.failure.is_some() as u64);
         }
-    }
-    if let Some(x) = &rep.deep {
-        for v in [x.removed, x.added, x.unplaced, x.deep_cells, x.interface_cells] {
-            d.u64(v as u64);
+        if let Some(x) = &r.deep {
+            for v in [
+                x.removed,
+                x.added,
+                x.unplaced,
+                x.deep_cells,
+                x.interface_cells,
+            ] {
+                d.u64(v as u64);
+            }
         }
     }
     rep.blocked.iter().for_each(|b| d.u64(*b as u64));
@@ -98,19 +166,67 @@ pub fn digest_report<const D: usize>(d: &mut Digest, rep: &StepReport<D>) {
 
 /// The digest of `steps` steps of a scene: state and report after every step, chained.
 pub fn digest_run<const D: usize>(scene: &Scene, steps: u64) -> String {
-    let mut sim = Simulation::<D>::new(scene.config::<D>());
     let mut d = Digest::default();
-    digest_state(&mut d, &sim);
-    for _ in 0..steps {
-        let rep = sim
-            .step()
-            .unwrap_or_else(|e| panic!("{} step {}: {e}", scene.name(), sim.steps + 1));
-        digest_report(&mut d, &rep);
-        digest_state(&mut d, &sim);
-    }
+    digest_state(&mut d, &Simulation::<D>::new(scene.config::<D>()));
+    run::<D>(scene, Some(steps), |sim, rep| {
+        digest_report(&mut d, rep);
+        digest_state(&mut d, sim);
+    });
     d.hex()
 }
 
-pub fn load(name: &str, o: &Overrides) -> Scene {
-    Scene::load(name, o).unwrap_or_else(|e| panic!("{name}: {e:#}"))
+/// Every entity path of a recording.
+pub fn logged_entities(path: &Path) -> BTreeSet<String> {
+    use rerun::external::re_log_encoding::DecoderApp;
+    use rerun::log::{Chunk, LogMsg};
+    let reader = std::io::BufReader::new(std::fs::File::open(path).unwrap());
+    let mut out = BTreeSet::new();
+    for msg in DecoderApp::decode_lazy(reader) {
+        if let LogMsg::ArrowMsg(store, arrow) = msg.unwrap() {
+            if store.kind() == rerun::StoreKind::Recording {
+                let chunk = Chunk::from_arrow_msg(&arrow).unwrap();
+                out.insert(
+                    chunk
+                        .entity_path()
+                        .to_string()
+                        .trim_start_matches('/')
+                        .to_string(),
+                );
+            }
+        }
+    }
+    out
+}
+
+/// The entity paths the README's recording table documents (`<name>` placeholders kept).
+pub fn documented_entities() -> Vec<String> {
+    let readme = include_str!("../../README.md");
+    let table = readme
+        .split("| entity | when | what |")
+        .nth(1)
+        .expect("the README's entity table");
+    table
+        .lines()
+        .skip(2)
+        .take_while(|l| l.starts_with('|'))
+        .flat_map(|l| {
+            let first = l.split('|').nth(1).unwrap_or("");
+            first
+                .split('`')
+                .skip(1)
+                .step_by(2)
+                .map(str::to_string)
+                .collect::<Vec<_>>()
+        })
+        .collect()
+}
+
+/// Whether a logged path matches a documented one, where `<...>` stands for one path part.
+pub fn matches(documented: &str, logged: &str) -> bool {
+    let (d, l): (Vec<&str>, Vec<&str>) =
+        (documented.split('/').collect(), logged.split('/').collect());
+    d.len() == l.len()
+        && d.iter()
+            .zip(&l)
+            .all(|(a, b)| a == b || (a.starts_with('<') && a.ends_with('>')))
 }

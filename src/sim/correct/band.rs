@@ -34,6 +34,39 @@ pub enum BandVariant {
     Paths,
 }
 
+/// The band setting of method ccp (`simulation.band`, `--band`): no band, or the band with the
+/// variant that keeps its count.
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum,
+)]
+#[serde(rename_all = "kebab-case")]
+pub enum BandMode {
+    /// No band: particles fill the whole fluid.
+    None,
+    /// The paper's choice: push particles along grid paths (sec. push_part).
+    Paths,
+    /// A second solve with the one-way constraint (sec. band_con2), an integer program.
+    OneWay,
+    /// Eq. problem3 with eq. band_con as one integer program: small grids only.
+    Full,
+}
+
+impl BandMode {
+    /// The band variant, when there is a band.
+    pub fn variant(self) -> Option<BandVariant> {
+        match self {
+            BandMode::None => None,
+            BandMode::Paths => Some(BandVariant::Paths),
+            BandMode::OneWay => Some(BandVariant::OneWay),
+            BandMode::Full => Some(BandVariant::Full),
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        self.variant().map_or("none", BandVariant::name)
+    }
+}
+
 impl BandVariant {
     pub const ALL: [BandVariant; 3] = [BandVariant::Full, BandVariant::OneWay, BandVariant::Paths];
 
@@ -98,6 +131,62 @@ pub struct BandCorrection<const D: usize> {
     pub paths: Vec<BandPath<D>>,
     /// With cross-checking: the final objective of every other variant on the same problem.
     pub other_objectives: Vec<(BandVariant, Result<f64, String>)>,
+}
+
+impl<const D: usize> BandCorrection<D> {
+    /// The report after the first solve: its moves in and out of `C_<=-R` and its objective.
+    fn new(variant: BandVariant, alpha: i64, (n_in, n_out): (usize, usize), first: f64) -> Self {
+        let (s_in, s_out) = (
+            n_out as i64 - n_in as i64 + alpha,
+            n_in as i64 - n_out as i64,
+        );
+        Self {
+            variant,
+            alpha,
+            n_in,
+            n_out,
+            s_in,
+            s_out,
+            n_move: (-s_in).max(-s_out).max(0) as usize,
+            paths_applied: 0,
+            paths_found: 0,
+            find_calls: 0,
+            second_time: Duration::ZERO,
+            first_objective: first,
+            objective: 0.0,
+            net_in: 0,
+            failure: None,
+            paths: vec![],
+            other_objectives: vec![],
+        }
+    }
+}
+
+/// The first solve `b*` of eq. problem3 (for `full`, its only solve, with eq. band_con): the
+/// choice, the flow solver's augmenting paths, and why it failed if it did (every particle
+/// then keeps its previous cell).
+fn first_solve<const D: usize>(
+    p: &CorrectionProblem<D>,
+    variant: BandVariant,
+    alpha: i64,
+    solver: super::Solver,
+) -> (Vec<u32>, usize, Option<String>) {
+    let first = match variant {
+        BandVariant::Full => solve_full(p, alpha).map(|c| (c, 0)),
+        _ => solver.solve(&p.assignment),
+    }
+    .and_then(|(c, aug)| p.assignment.check(&c).map(|()| (c, aug)));
+    match first {
+        Ok((c, aug)) => (c, aug, None),
+        Err(e) => {
+            let who = match variant {
+                BandVariant::Full => "band ILP (simplex)",
+                _ => solver.name(),
+            };
+            let why = format!("{who} solver failed ({e}); particles keep their cells");
+            (p.stay.clone(), 0, Some(why))
+        }
+    }
 }
 
 /// `alpha_<=-R = alpha_-R + alpha_<-R`: particles missing from the band interface cells of the
@@ -526,45 +615,11 @@ pub fn correct_band<const D: usize>(
     // particle may enter.
     let alpha = room_at_or_below_interface(previous, ctx.r, mu, ctx.n_deep).max(0);
     let t0 = Instant::now();
-    let first = match ctx.variant {
-        BandVariant::Full => solve_full(p, alpha).map(|c| (c, 0)),
-        _ => solver.solve(&p.assignment),
-    }
-    .and_then(|(c, aug)| p.assignment.check(&c).map(|()| (c, aug)));
+    let (choice, augmentations, fallback) = first_solve(p, ctx.variant, alpha, solver);
     let solve_time = t0.elapsed();
-    let (choice, augmentations, fallback) = match first {
-        Ok((c, aug)) => (c, aug, None),
-        Err(e) => {
-            let who = match ctx.variant {
-                BandVariant::Full => "band ILP (simplex)",
-                _ => solver.name(),
-            };
-            let why = format!("{who} solver failed ({e}); particles keep their cells");
-            (p.stay.clone(), 0, Some(why))
-        }
-    };
     let (n_in, n_out) = flows(p, &choice);
     let mut pos: Vec<Vector<D>> = positions(grid, p, &choice, x_hat);
-    let mut rep = BandCorrection {
-        variant: ctx.variant,
-        alpha,
-        n_in,
-        n_out,
-        s_in: n_out as i64 - n_in as i64 + alpha,
-        s_out: n_in as i64 - n_out as i64,
-        n_move: 0,
-        paths_applied: 0,
-        paths_found: 0,
-        find_calls: 0,
-        second_time: Duration::ZERO,
-        first_objective: objective(&pos, x_hat),
-        objective: 0.0,
-        net_in: 0,
-        failure: None,
-        paths: vec![],
-        other_objectives: vec![],
-    };
-    rep.n_move = (-rep.s_in).max(-rep.s_out).max(0) as usize;
+    let mut rep = BandCorrection::new(ctx.variant, alpha, (n_in, n_out), objective(&pos, x_hat));
     // Out of the interface when too many went in (`s_in < 0`), else into it.
     let pusher = |out: bool| PathPusher {
         grid,

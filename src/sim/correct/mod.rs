@@ -7,6 +7,7 @@
 //! band method (sec. band_method) one of the band variants of [`band`] finishes the step.
 
 pub mod band;
+pub mod deep;
 pub mod problem;
 
 use crate::grid::{Grid, Vector};
@@ -18,7 +19,10 @@ use rayon::prelude::*;
 use std::time::{Duration, Instant};
 
 /// Which solver corrects the positions.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum,
+)]
+#[serde(rename_all = "kebab-case")]
 pub enum Solver {
     /// Exact min-cost flow by successive shortest paths ([`min_cost_flow`]).
     Flow,
@@ -125,40 +129,50 @@ pub fn correct<const D: usize>(
         overfull_before: overfull_cells(grid, pos, mu),
         ..Default::default()
     };
-    if let Some(ctx) = band {
-        let inputs = BandInputs {
-            grid,
-            problem: &problem,
-            x_bar,
-            previous,
-            solid,
-            penalty,
-            mu,
-        };
-        correct_band(&inputs, pos, settings, ctx, &mut rep);
-        if want_mps {
-            let b = rep.band.as_ref().expect("band report");
-            let mut comment = vec![format!(
-                "band method ({}): eq. problem3 with the bounds of eq. band_con_update; the band row \
-                 eq. band_con (0 <= in - out <= alpha = {}) is not included",
-                ctx.variant.name(),
-                b.alpha
-            )];
-            if ctx.variant != BandVariant::Full && rep.fallback.is_none() {
-                comment.push(format!(
+    match band {
+        Some(ctx) => {
+            let inputs = BandInputs {
+                grid,
+                problem: &problem,
+                x_bar,
+                previous,
+                solid,
+                penalty,
+                mu,
+            };
+            correct_band(&inputs, pos, settings, ctx, &mut rep);
+            if want_mps {
+                rep.mps = Some(band_mps(&problem, &rep, settings, ctx.variant));
+            }
+        }
+        None => {
+            let choice = solve(&problem, settings, &mut rep);
+            if want_mps {
+                let comment = format!(
                     "optimal objective {:.17e} ({} solver)",
-                    b.first_objective,
+                    rep.objective,
                     settings.solver.name()
+                );
+                rep.mps = Some(lp::to_mps(
+                    &problem.assignment,
+                    "cellflip-correction",
+                    &[comment],
                 ));
             }
-            rep.mps = Some(lp::to_mps(
-                &problem.assignment,
-                "cellflip-correction",
-                &comment,
-            ));
+            apply(grid, &problem, &choice, pos, &mut rep);
         }
-        return Ok(rep);
     }
+    Ok(rep)
+}
+
+/// Eq. problem3 without the band: the solver's choice of candidate per particle (every
+/// particle's previous cell if the solver fails), its objective, and with `cross_check` the
+/// other solver's answer on the same problem.
+fn solve<const D: usize>(
+    problem: &CorrectionProblem<D>,
+    settings: &CorrectionSettings,
+    rep: &mut CorrectionReport<D>,
+) -> Vec<u32> {
     let t0 = Instant::now();
     // An answer that breaks a constraint counts as a failure of the solver.
     let solved = settings
@@ -194,19 +208,32 @@ pub fn correct<const D: usize>(
             Ok((o - rep.objective).abs() / rep.objective.abs().max(1.0))
         }));
     }
-    if want_mps {
-        rep.mps = Some(lp::to_mps(
-            &problem.assignment,
-            "cellflip-correction",
-            &[format!(
-                "optimal objective {:.17e} ({} solver)",
-                rep.objective,
-                settings.solver.name()
-            )],
+    choice
+}
+
+/// The band method's problem as MPS: eq. problem3 with the bounds of eq. band_con_update,
+/// without the band row, and the first solve's optimum where there was one.
+fn band_mps<const D: usize>(
+    problem: &CorrectionProblem<D>,
+    rep: &CorrectionReport<D>,
+    settings: &CorrectionSettings,
+    variant: BandVariant,
+) -> String {
+    let b = rep.band.as_ref().expect("band report");
+    let mut comment = vec![format!(
+        "band method ({}): eq. problem3 with the bounds of eq. band_con_update; the band row \
+         eq. band_con (0 <= in - out <= alpha = {}) is not included",
+        variant.name(),
+        b.alpha
+    )];
+    if variant != BandVariant::Full && rep.fallback.is_none() {
+        comment.push(format!(
+            "optimal objective {:.17e} ({} solver)",
+            b.first_objective,
+            settings.solver.name()
         ));
     }
-    apply(grid, &problem, &choice, pos, &mut rep);
-    Ok(rep)
+    lp::to_mps(&problem.assignment, "cellflip-correction", &comment)
 }
 
 /// What every band variant reads.

@@ -22,7 +22,10 @@ use crate::solvers::min_cost_flow::BoundedAssignment;
 use rayon::prelude::*;
 
 /// The candidate moves of a particle (sec. grid_move).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum,
+)]
+#[serde(rename_all = "kebab-case")]
 pub enum Directions {
     /// Stay, or one cell along an axis: 5 in 2D, 7 in 3D (the paper's choice).
     VonNeumann,

@@ -1,0 +1,615 @@
+//! The checks of a scene file, one function per section (domain, simulation, fluid, solid,
+//! emitter, obstacle). Every error is a [`SceneError`]: the file, the key, a kind that tests
+//! match, and the reason in words.
+
+use super::{
+    EmitterFile, MotionKind, ObstacleFile, RegionFile, Scene, SceneFile, Shape, SimulationFile,
+};
+use crate::grid::Grid;
+use crate::methods::MethodSettings;
+use crate::particles;
+use crate::sim::correct::band::BandMode;
+use crate::sim::correct::problem::Directions;
+use std::collections::BTreeSet;
+
+/// What is wrong with a scene, broadly: tests match on it, people read the reason.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ErrorKind {
+    /// Not valid TOML, an unknown key, a value of the wrong type or an unknown name.
+    Syntax,
+    /// A number out of its range, or a list of the wrong length.
+    Range,
+    /// A shape or motion missing a key it needs, or given one it does not take.
+    Keys,
+    /// Geometry that does not fit: outside the domain, too thin, overlapping.
+    Geometry,
+    /// Settings that do not go together.
+    Conflict,
+}
+
+/// A scene that cannot run: which file, which key, what kind of problem and why.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SceneError {
+    pub source: String,
+    pub key: String,
+    pub kind: ErrorKind,
+    pub reason: String,
+}
+
+impl std::fmt::Display for SceneError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}: key '{}': {}", self.source, self.key, self.reason)
+    }
+}
+
+impl std::error::Error for SceneError {}
+
+/// A TOML error as a [`SceneError`] naming the key it points at (the table headers above it
+/// and the key on its line).
+pub(super) fn toml_error(source: &str, text: &str, e: &toml::de::Error) -> SceneError {
+    let key = e
+        .span()
+        .map(|s| key_at(text, s.start))
+        .filter(|k| !k.is_empty())
+        .unwrap_or_else(|| "(file)".into());
+    SceneError {
+        source: source.into(),
+        key,
+        kind: ErrorKind::Syntax,
+        reason: e.to_string().trim_end().into(),
+    }
+}
+
+/// The dotted key at byte `offset` of a TOML text: `table.key`, or `array[i].key` for the
+/// `i`-th `[[array]]`.
+fn key_at(text: &str, offset: usize) -> String {
+    let offset = offset.min(text.len());
+    let line_start = text[..offset].rfind('\n').map_or(0, |i| i + 1);
+    let line_end = text[offset..].find('\n').map_or(text.len(), |i| offset + i);
+    let mut table = String::new();
+    let mut seen: Vec<(String, usize)> = vec![];
+    // Table headers up to and including the error's line.
+    for line in text[..line_end].lines().map(str::trim) {
+        if let Some(name) = line.strip_prefix("[[").and_then(|l| l.split("]]").next()) {
+            let name = name.trim().to_string();
+            let i = match seen.iter_mut().find(|(n, _)| *n == name) {
+                Some((_, i)) => {
+                    *i += 1;
+                    *i
+                }
+                None => {
+                    seen.push((name.clone(), 0));
+                    0
+                }
+            };
+            table = format!("{name}[{i}]");
+        } else if let Some(name) = line.strip_prefix('[').and_then(|l| l.split(']').next()) {
+            table = name.trim().to_string();
+        }
+    }
+    let line = text[line_start..line_end].trim();
+    let key = match line.starts_with('[') {
+        true => "",
+        false => line.split_once('=').map_or("", |(k, _)| k.trim()),
+    };
+    match (table.is_empty(), key.is_empty()) {
+        (_, true) => table,
+        (true, false) => key.to_string(),
+        (false, false) => format!("{table}.{key}"),
+    }
+}
+
+/// `k` with `k^dim = ppc`, if there is one.
+pub(super) fn ppc_per_axis(ppc: usize, dim: usize) -> Option<usize> {
+    (1..=ppc).find(|k| k.pow(dim as u32) == ppc)
+}
+
+type Checked<T> = Result<T, SceneError>;
+
+/// What the checks of one scene share: where it came from, its dimension and tank.
+struct Checker<'a> {
+    source: &'a str,
+    dim: usize,
+    size: &'a [f64],
+    /// Cell size, metres.
+    h: f64,
+}
+
+impl Checker<'_> {
+    fn err<T>(&self, key: &str, kind: ErrorKind, reason: String) -> Checked<T> {
+        Err(SceneError {
+            source: self.source.into(),
+            key: key.into(),
+            kind,
+            reason,
+        })
+    }
+
+    /// `dim` finite numbers.
+    fn len(&self, key: &str, v: &[f64]) -> Checked<()> {
+        let dim = self.dim;
+        if v.len() != dim {
+            let why = format!("needs {dim} numbers (dim = {dim}), got {}", v.len());
+            return self.err(key, ErrorKind::Range, why);
+        }
+        match v.iter().find(|x| !x.is_finite()) {
+            Some(x) => self.err(key, ErrorKind::Range, format!("must be finite, got {x}")),
+            None => Ok(()),
+        }
+    }
+
+    fn positive(&self, key: &str, v: f64) -> Checked<()> {
+        if v.is_finite() && v > 0.0 {
+            return Ok(());
+        }
+        self.err(key, ErrorKind::Range, format!("must be positive, got {v}"))
+    }
+
+    /// A point inside the tank.
+    fn inside(&self, key: &str, p: &[f64]) -> Checked<()> {
+        self.len(key, p)?;
+        match (0..self.dim).find(|&k| p[k] < 0.0 || p[k] > self.size[k]) {
+            Some(k) => self.err(
+                key,
+                ErrorKind::Geometry,
+                format!(
+                    "axis {k}: {} lies outside the domain [0, {}]",
+                    p[k], self.size[k]
+                ),
+            ),
+            None => Ok(()),
+        }
+    }
+
+    /// A box's corners inside the tank and below each other.
+    fn block(&self, key: &str, min: &[f64], max: &[f64]) -> Checked<()> {
+        self.inside(&format!("{key}.min"), min)?;
+        self.inside(&format!("{key}.max"), max)?;
+        if (0..self.dim).any(|k| min[k] >= max[k]) {
+            let why = format!("'min' {min:?} must be below 'max' {max:?} on every axis");
+            return self.err(key, ErrorKind::Geometry, why);
+        }
+        Ok(())
+    }
+
+    /// The shape has exactly the keys in `wanted`.
+    fn takes(&self, key: &str, r: &RegionFile, wanted: &[&str]) -> Checked<()> {
+        let given = [
+            ("min", r.min.is_some()),
+            ("max", r.max.is_some()),
+            ("center", r.center.is_some()),
+            ("radius", r.radius.is_some()),
+            ("turns", r.turns.is_some()),
+            ("width", r.width.is_some()),
+        ];
+        let quoted = |names: &[&str]| {
+            let q: Vec<String> = names.iter().map(|n| format!("'{n}'")).collect();
+            match q.split_last() {
+                Some((last, rest)) if !rest.is_empty() => format!("{} and {last}", rest.join(", ")),
+                _ => q.join(""),
+            }
+        };
+        let shape = r.shape.name();
+        if given.iter().any(|(n, g)| !g && wanted.contains(n)) {
+            return self.err(
+                key,
+                ErrorKind::Keys,
+                format!("a {shape} needs {}", quoted(wanted)),
+            );
+        }
+        let extra: Vec<&str> = given
+            .iter()
+            .filter(|(n, g)| *g && !wanted.contains(n))
+            .map(|(n, _)| *n)
+            .collect();
+        if !extra.is_empty() {
+            let why = format!("a {shape} takes {}, not {}", quoted(wanted), quoted(&extra));
+            return self.err(key, ErrorKind::Keys, why);
+        }
+        Ok(())
+    }
+
+    /// A region of section `fluid`, `solid` (which alone may be a 2D spiral) or `obstacle`.
+    fn region(&self, key: &str, r: &RegionFile, solid: bool) -> Checked<()> {
+        match r.shape {
+            Shape::Box => {
+                self.takes(key, r, &["min", "max"])?;
+                self.block(key, r.min.as_deref().unwrap(), r.max.as_deref().unwrap())
+            }
+            Shape::Ball => {
+                self.takes(key, r, &["center", "radius"])?;
+                let (c, rad) = (r.center.as_deref().unwrap(), r.radius.unwrap());
+                self.len(&format!("{key}.center"), c)?;
+                self.positive(&format!("{key}.radius"), rad)?;
+                match (0..self.dim).find(|&k| c[k] - rad < 0.0 || c[k] + rad > self.size[k]) {
+                    Some(k) => self.err(
+                        key,
+                        ErrorKind::Geometry,
+                        format!("the ball leaves the domain on axis {k}"),
+                    ),
+                    None => Ok(()),
+                }
+            }
+            Shape::Spiral if solid && self.dim == 2 => self.spiral(key, r),
+            Shape::Spiral => self.err(
+                &format!("{key}.shape"),
+                ErrorKind::Conflict,
+                "a spiral is a static 2D solid ([[solid]] in a 2D scene) only".into(),
+            ),
+        }
+    }
+
+    fn spiral(&self, key: &str, r: &RegionFile) -> Checked<()> {
+        let wanted = ["min", "max", "center", "radius", "turns", "width"];
+        self.takes(key, r, &wanted)?;
+        let (min, max) = (r.min.as_deref().unwrap(), r.max.as_deref().unwrap());
+        self.block(key, min, max)?;
+        let c = r.center.as_deref().unwrap();
+        self.len(&format!("{key}.center"), c)?;
+        let (rad, turns, width) = (r.radius.unwrap(), r.turns.unwrap(), r.width.unwrap());
+        self.positive(&format!("{key}.radius"), rad)?;
+        self.positive(&format!("{key}.turns"), turns)?;
+        self.positive(&format!("{key}.width"), width)?;
+        // Rasterised by cell centres, a channel or wall under two cells across can break
+        // into pockets where it runs diagonally, or leak into the next turn.
+        let two = 2.0 * self.h;
+        if width < two {
+            let why = format!(
+                "{width} m is narrower than two cells ({two:.4} m): the channel would break into pockets"
+            );
+            return self.err(&format!("{key}.width"), ErrorKind::Geometry, why);
+        }
+        let wall = particles::pitch(rad, turns) - width;
+        if wall < two {
+            let why = format!(
+                "the walls between turns are {wall:.4} m thick, thinner than two cells ({two:.4} m): \
+                 fewer turns, a narrower channel or a larger radius"
+            );
+            return self.err(key, ErrorKind::Geometry, why);
+        }
+        let reach = rad + width / 2.0;
+        match (0..self.dim).find(|&k| c[k] - reach < min[k] || c[k] + reach > max[k]) {
+            Some(k) => self.err(
+                key,
+                ErrorKind::Geometry,
+                format!("the channel leaves the box on axis {k}"),
+            ),
+            None => Ok(()),
+        }
+    }
+}
+
+/// Checks a scene file (with overrides applied) and makes the [`Scene`].
+pub(super) fn check(source: &str, file: SceneFile) -> Checked<Scene> {
+    let dim = file.dim;
+    if dim != 2 && dim != 3 {
+        return Err(SceneError {
+            source: source.into(),
+            key: "dim".into(),
+            kind: ErrorKind::Range,
+            reason: format!("must be 2 or 3, got {dim}"),
+        });
+    }
+    let size = file.domain.size.clone();
+    let mut ch = Checker {
+        source,
+        dim,
+        size: &size,
+        h: 0.0,
+    };
+    let (dims, h) = domain(&ch, file.domain.cells)?;
+    ch.h = h;
+    let method = simulation(&ch, &file.simulation)?;
+    regions(&ch, &file)?;
+    file.emitter
+        .iter()
+        .enumerate()
+        .try_for_each(|(i, e)| emitter(&ch, &format!("emitter[{i}]"), e))?;
+    obstacles(&ch, &file.obstacle)?;
+    let obstacle_mode = obstacle_mode(&ch, &file.simulation, &method)?;
+    let scene = Scene {
+        source: source.to_string(),
+        cell_size_m: h,
+        dims,
+        method,
+        obstacle_mode,
+        file,
+    };
+    match dim {
+        2 => obstacles_start_clear::<2>(&ch, &scene),
+        _ => obstacles_start_clear::<3>(&ch, &scene),
+    }?;
+    Ok(scene)
+}
+
+/// Section `domain`: the tank's size in whole cells, at least 4 per axis. Returns the cells
+/// per axis and the cell size.
+fn domain(ch: &Checker, cells: usize) -> Checked<(Vec<usize>, f64)> {
+    ch.len("domain.size", ch.size)?;
+    if let Some(x) = ch.size.iter().find(|x| **x <= 0.0) {
+        let why = format!("every extent must be positive, got {x}");
+        return ch.err("domain.size", ErrorKind::Range, why);
+    }
+    if cells < 4 {
+        let why = format!("needs at least 4 cells per axis, got {cells}");
+        return ch.err("domain.cells", ErrorKind::Range, why);
+    }
+    let longest = ch.size.iter().cloned().fold(0.0, f64::max);
+    let h = longest / cells as f64;
+    let mut dims = vec![];
+    for (k, &s) in ch.size.iter().enumerate() {
+        let n = s / h;
+        let rounded = n.round();
+        if (n - rounded).abs() > 1e-6 * n.max(1.0) {
+            let why = format!(
+                "axis {k}: extent {s} m is not a whole number of cells of {h} m ({n:.4} cells)"
+            );
+            return ch.err("domain.size", ErrorKind::Geometry, why);
+        }
+        if rounded < 4.0 {
+            let why = format!("axis {k} gets {rounded} cells; at least 4 per axis are needed");
+            return ch.err("domain.cells", ErrorKind::Range, why);
+        }
+        dims.push(rounded as usize);
+    }
+    let total: usize = dims.iter().product();
+    if total > 200_000_000 {
+        let why = format!("{total} cells is more than this program can hold");
+        return ch.err("domain.cells", ErrorKind::Range, why);
+    }
+    Ok((dims, h))
+}
+
+/// Section `simulation`: the ranges of its numbers, and the method's settings.
+fn simulation(ch: &Checker, s: &SimulationFile) -> Checked<MethodSettings> {
+    let range = |key: &str, ok: bool, why: String| -> Checked<()> {
+        match ok {
+            true => Ok(()),
+            false => ch.err(&format!("simulation.{key}"), ErrorKind::Range, why),
+        }
+    };
+    if s.band != BandMode::None && s.directions == Directions::Moore {
+        let why = "the band method moves particles to von Neumann neighbours only \
+                   (sec. push_part); use directions = \"von-neumann\" or band = \"none\"";
+        return ch.err("simulation.band", ErrorKind::Conflict, why.into());
+    }
+    let r = s.band_r;
+    range(
+        "band_r",
+        (1..=10_000).contains(&r),
+        format!("must be at least 1 (the band interface lies R cells below the surface), got {r}"),
+    )?;
+    let d = s.duration;
+    range(
+        "duration",
+        d.is_finite() && d > 0.0,
+        format!("must be a positive number of seconds, got {d}"),
+    )?;
+    range(
+        "ppc",
+        s.ppc > 0,
+        "must be at least 1 particle per cell, got 0".into(),
+    )?;
+    let dim = ch.dim;
+    range(
+        "ppc",
+        ppc_per_axis(s.ppc, dim).is_some(),
+        format!(
+            "must be k^{dim} for a whole k (e.g. 1, {}, {}), got {}",
+            2usize.pow(dim as u32),
+            3usize.pow(dim as u32),
+            s.ppc
+        ),
+    )?;
+    range(
+        "jitter",
+        (0.0..0.5).contains(&s.jitter),
+        format!("must be in [0, 0.5), got {}", s.jitter),
+    )?;
+    ch.len("simulation.gravity", s.gravity.as_deref().unwrap())?;
+    let f = s.flip_ratio;
+    range(
+        "flip_ratio",
+        (0.0..=1.0).contains(&f),
+        format!("must be in [0, 1], got {f}"),
+    )?;
+    let c = s.cfl;
+    range(
+        "cfl",
+        c > 0.0 && c <= 1.0,
+        format!("must be in (0, 1] cells per step, got {c}"),
+    )?;
+    let dt = s.max_dt;
+    range(
+        "max_dt",
+        dt.is_finite() && dt > 0.0,
+        format!("must be a positive number of seconds, got {dt}"),
+    )?;
+    let v = s.max_speed;
+    range(
+        "max_speed",
+        v.is_finite() && v > 0.0,
+        format!("must be a positive speed in m/s, got {v}"),
+    )?;
+    let t = s.pressure_tolerance;
+    range(
+        "pressure_tolerance",
+        t > 0.0 && t < 1.0,
+        format!("must be in (0, 1), got {t}"),
+    )?;
+    Ok(MethodSettings {
+        kind: s.method,
+        solver: s.solver,
+        directions: s.directions,
+        band: s.band,
+        band_r: s.band_r,
+        cross_check: false,
+        export_lp: None,
+    })
+}
+
+/// Sections `fluid` and `solid`: at least some fluid (or an emitter), every region valid.
+fn regions(ch: &Checker, file: &SceneFile) -> Checked<()> {
+    if file.fluid.is_empty() && file.emitter.is_empty() {
+        return ch.err(
+            "fluid",
+            ErrorKind::Conflict,
+            "the scene has no fluid and no emitter".into(),
+        );
+    }
+    for (i, r) in file.fluid.iter().enumerate() {
+        ch.region(&format!("fluid[{i}]"), r, false)?;
+    }
+    for (i, r) in file.solid.iter().enumerate() {
+        ch.region(&format!("solid[{i}]"), r, true)?;
+    }
+    Ok(())
+}
+
+/// One `[[emitter]]`: a box in the tank, a velocity, start before stop, a fill in (0, 1].
+fn emitter(ch: &Checker, key: &str, e: &EmitterFile) -> Checked<()> {
+    ch.inside(&format!("{key}.min"), &e.min)?;
+    ch.inside(&format!("{key}.max"), &e.max)?;
+    ch.len(&format!("{key}.velocity"), &e.velocity)?;
+    if !(e.start.is_finite() && e.start >= 0.0) {
+        let why = format!("must be a time >= 0 s, got {}", e.start);
+        return ch.err(&format!("{key}.start"), ErrorKind::Range, why);
+    }
+    if let Some(stop) = e.stop.filter(|&stop| stop.is_nan() || stop <= e.start) {
+        let why = format!("must be after start ({} s), got {stop}", e.start);
+        return ch.err(&format!("{key}.stop"), ErrorKind::Range, why);
+    }
+    if let Some(f) = e.until_fill.filter(|&f| !(f > 0.0 && f <= 1.0)) {
+        return ch.err(
+            &format!("{key}.until_fill"),
+            ErrorKind::Range,
+            format!("must be in (0, 1], got {f}"),
+        );
+    }
+    Ok(())
+}
+
+/// Section `obstacle`: shapes, velocities, names (unique, path-safe) and motion keys.
+fn obstacles(ch: &Checker, obstacles: &[ObstacleFile]) -> Checked<()> {
+    let mut names = BTreeSet::new();
+    for (i, o) in obstacles.iter().enumerate() {
+        let key = format!("obstacle[{i}]");
+        ch.region(&key, &o.region(), false)?;
+        ch.len(&format!("{key}.velocity"), &o.velocity)?;
+        let ok = !o.name.is_empty()
+            && o.name
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_');
+        if !ok {
+            let why = format!("must be letters, digits, '-' or '_', got '{}'", o.name);
+            return ch.err(&format!("{key}.name"), ErrorKind::Range, why);
+        }
+        motion(ch, &key, o)?;
+        if !names.insert(o.name.clone()) {
+            let why = format!("'{}' names two obstacles", o.name);
+            return ch.err(&format!("{key}.name"), ErrorKind::Conflict, why);
+        }
+    }
+    Ok(())
+}
+
+/// An obstacle's motion: a falling one needs its terminal speed; only a falling one takes
+/// `terminal_speed` and `drag`.
+fn motion(ch: &Checker, key: &str, o: &ObstacleFile) -> Checked<()> {
+    match (o.motion, o.terminal_speed, o.drag) {
+        (MotionKind::Falling, None, _) => ch.err(
+            &format!("{key}.terminal_speed"),
+            ErrorKind::Keys,
+            "a falling obstacle needs its terminal speed in the water (m/s)".into(),
+        ),
+        (MotionKind::Falling, Some(v), _) if !(v.is_finite() && v >= 0.0) => ch.err(
+            &format!("{key}.terminal_speed"),
+            ErrorKind::Range,
+            format!("must be a speed >= 0 m/s, got {v}"),
+        ),
+        (MotionKind::Falling, _, Some(d)) if !(d.is_finite() && d > 0.0) => ch.err(
+            &format!("{key}.drag"),
+            ErrorKind::Range,
+            format!("must be a rate > 0 per second, got {d}"),
+        ),
+        (MotionKind::Constant, Some(_), _) | (MotionKind::Constant, _, Some(_)) => ch.err(
+            key,
+            ErrorKind::Keys,
+            "'terminal_speed' and 'drag' apply to motion = \"falling\" only".into(),
+        ),
+        _ => Ok(()),
+    }
+}
+
+/// `simulation.obstacle`: one of the method's modes, its first by default.
+fn obstacle_mode(
+    ch: &Checker,
+    s: &SimulationFile,
+    method: &MethodSettings,
+) -> Checked<crate::sim::solids::ObstacleMode> {
+    let info = method.kind.info();
+    let mode = s.obstacle.unwrap_or(info.obstacle_modes[0]);
+    if info.obstacle_modes.contains(&mode) {
+        return Ok(mode);
+    }
+    let modes: Vec<&str> = info.obstacle_modes.iter().map(|m| m.name()).collect();
+    let why = format!(
+        "method {} cannot use obstacle mode '{}' (it has: {}); ccp couples obstacles through \
+         its correction (sec. 7), the other methods wait ('naive') or move regardless ('ignore')",
+        info.name,
+        mode.name(),
+        modes.join(", ")
+    );
+    ch.err("simulation.obstacle", ErrorKind::Conflict, why)
+}
+
+/// Every obstacle starts clear of the static solids and of the other obstacles, cell by cell
+/// at the scene's resolution.
+fn obstacles_start_clear<const D: usize>(ch: &Checker, scene: &Scene) -> Checked<()> {
+    let config = scene.config::<D>();
+    let grid = Grid::new(config.dims);
+    // What holds each cell: a static solid or an obstacle, named as in the scene file.
+    let mut holder: Vec<Option<String>> = vec![None; grid.num_cells()];
+    for (i, r) in config.solids.iter().enumerate() {
+        r.cells(&grid)
+            .for_each(|c| holder[c] = Some(format!("solid[{i}]")));
+    }
+    for (i, o) in config.obstacles.iter().enumerate() {
+        let cells = o.cells_at(&grid, &o.offset);
+        if let Some(&c) = cells.iter().find(|&&c| holder[c].is_some()) {
+            let why = format!(
+                "'{}' starts in a cell of {} (cell {:?}); obstacles must start clear of \
+                 solids and of each other",
+                o.name,
+                holder[c].as_deref().unwrap(),
+                grid.cell_coords(c)
+            );
+            return ch.err(&format!("obstacle[{i}]"), ErrorKind::Geometry, why);
+        }
+        let name = format!("obstacle[{i}] '{}'", o.name);
+        cells
+            .into_iter()
+            .for_each(|c| holder[c] = Some(name.clone()));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_toml_error_names_the_key_it_points_at() {
+        let text = "name = \"x\"\n[simulation]\nband = \"wide\"\n[[fluid]]\nshape = \"box\"\n[[fluid]]\nshape = \"cone\"\n";
+        assert_eq!(
+            key_at(text, text.find("\"wide\"").unwrap()),
+            "simulation.band"
+        );
+        assert_eq!(
+            key_at(text, text.find("\"cone\"").unwrap()),
+            "fluid[1].shape"
+        );
+        assert_eq!(key_at(text, 2), "name");
+        assert_eq!(key_at("dim = 2\n[domain\n", 9), "domain");
+    }
+}

@@ -1,0 +1,479 @@
+//! Scene files: TOML as written -> checked ([`check`]) -> [`SimConfig`] in grid units.
+//!
+//! Scene files speak SI (metres, seconds, m/s^2) and cells per axis; everything below this
+//! module works in grid units. All checks of user input live here, and every error is a
+//! [`SceneError`] that names the file, the key and the reason.
+
+mod check;
+
+pub use check::{ErrorKind, SceneError};
+
+use crate::grid::Vector;
+use crate::methods::{MethodKind, MethodSettings};
+use crate::particles::{Region, SpiralBlock};
+use crate::sim::correct::band::BandMode;
+use crate::sim::correct::problem::Directions;
+use crate::sim::correct::Solver;
+use crate::sim::emit::Emitter;
+use crate::sim::solids::{Motion, Obstacle, ObstacleMode};
+use crate::sim::SimConfig;
+use anyhow::{bail, Context, Result};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// `(name, text)` of each scene file `scenes/<name>.toml`, embedded into the binary.
+macro_rules! built_in {
+    ($($name:literal),* $(,)?) => {
+        &[$(($name, include_str!(concat!("../../scenes/", $name, ".toml")))),*]
+    };
+}
+
+/// The built-in scenes, embedded from `scenes/`.
+pub const BUILT_IN: &[(&str, &str)] = built_in![
+    "dam-2d",
+    "dam-1ppc-2d",
+    "dam-3d",
+    "compress-2d",
+    "spiral-2d",
+    "falling-obstacle-2d",
+    "falling-obstacle-3d",
+    "falling-obstacle-zero-bc-2d",
+    "large-obstacle-2d",
+    "large-obstacle-3d",
+    "drop-2d",
+    "drop-3d",
+    "hydrostatic-2d",
+    "martin-moyce-2d",
+];
+
+/// The rate at which a falling obstacle approaches its terminal speed in the water, 1/s,
+/// unless `obstacle.drag` says otherwise.
+pub const DEFAULT_DRAG: f64 = 10.0;
+
+/// A scene file as written.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneFile {
+    pub name: String,
+    #[serde(default)]
+    pub description: String,
+    /// 2 or 3.
+    pub dim: usize,
+    pub domain: DomainFile,
+    #[serde(default)]
+    pub simulation: SimulationFile,
+    /// Regions filled with fluid at the start.
+    #[serde(default)]
+    pub fluid: Vec<RegionFile>,
+    /// Static solid regions (cells whose centre is inside are solid).
+    #[serde(default)]
+    pub solid: Vec<RegionFile>,
+    #[serde(default)]
+    pub emitter: Vec<EmitterFile>,
+    /// Moving obstacles (sec. 7).
+    #[serde(default)]
+    pub obstacle: Vec<ObstacleFile>,
+}
+
+/// A moving box (`min`, `max`) or ball (`center`, `radius`), in metres, with a velocity.
+/// The shape keys repeat [`RegionFile`]'s because serde cannot flatten a struct into one that
+/// rejects unknown keys.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ObstacleFile {
+    /// Names the obstacle in recordings (`world/obstacles/<name>`).
+    pub name: String,
+    /// A box or a ball (no spiral).
+    pub shape: Shape,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub min: Option<Vec<f64>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max: Option<Vec<f64>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub center: Option<Vec<f64>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub radius: Option<f64>,
+    /// m/s: constant, or the start velocity of a falling obstacle.
+    pub velocity: Vec<f64>,
+    /// Constant, or falling: gravity in the air, then buoyancy and drag towards
+    /// `terminal_speed` in the water (a dense object, sec. 7).
+    #[serde(default)]
+    pub motion: MotionKind,
+    /// Falling: the speed it settles to in the water, m/s.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub terminal_speed: Option<f64>,
+    /// Falling: how fast it approaches the terminal speed in the water, 1/s (default 10).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub drag: Option<f64>,
+    /// The zero-velocity variant: the pressure solve sees the obstacle at rest.
+    #[serde(default)]
+    pub zero_velocity_bc: bool,
+}
+
+/// The shape of a region.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Shape {
+    /// `min`, `max`.
+    #[default]
+    Box,
+    /// `center`, `radius`.
+    Ball,
+    /// A 2D static solid only: a box with a spiral channel (see [`SpiralBlock`]).
+    Spiral,
+}
+
+impl Shape {
+    pub fn name(self) -> &'static str {
+        match self {
+            Shape::Box => "box",
+            Shape::Ball => "ball",
+            Shape::Spiral => "spiral",
+        }
+    }
+}
+
+/// How an obstacle's velocity evolves (`obstacle.motion`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum MotionKind {
+    #[default]
+    Constant,
+    Falling,
+}
+
+impl ObstacleFile {
+    /// Its shape as a region.
+    pub fn region(&self) -> RegionFile {
+        RegionFile {
+            shape: self.shape,
+            min: self.min.clone(),
+            max: self.max.clone(),
+            center: self.center.clone(),
+            radius: self.radius,
+            turns: None,
+            width: None,
+        }
+    }
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct DomainFile {
+    /// Extent of the tank in metres, one entry per axis; the tank spans `[0, size]`.
+    pub size: Vec<f64>,
+    /// Cells along the longest axis; the others get the same cell size.
+    pub cells: usize,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SimulationFile {
+    pub method: MethodKind,
+    /// Simulated time in seconds.
+    pub duration: f64,
+    /// Particles per cell, `mu`; must be `k^dim` for a whole `k`.
+    pub ppc: usize,
+    /// Seeding jitter, a fraction of the sub-cell spacing in [0, 0.5).
+    pub jitter: f64,
+    /// m/s^2 per axis; defaults to 9.81 down axis 1 (y is up, as in the paper).
+    pub gravity: Option<Vec<f64>>,
+    /// FLIP share of the FLIP/PIC velocity blend, in [0, 1].
+    pub flip_ratio: f64,
+    /// Largest motion per step in cells, in (0, 1].
+    pub cfl: f64,
+    /// Largest time step in seconds.
+    pub max_dt: f64,
+    /// Bound on the fluid speed, m/s.
+    pub max_speed: f64,
+    /// Relative tolerance of the pressure solve.
+    pub pressure_tolerance: f64,
+    pub seed: u64,
+    /// Solver of the correction step (method ccp).
+    pub solver: Solver,
+    /// Candidate moves of the correction: von Neumann (5 in 2D, 7 in 3D) or Moore (9, 27).
+    pub directions: Directions,
+    /// The band method of method ccp (sec. band_method): none, or how the band's count is
+    /// kept: paths (sec. push_part, the paper's choice), one-way (sec. band_con2) or full
+    /// (sec. band_con, small problems only).
+    pub band: BandMode,
+    /// `R`: depth of the band interface; the band is `R + 1` cells thick (the paper: 3, and 6
+    /// for the dam scenes).
+    pub band_r: u32,
+    /// How obstacles get through particles: couple (method ccp, sec. 7), or for the other
+    /// methods naive (wait until the way is free) or ignore (move regardless). Default: the
+    /// method's first mode ([`crate::methods::MethodInfo::obstacle_modes`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub obstacle: Option<ObstacleMode>,
+}
+
+impl Default for SimulationFile {
+    fn default() -> Self {
+        Self {
+            method: MethodKind::Flip,
+            duration: 2.0,
+            ppc: 4,
+            jitter: 0.1,
+            gravity: None,
+            flip_ratio: 0.9,
+            cfl: 1.0,
+            max_dt: 0.01,
+            max_speed: 10.0,
+            pressure_tolerance: 1e-9,
+            seed: 1,
+            solver: Solver::Flow,
+            directions: Directions::VonNeumann,
+            band: BandMode::None,
+            band_r: 3,
+            obstacle: None,
+        }
+    }
+}
+
+/// A box (`min`, `max`) or a ball (`center`, `radius`), in metres.
+#[derive(Clone, Debug, Default, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct RegionFile {
+    /// Box (`min`, `max`), ball (`center`, `radius`), or, for a 2D solid only, spiral: the
+    /// box `min`..`max` with a spiral channel carved into it, centred at `center`, its centre
+    /// line starting `radius` above the centre and winding `turns` times inwards, the channel
+    /// `width` wide and open to the box's top face (see [`SpiralBlock`]).
+    pub shape: Shape,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub min: Option<Vec<f64>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max: Option<Vec<f64>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub center: Option<Vec<f64>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub radius: Option<f64>,
+    /// Spiral: how many times the channel winds around the centre.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub turns: Option<f64>,
+    /// Spiral: the channel's width, metres; at least two cells, and the walls between turns
+    /// (`radius / (turns + 1/2) - width`) too.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub width: Option<f64>,
+}
+
+/// A box that injects particles at `velocity` from `start` to `stop` seconds.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct EmitterFile {
+    pub min: Vec<f64>,
+    pub max: Vec<f64>,
+    /// m/s.
+    pub velocity: Vec<f64>,
+    #[serde(default)]
+    pub start: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub stop: Option<f64>,
+    /// Stop when the scene holds `until_fill * mu * cells` particles (0.5: half the tank).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub until_fill: Option<f64>,
+}
+
+/// Command-line overrides of scene values.
+#[derive(Clone, Debug, Default)]
+pub struct Overrides {
+    pub method: Option<MethodKind>,
+    pub duration: Option<f64>,
+    pub cells: Option<usize>,
+    pub ppc: Option<usize>,
+    pub seed: Option<u64>,
+    pub solver: Option<Solver>,
+    pub directions: Option<Directions>,
+    pub band: Option<BandMode>,
+    pub band_r: Option<u32>,
+    pub obstacle: Option<ObstacleMode>,
+}
+
+/// A scene ready to run: its source, the file with overrides applied, and its checked values.
+#[derive(Clone, Debug)]
+pub struct Scene {
+    /// Where it came from: `built-in:NAME` or the file path.
+    pub source: String,
+    pub file: SceneFile,
+    pub dims: Vec<usize>,
+    pub cell_size_m: f64,
+    /// The method and its settings.
+    pub method: MethodSettings,
+    pub obstacle_mode: ObstacleMode,
+}
+
+impl Overrides {
+    /// Writes the overrides into the scene file, and the default gravity where it has none.
+    fn apply(&self, file: &mut SceneFile) {
+        let sim = &mut file.simulation;
+        macro_rules! set {
+            ($($field:ident),*) => {
+                $(if let Some(v) = &self.$field {
+                    sim.$field = *v;
+                })*
+            };
+        }
+        set!(method, duration, ppc, seed, solver, directions, band, band_r);
+        if let Some(m) = self.obstacle {
+            sim.obstacle = Some(m);
+        }
+        if let Some(c) = self.cells {
+            file.domain.cells = c;
+        }
+        if sim.gravity.is_none() {
+            let mut g = vec![0.0; file.dim];
+            if file.dim > 1 {
+                g[1] = -9.81;
+            }
+            sim.gravity = Some(g);
+        }
+    }
+}
+
+impl Scene {
+    pub fn name(&self) -> &str {
+        &self.file.name
+    }
+
+    pub fn dim(&self) -> usize {
+        self.file.dim
+    }
+
+    pub fn duration_secs(&self) -> f64 {
+        self.file.simulation.duration
+    }
+
+    /// The scene as run, as TOML (defaults and overrides filled in).
+    pub fn resolved_toml(&self) -> String {
+        toml::to_string_pretty(&self.file).expect("a scene file always serialises")
+    }
+
+    /// Loads a built-in scene by name, or a scene file by path.
+    pub fn load(name_or_path: &str, overrides: &Overrides) -> Result<Scene> {
+        let (source, text) =
+            if let Some((_, text)) = BUILT_IN.iter().find(|(n, _)| *n == name_or_path) {
+                (format!("built-in scene '{name_or_path}'"), text.to_string())
+            } else if name_or_path.ends_with(".toml") || Path::new(name_or_path).exists() {
+                let text = std::fs::read_to_string(name_or_path)
+                    .with_context(|| format!("cannot read scene file '{name_or_path}'"))?;
+                (format!("scene file '{name_or_path}'"), text)
+            } else {
+                let names: Vec<&str> = BUILT_IN.iter().map(|(n, _)| *n).collect();
+                bail!(
+                "unknown scene '{name_or_path}': not a built-in scene ({}) and not a .toml file",
+                names.join(", ")
+            );
+            };
+        Self::parse(&source, &text, overrides)
+    }
+
+    /// Parses and checks scene text; `source` names it in errors.
+    pub fn parse(source: &str, text: &str, overrides: &Overrides) -> Result<Scene> {
+        let mut file: SceneFile =
+            toml::from_str(text).map_err(|e| check::toml_error(source, text, &e))?;
+        overrides.apply(&mut file);
+        Ok(check::check(source, file)?)
+    }
+
+    /// The configuration in grid units.
+    pub fn config<const D: usize>(&self) -> SimConfig<D> {
+        assert_eq!(D, self.dim(), "scene dimension");
+        let h = self.cell_size_m;
+        let s = &self.file.simulation;
+        let vec = |v: &[f64]| Vector::<D>::from_fn(|k, _| v[k] / h);
+        let region = |r: &RegionFile| match r.shape {
+            Shape::Box => Region::Box {
+                min: vec(r.min.as_deref().unwrap()),
+                max: vec(r.max.as_deref().unwrap()),
+            },
+            Shape::Ball => Region::Ball {
+                center: vec(r.center.as_deref().unwrap()),
+                radius: r.radius.unwrap() / h,
+            },
+            Shape::Spiral => Region::Spiral(SpiralBlock {
+                min: vec(r.min.as_deref().unwrap()),
+                max: vec(r.max.as_deref().unwrap()),
+                center: vec(r.center.as_deref().unwrap()),
+                radius: r.radius.unwrap() / h,
+                turns: r.turns.unwrap(),
+                width: r.width.unwrap() / h,
+            }),
+        };
+        let dims: [usize; D] = std::array::from_fn(|k| self.dims[k]);
+        let per_axis = check::ppc_per_axis(s.ppc, D).unwrap();
+        let cells: usize = dims.iter().product();
+        SimConfig {
+            dims,
+            cell_size_m: h,
+            method: self.method.clone(),
+            per_axis,
+            jitter: s.jitter,
+            gravity: vec(s.gravity.as_deref().unwrap()),
+            flip_ratio: s.flip_ratio,
+            cfl: s.cfl,
+            max_dt_secs: s.max_dt,
+            max_speed: s.max_speed / h,
+            pressure_tolerance: s.pressure_tolerance,
+            seed: s.seed,
+            fluid: self.file.fluid.iter().map(region).collect(),
+            solids: self.file.solid.iter().map(region).collect(),
+            emitters: self
+                .file
+                .emitter
+                .iter()
+                .map(|e| Emitter {
+                    region: Region::Box {
+                        min: vec(&e.min),
+                        max: vec(&e.max),
+                    },
+                    velocity: vec(&e.velocity),
+                    start_secs: e.start,
+                    stop_secs: e.stop.unwrap_or(f64::INFINITY),
+                    until_particles: e
+                        .until_fill
+                        .map(|f| (f * (s.ppc * cells) as f64).round() as usize),
+                })
+                .collect(),
+            obstacles: self
+                .file
+                .obstacle
+                .iter()
+                .map(|o| Obstacle {
+                    name: o.name.clone(),
+                    shape: region(&o.region()),
+                    offset: Vector::<D>::zeros(),
+                    velocity: vec(&o.velocity),
+                    motion: match o.motion {
+                        MotionKind::Falling => Motion::Falling {
+                            terminal_speed: o.terminal_speed.unwrap() / h,
+                            drag: o.drag.unwrap_or(DEFAULT_DRAG),
+                        },
+                        MotionKind::Constant => Motion::Constant,
+                    },
+                    zero_velocity_bc: o.zero_velocity_bc,
+                })
+                .collect(),
+            obstacle_mode: self.obstacle_mode,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_built_in_scene_parses_and_converts() {
+        for (name, _) in BUILT_IN {
+            let s = Scene::load(name, &Overrides::default()).unwrap();
+            assert_eq!(s.name(), *name);
+            match s.dim() {
+                2 => assert_eq!(s.config::<2>().dims.len(), 2),
+                _ => assert_eq!(s.config::<3>().dims.len(), 3),
+            }
+            // The resolved TOML parses back to the same scene.
+            let again =
+                Scene::parse("resolved", &s.resolved_toml(), &Overrides::default()).unwrap();
+            assert_eq!(again.dims, s.dims);
+        }
+    }
+}
