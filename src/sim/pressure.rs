@@ -100,71 +100,105 @@ pub fn project<const D: usize>(
     u: &mut MacField<D>,
     settings: &PcgSettings,
 ) -> PcgStats {
-    let n = grid.num_cells();
-    let mut row = vec![NONE; n];
-    let mut rows = 0u32;
-    for c in 0..n {
-        if kind[c] == CellKind::Fluid {
-            row[c] = rows;
-            rows += 1;
-        }
-    }
-    let mut a = StencilMatrix::<D>::default();
-    let mut rhs = Vec::with_capacity(rows as usize);
-    let mut dirichlet = vec![false; rows as usize];
-    for c in (0..n).filter(|&c| row[c] != NONE) {
-        let cc = grid.cell_coords(c);
-        let mut diag = 0.0;
-        let mut plus = [NONE; D];
-        let mut minus = [NONE; D];
-        let mut off = [0.0; D];
-        for ax in 0..D {
-            for dir in [-1, 1] {
-                let Some(nb) = grid.neighbor(cc, ax, dir) else {
-                    continue;
-                };
-                let nb = grid.cell_index(nb);
-                if solid[nb] {
-                    continue;
-                }
-                diag += 1.0;
-                match kind[nb] {
-                    CellKind::Fluid if dir > 0 => {
-                        plus[ax] = row[nb];
-                        off[ax] = -1.0;
-                    }
-                    CellKind::Fluid => minus[ax] = row[nb],
-                    _ => dirichlet[a.diag.len()] = true,
-                }
-            }
-        }
-        a.diag.push(diag);
-        a.plus.push(plus);
-        a.minus.push(minus);
-        a.off_plus.push(off);
-        rhs.push(-divergence(grid, u, c));
-    }
-    remove_mean_of_closed_components(&a, &dirichlet, &mut rhs);
-    let mut p = vec![0.0; rows as usize];
-    let stats = pcg::solve(&a, &rhs, &mut p, settings);
-    let pressure = |c: usize| {
-        if row[c] == NONE {
-            0.0
-        } else {
-            p[row[c] as usize]
-        }
-    };
+    let system = Poisson::new(grid, |c| kind[c] == CellKind::Fluid, solid);
+    let rhs = system.cells().map(|c| -divergence(grid, u, c)).collect();
+    let (p, stats) = system.solve(rhs, settings);
     for ax in 0..D {
         for (i, v) in u.comp[ax].iter_mut().enumerate() {
             let f = grid.face_coords(ax, i);
             if let FaceKind::Open { left, right } = face_kind(grid, ax, f, solid, solid_vel) {
-                if row[left] != NONE || row[right] != NONE {
-                    *v -= pressure(right) - pressure(left);
+                if system.has(left) || system.has(right) {
+                    *v -= p[right] - p[left];
                 }
             }
         }
     }
     stats
+}
+
+/// The Poisson system of the projection over a set of cells: `A x = b` with `A` the 5- or
+/// 7-point negative Laplacian (unit cells), one row per cell of the set in ascending cell
+/// order. Solid cells and the domain walls are Neumann (no term), non-solid cells outside the
+/// set are Dirichlet (`x = 0`). Shared by the pressure projection and IDP's second solve, so
+/// that both use the same matrix.
+pub struct Poisson<const D: usize> {
+    /// Row of each cell, or [`NONE`] outside the set.
+    row: Vec<u32>,
+    a: StencilMatrix<D>,
+    /// Rows with a Dirichlet neighbour.
+    dirichlet: Vec<bool>,
+}
+
+impl<const D: usize> Poisson<D> {
+    pub fn new(grid: &Grid<D>, in_set: impl Fn(usize) -> bool, solid: &[bool]) -> Self {
+        let n = grid.num_cells();
+        let mut row = vec![NONE; n];
+        let mut rows = 0u32;
+        for c in (0..n).filter(|&c| in_set(c)) {
+            row[c] = rows;
+            rows += 1;
+        }
+        let mut a = StencilMatrix::<D>::default();
+        let mut dirichlet = vec![false; rows as usize];
+        for c in (0..n).filter(|&c| row[c] != NONE) {
+            let cc = grid.cell_coords(c);
+            let mut diag = 0.0;
+            let mut plus = [NONE; D];
+            let mut minus = [NONE; D];
+            let mut off = [0.0; D];
+            for ax in 0..D {
+                for dir in [-1, 1] {
+                    let Some(nb) = grid.neighbor(cc, ax, dir) else {
+                        continue;
+                    };
+                    let nb = grid.cell_index(nb);
+                    if solid[nb] {
+                        continue;
+                    }
+                    diag += 1.0;
+                    match row[nb] {
+                        NONE => dirichlet[a.diag.len()] = true,
+                        r if dir > 0 => {
+                            plus[ax] = r;
+                            off[ax] = -1.0;
+                        }
+                        r => minus[ax] = r,
+                    }
+                }
+            }
+            a.diag.push(diag);
+            a.plus.push(plus);
+            a.minus.push(minus);
+            a.off_plus.push(off);
+        }
+        Self { row, a, dirichlet }
+    }
+
+    /// Whether cell `c` has a row.
+    pub fn has(&self, c: usize) -> bool {
+        self.row[c] != NONE
+    }
+
+    /// The cells of the set, in row order.
+    pub fn cells(&self) -> impl Iterator<Item = usize> + '_ {
+        (0..self.row.len()).filter(|&c| self.row[c] != NONE)
+    }
+
+    /// Solves `A x = rhs` (`rhs` in row order) by MIC(0)-PCG from zero. A connected part of
+    /// the set with no Dirichlet neighbour has a singular system: the mean of `rhs` over it is
+    /// removed first ([`remove_mean_of_closed_components`]). Returns `x` per cell (0 outside
+    /// the set).
+    pub fn solve(&self, mut rhs: Vec<f64>, settings: &PcgSettings) -> (Vec<f64>, PcgStats) {
+        remove_mean_of_closed_components(&self.a, &self.dirichlet, &mut rhs);
+        let mut x = vec![0.0; self.a.len()];
+        let stats = pcg::solve(&self.a, &rhs, &mut x, settings);
+        let per_cell = self
+            .row
+            .iter()
+            .map(|&r| if r == NONE { 0.0 } else { x[r as usize] })
+            .collect();
+        (per_cell, stats)
+    }
 }
 
 /// A connected fluid region that touches no empty cell (a full, closed container or a pocket
