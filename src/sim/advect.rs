@@ -12,9 +12,7 @@ use rayon::prelude::*;
 /// The margin epsilon of eq. best_cell_pos, in cells.
 pub const CELL_MARGIN: f64 = 0.01;
 
-/// Moves every particle with the grid velocity. A particle that would leave the domain is
-/// clamped inside it; one that would enter a solid cell stays in its own cell, at the point
-/// closest to where it was heading.
+/// Moves every particle with the grid velocity ([`displace`] by `dt u(x)`).
 pub fn advect_particles<const D: usize>(
     grid: &Grid<D>,
     u: &MacField<D>,
@@ -22,17 +20,28 @@ pub fn advect_particles<const D: usize>(
     dt: f64,
     pos: &mut [Vector<D>],
 ) {
-    pos.par_iter_mut().for_each(|x| {
-        let from = grid.cell_of(x).expect("particle inside the domain");
-        let mut to = *x + dt * u.interpolate(grid, x);
-        for k in 0..D {
-            to[k] = to[k].clamp(CELL_MARGIN, grid.dims[k] as f64 - CELL_MARGIN);
-        }
-        if solid[grid.cell_index_of(&to)] {
-            to = grid.closest_in_cell(&to, from, CELL_MARGIN);
-        }
-        *x = to;
-    });
+    pos.par_iter_mut()
+        .for_each(|x| *x = displace(grid, solid, x, dt * u.interpolate(grid, x)));
+}
+
+/// Where a particle at `x` ends when moved by `d`: clamped into the domain, `CELL_MARGIN` from
+/// its walls; and if that is in a cell flagged in `solid`, it stays in its own cell at the point
+/// closest to where it was heading.
+pub fn displace<const D: usize>(
+    grid: &Grid<D>,
+    solid: &[bool],
+    x: &Vector<D>,
+    d: Vector<D>,
+) -> Vector<D> {
+    let from = grid.cell_of(x).expect("particle inside the domain");
+    let mut to = *x + d;
+    for k in 0..D {
+        to[k] = to[k].clamp(CELL_MARGIN, grid.dims[k] as f64 - CELL_MARGIN);
+    }
+    if solid[grid.cell_index_of(&to)] {
+        to = grid.closest_in_cell(&to, from, CELL_MARGIN);
+    }
+    to
 }
 
 /// Semi-Lagrangian advection of the grid velocity by itself over `dt` (first order): each face
