@@ -244,6 +244,41 @@ pub fn for_each_face_weight<const D: usize>(
     }
 }
 
+/// Calls `f(cell_index, weight)` for the up to `2^D` cells whose centres lie within one cell
+/// of `x` on every axis, with the multilinear ("tent") weights `prod_k (1 - |x_k - c_k - 1/2|)`.
+/// Unlike [`for_each_face_weight`], nothing is clamped: the share of cells outside the domain
+/// is dropped (IDP's density estimate, which accounts for the walls separately).
+#[inline]
+pub fn for_each_cell_weight<const D: usize>(
+    grid: &Grid<D>,
+    x: &Vector<D>,
+    mut f: impl FnMut(usize, f64),
+) {
+    let mut base = [0i64; D];
+    let mut frac = [0.0f64; D];
+    for k in 0..D {
+        let s = x[k] - 0.5;
+        base[k] = s.floor() as i64;
+        frac[k] = s - base[k] as f64;
+    }
+    'corners: for corner in 0..1usize << D {
+        let mut w = 1.0;
+        let mut idx = 0;
+        for k in 0..D {
+            let up = ((corner >> k) & 1) as i64;
+            let i = base[k] + up;
+            if i < 0 || i >= grid.dims[k] as i64 {
+                continue 'corners;
+            }
+            w *= if up == 1 { frac[k] } else { 1.0 - frac[k] };
+            idx += i as usize * grid.cell_stride(k);
+        }
+        if w != 0.0 {
+            f(idx, w);
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

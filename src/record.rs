@@ -118,28 +118,29 @@ fn rgba(c: [u8; 4]) -> rerun::Rgba32 {
     rerun::Rgba32::from_unmultiplied_rgba(c[0], c[1], c[2], c[3])
 }
 
-fn blueprint(dim: usize) -> Blueprint {
+/// The world view on the left; on the right the volume, stage times, the pressure solve, the
+/// method's own panels, the log and the scene.
+fn blueprint(dim: usize, method_panels: &[(&str, &str)]) -> Blueprint {
     let world: rerun::blueprint::ContainerLike = if dim == 2 {
         Spatial2DView::new("world").with_origin("world").into()
     } else {
         Spatial3DView::new("world").with_origin("world").into()
     };
     let series = |name: &str, origin: &str| TimeSeriesView::new(name).with_origin(origin).into();
+    let mut right: Vec<rerun::blueprint::ContainerLike> = vec![
+        series("volume %", "metrics/volume_percent"),
+        series("stage times (ms)", "metrics/time"),
+        series("pressure solve", "metrics/pcg"),
+    ];
+    right.extend(
+        method_panels
+            .iter()
+            .map(|(name, origin)| series(name, origin)),
+    );
+    right.push(TextLogView::new("log").with_origin("log").into());
+    right.push(TextDocumentView::new("scene").with_origin("scene").into());
     Blueprint::new(
-        Horizontal::new([
-            world,
-            Vertical::new([
-                series("volume %", "metrics/volume_percent"),
-                series("stage times (ms)", "metrics/time"),
-                series("pressure solve", "metrics/pcg"),
-                series("correction", "metrics/correction"),
-                series("band", "metrics/band"),
-                TextLogView::new("log").with_origin("log").into(),
-                TextDocumentView::new("scene").with_origin("scene").into(),
-            ])
-            .into(),
-        ])
-        .with_column_shares([2.0, 1.0]),
+        Horizontal::new([world, Vertical::new(right).into()]).with_column_shares([2.0, 1.0]),
     )
 }
 
@@ -160,7 +161,7 @@ impl Recorder {
             .recording_name(scene.name())
             .enabled(true)
             .send_properties(false)
-            .with_blueprint(blueprint(scene.dim()))
+            .with_blueprint(blueprint(scene.dim(), scene.method.kind.info().panels))
             .save(path)
             .map_err(|e| anyhow!("cannot write recording '{}': {e}", path.display()))?;
         rec.set_log_time_enabled(false);

@@ -55,6 +55,7 @@ impl MethodType for Ccp {
             MethodOption::ExportLp,
         ],
         obstacle_modes: &[ObstacleMode::Couple],
+        panels: &[("correction", "metrics/correction"), ("band", "metrics/band")],
     };
 
     fn build<const D: usize>(s: &MethodSettings) -> Box<dyn FluidMethod<D>> {

@@ -14,6 +14,7 @@ impl MethodType for Flip {
         about: "PIC/FLIP with no position correction (Zhu and Bridson 2005)",
         options: &[],
         obstacle_modes: &[ObstacleMode::Naive, ObstacleMode::Ignore],
+        panels: &[],
     };
 
     fn build<const D: usize>(_settings: &MethodSettings) -> Box<dyn FluidMethod<D>> {

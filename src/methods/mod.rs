@@ -72,6 +72,7 @@ macro_rules! methods {
 methods! {
     flip::Flip,
     ccp::Ccp,
+    idp::Idp,
 }
 
 impl MethodKind {
@@ -117,6 +118,8 @@ pub struct MethodInfo {
     pub options: &'static [MethodOption],
     /// The obstacle modes it supports; the first is its default.
     pub obstacle_modes: &'static [ObstacleMode],
+    /// Time-series panels of its metrics in the recording's layout: `(title, entity path)`.
+    pub panels: &'static [(&'static str, &'static str)],
 }
 
 /// The settings of the methods, as the scene file and the command line give them; each method
@@ -136,6 +139,8 @@ pub struct MethodSettings {
     pub cross_check: bool,
     /// Write the correction problem of this step as MPS to this path.
     pub export_lp: Option<(u64, PathBuf)>,
+    /// IDP: resample degenerate cells (`simulation.idp_resample`).
+    pub idp_resample: bool,
 }
 
 impl MethodSettings {
@@ -317,6 +322,7 @@ mod tests {
             band_r: 3,
             cross_check: false,
             export_lp: None,
+            idp_resample: false,
         };
         let e = s.check_given(&[MethodOption::Band]).unwrap_err();
         assert!(e.contains("--band") && e.contains("'flip'") && e.contains("ccp"));

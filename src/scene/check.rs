@@ -445,6 +445,7 @@ fn simulation(ch: &Checker, s: &SimulationFile) -> Checked<MethodSettings> {
         band_r: s.band_r,
         cross_check: false,
         export_lp: None,
+        idp_resample: s.idp_resample,
     })
 }
 

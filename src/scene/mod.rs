@@ -205,6 +205,9 @@ pub struct SimulationFile {
     /// method's first mode ([`crate::methods::MethodInfo::obstacle_modes`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub obstacle: Option<ObstacleMode>,
+    /// Method idp: resample cells over twice the rest density (Kugelstadt et al.'s optional
+    /// step; off as in their 3D scene).
+    pub idp_resample: bool,
 }
 
 impl Default for SimulationFile {
@@ -226,6 +229,7 @@ impl Default for SimulationFile {
             band: BandMode::None,
             band_r: 3,
             obstacle: None,
+            idp_resample: false,
         }
     }
 }

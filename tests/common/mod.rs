@@ -4,6 +4,7 @@
 #![allow(dead_code)]
 
 use cellflip::methods::ccp::CcpReport;
+use cellflip::methods::idp::IdpReport;
 use cellflip::methods::MethodKind;
 use cellflip::runner::{Limit, Runner};
 use cellflip::scene::{Overrides, Scene};
@@ -60,6 +61,11 @@ pub fn run<const D: usize>(
 /// The report of method ccp.
 pub fn ccp<const D: usize>(rep: &StepReport<D>) -> &CcpReport<D> {
     rep.method_report::<CcpReport<D>>().expect("a ccp report")
+}
+
+/// The report of method idp.
+pub fn idp<const D: usize>(rep: &StepReport<D>) -> &IdpReport<D> {
+    rep.method_report::<IdpReport<D>>().expect("an idp report")
 }
 
 /// FNV-1a over the bits of what it is fed: a digest that changes with any bit of the state.
