@@ -27,6 +27,42 @@ pub enum Command {
     Bench(BenchArgs),
     /// Compare with experiment: Martin & Moyce's dam break and water at rest.
     Validate(ValidateArgs),
+    /// Speed against error: every method on a matrix of scenes, resolutions and seeds, with
+    /// tables (report.md, report.csv), plots (PNG, SVG) and a comparison recording.
+    Report(ReportArgs),
+}
+
+#[derive(Args, Debug, Clone)]
+pub struct ReportArgs {
+    /// Scenes (built-in names or .toml paths), comma-separated [default: the paper's matrix,
+    /// about 15 minutes on 2 cores]
+    #[arg(long, value_delimiter = ',')]
+    pub scenes: Vec<String>,
+    /// Methods, comma-separated [default: every method]
+    #[arg(long, value_enum, value_delimiter = ',')]
+    pub methods: Vec<MethodKind>,
+    /// Resolutions (cells along the longest axis), comma-separated; every scene runs at each
+    /// [default: each scene's, three for martin-moyce-2d]
+    #[arg(long, value_delimiter = ',')]
+    pub res: Vec<usize>,
+    /// Seeds, comma-separated; every run is repeated with each [default: the scene's]
+    #[arg(long, value_delimiter = ',')]
+    pub seeds: Vec<u64>,
+    /// Simulated seconds per run at most (quick looks) [default: each scene's]
+    #[arg(long)]
+    pub duration: Option<f64>,
+    /// Also run the hard cases for the stability table (on by default without --scenes)
+    #[arg(long, conflicts_with = "no_stability")]
+    pub stability: bool,
+    /// Leave out the stability runs
+    #[arg(long)]
+    pub no_stability: bool,
+    /// Output folder
+    #[arg(long, default_value = "report")]
+    pub out: PathBuf,
+    /// No progress bar and no closing line
+    #[arg(long, short)]
+    pub quiet: bool,
 }
 
 #[derive(Args, Debug, Clone)]

@@ -11,6 +11,7 @@ pub mod methods;
 pub mod metrics;
 pub mod particles;
 pub mod record;
+pub mod report;
 pub mod run;
 pub mod runner;
 pub mod scene;

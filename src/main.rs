@@ -2,7 +2,7 @@
 
 use anyhow::Result;
 use cellflip::cli::{Cli, Command, ValidateArgs};
-use cellflip::{bench, run, scene, validation};
+use cellflip::{bench, report, run, scene, validation};
 use clap::Parser;
 
 fn main() {
@@ -34,6 +34,7 @@ fn dispatch(cli: Cli) -> Result<()> {
         Command::Run(args) => run::run(&args),
         Command::Bench(args) => bench::bench(&args),
         Command::Validate(args) => validate(&args),
+        Command::Report(args) => report::report(&args),
     }
 }
 

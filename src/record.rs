@@ -634,3 +634,78 @@ impl<const D: usize> Log<D> for Canvas<'_, D> {
         self.keep(r);
     }
 }
+
+/// One run's time series for the report's comparison recording.
+pub struct ComparisonSeries<'a> {
+    pub scene: &'a str,
+    pub method: &'a str,
+    pub res: usize,
+    pub seed: u64,
+    /// `(simulated seconds, V/V* %)` and `(simulated seconds, kinetic energy per unit mass)`.
+    pub volume: &'a [(f64, f64)],
+    pub ke: &'a [(f64, f64)],
+}
+
+/// Entity-path part of a scene label.
+fn path_part(s: &str) -> String {
+    s.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
+/// `cellflip report`'s recording: every run's volume and kinetic energy on the `sim_time`
+/// timeline, under `volume/<scene>/<method>/<cells>` and
+/// `kinetic_energy/<scene>/<method>/<cells>` (`_s<seed>` appended when a scene runs with
+/// several seeds), with one panel per scene comparing the methods.
+pub fn write_comparison(path: &Path, runs: &[ComparisonSeries<'_>]) -> Result<()> {
+    let mut scenes: Vec<String> = vec![];
+    for r in runs {
+        let s = path_part(r.scene);
+        if !scenes.contains(&s) {
+            scenes.push(s);
+        }
+    }
+    let panel = |what: &str, s: &String| -> rerun::blueprint::ContainerLike {
+        TimeSeriesView::new(format!("{s}: {what}"))
+            .with_origin(format!("{what}/{s}"))
+            .into()
+    };
+    let volume: Vec<_> = scenes.iter().map(|s| panel("volume", s)).collect();
+    let ke: Vec<_> = scenes.iter().map(|s| panel("kinetic_energy", s)).collect();
+    let blueprint = Blueprint::new(Horizontal::new([
+        Vertical::new(volume).into(),
+        Vertical::new(ke).into(),
+    ]));
+    let rec = rerun::RecordingStreamBuilder::new("cellflip")
+        .recording_name("cellflip report")
+        .send_properties(false)
+        .with_blueprint(blueprint)
+        .save(path)?;
+    rec.set_log_time_enabled(false);
+    let several_seeds = |r: &ComparisonSeries<'_>| {
+        runs.iter().any(|o| {
+            o.scene == r.scene && o.method == r.method && o.res == r.res && o.seed != r.seed
+        })
+    };
+    for r in runs {
+        let mut leaf = format!("{}/{}/{}", path_part(r.scene), r.method, r.res);
+        if several_seeds(r) {
+            leaf += &format!("_s{}", r.seed);
+        }
+        for (what, series) in [("volume", r.volume), ("kinetic_energy", r.ke)] {
+            let entity = format!("{what}/{leaf}");
+            for &(t, v) in series {
+                rec.set_duration_secs("sim_time", t);
+                rec.log(entity.as_str(), &rerun::Scalars::single(v))?;
+            }
+        }
+    }
+    rec.flush_blocking().map_err(|e| anyhow!("{e}"))?;
+    Ok(())
+}

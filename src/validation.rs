@@ -84,25 +84,34 @@ pub fn mean_relative_error(rows: &[Row]) -> f64 {
         / rows.len() as f64
 }
 
-/// Runs scene `martin-moyce-2d` (with `overrides`) until the last tabulated time and compares
-/// the surge front (furthest particle within a quarter column width of the floor) and the
-/// column height at the back wall (highest particle in the first cell column) with experiment.
-pub fn martin_moyce(overrides: &Overrides, shift_t: f64) -> Result<MartinMoyce> {
-    let scene = Scene::load("martin-moyce-2d", overrides)?;
-    let front_data = parse_csv(SURGE_FRONT_CSV).context("martin_moyce_1952.csv")?;
-    let height_data = parse_csv(COLUMN_HEIGHT_CSV).context("martin_moyce_1952_height.csv")?;
-    let sim = Simulation::<2>::new(scene.config::<2>());
-    let h = sim.state.config.cell_size_m;
-    let a = COLUMN_WIDTH_M;
-    let t_front = (2.0 * G / a).sqrt();
-    let t_height = (G / a).sqrt();
-    let t_end =
-        (front_data.last().unwrap().0 / t_front).max(height_data.last().unwrap().0 / t_height);
-    // Surge front: furthest particle within a/4 of the floor; column: highest particle in the
-    // first cell column. In metres.
-    let observe = |sim: &Simulation<2>| {
-        let pos = &sim.state.particles.pos;
-        let floor = 0.25 * a / h;
+/// The surge front (furthest particle within a quarter column width of the floor) and the
+/// column height at the back wall (highest particle in the first cell column) of scene
+/// `martin-moyce-2d` over time, observed after each step, and their comparison with
+/// experiment.
+#[derive(Clone, Debug, Default)]
+pub struct MartinMoyceProbe {
+    /// `(t, front, column)`, seconds and metres.
+    pub series: Vec<(f64, f64, f64)>,
+}
+
+impl MartinMoyceProbe {
+    /// Simulated seconds that cover both tables.
+    pub fn end_time() -> f64 {
+        let last = |csv| {
+            parse_csv(csv)
+                .ok()
+                .and_then(|d| d.last().map(|r| r.0))
+                .unwrap_or(0.0)
+        };
+        let a = COLUMN_WIDTH_M;
+        (last(SURGE_FRONT_CSV) / (2.0 * G / a).sqrt()).max(last(COLUMN_HEIGHT_CSV) / (G / a).sqrt())
+    }
+
+    pub fn observe(&mut self, sim: &Simulation<2>) {
+        let s = &sim.state;
+        let h = s.config.cell_size_m;
+        let floor = 0.25 * COLUMN_WIDTH_M / h;
+        let pos = &s.particles.pos;
         let front = pos
             .iter()
             .filter(|x| x[1] < floor)
@@ -113,44 +122,65 @@ pub fn martin_moyce(overrides: &Overrides, shift_t: f64) -> Result<MartinMoyce> 
             .filter(|x| x[0] < 1.0)
             .map(|x| x[1])
             .fold(0.0, f64::max);
-        (sim.state.time_secs, front * h, column * h)
-    };
-    let mut series = vec![observe(&sim)];
+        self.series.push((s.time_secs, front * h, column * h));
+    }
+
+    /// The comparison with experiment, the simulated `T` shifted by `shift_t`.
+    pub fn compare(&self, shift_t: f64, steps: u64, cells_per_a: f64) -> Result<MartinMoyce> {
+        let front_data = parse_csv(SURGE_FRONT_CSV).context("martin_moyce_1952.csv")?;
+        let height_data = parse_csv(COLUMN_HEIGHT_CSV).context("martin_moyce_1952_height.csv")?;
+        let a = COLUMN_WIDTH_M;
+        let (t_front, t_height) = ((2.0 * G / a).sqrt(), (G / a).sqrt());
+        let fronts: Vec<(f64, f64)> = self
+            .series
+            .iter()
+            .map(|(t, f, _)| (t * t_front + shift_t, f / a))
+            .collect();
+        let heights: Vec<(f64, f64)> = self
+            .series
+            .iter()
+            .map(|(t, _, c)| (t * t_height + shift_t / 2f64.sqrt(), c / (2.0 * a)))
+            .collect();
+        let rows = |data: &[(f64, f64)], sim_series: &[(f64, f64)]| -> Vec<Row> {
+            data.iter()
+                .map(|&(t, m)| Row {
+                    time: t,
+                    measured: m,
+                    simulated: interpolate(sim_series, t),
+                })
+                .collect()
+        };
+        Ok(MartinMoyce {
+            front: rows(&front_data, &fronts),
+            height: rows(&height_data, &heights),
+            shift_t,
+            steps,
+            cells_per_a,
+        })
+    }
+}
+
+/// Runs scene `martin-moyce-2d` (with `overrides`) until the last tabulated time and compares
+/// it with experiment ([`MartinMoyceProbe`]).
+pub fn martin_moyce(overrides: &Overrides, shift_t: f64) -> Result<MartinMoyce> {
+    let scene = Scene::load("martin-moyce-2d", overrides)?;
+    let sim = Simulation::<2>::new(scene.config::<2>());
+    let mut probe = MartinMoyceProbe::default();
+    probe.observe(&sim);
     let mut runner = Runner::new(sim);
+    let limit = Limit::SimSeconds(MartinMoyceProbe::end_time());
     runner
         .run(
-            Limit::SimSeconds(t_end),
+            limit,
             || false,
             |sim, _| {
-                series.push(observe(sim));
+                probe.observe(sim);
                 Ok(())
             },
         )
         .context("martin-moyce-2d")?;
-    let fronts: Vec<(f64, f64)> = series
-        .iter()
-        .map(|(t, f, _)| (t * t_front + shift_t, f / a))
-        .collect();
-    let heights: Vec<(f64, f64)> = series
-        .iter()
-        .map(|(t, _, c)| (t * t_height + shift_t / 2f64.sqrt(), c / (2.0 * a)))
-        .collect();
-    let rows = |data: &[(f64, f64)], sim_series: &[(f64, f64)]| -> Vec<Row> {
-        data.iter()
-            .map(|&(t, m)| Row {
-                time: t,
-                measured: m,
-                simulated: interpolate(sim_series, t),
-            })
-            .collect()
-    };
-    Ok(MartinMoyce {
-        front: rows(&front_data, &fronts),
-        height: rows(&height_data, &heights),
-        shift_t,
-        steps: runner.sim.state.steps,
-        cells_per_a: a / h,
-    })
+    let cells_per_a = COLUMN_WIDTH_M / runner.sim.state.config.cell_size_m;
+    probe.compare(shift_t, runner.sim.state.steps, cells_per_a)
 }
 
 /// Water at rest after `steps` steps: the largest particle speed as a fraction of

@@ -93,7 +93,9 @@ fn the_solid_share_of_all_neighbours_and_the_cell_itself_is_one() {
 fn a_block_at_rest_is_not_moved<const D: usize>(k: usize) {
     let g = Grid::new([10; D]);
     let pillar = |c: [usize; D]| c[0] == 3 && c[1] < 2 && (D == 2 || c[D - 1] == 4);
-    let solid: Vec<bool> = (0..g.num_cells()).map(|i| pillar(g.cell_coords(i))).collect();
+    let solid: Vec<bool> = (0..g.num_cells())
+        .map(|i| pillar(g.cell_coords(i)))
+        .collect();
     let mut pos = vec![];
     for i in (0..g.num_cells()).filter(|&i| !solid[i]) {
         let c = g.cell_coords(i);

@@ -56,6 +56,7 @@ impl MethodType for Ccp {
         ],
         obstacle_modes: &[ObstacleMode::Couple],
         panels: &[("correction", "metrics/correction"), ("band", "metrics/band")],
+        figures: &["ccp_augmentations", "ccp_moved", "ccp_solver_ms"],
     };
 
     fn build<const D: usize>(s: &MethodSettings) -> Box<dyn FluidMethod<D>> {
@@ -251,6 +252,15 @@ impl<const D: usize> MethodReport<D> for CcpReport<D> {
         if let (Some(x), Some(band)) = (&self.deep, self.band) {
             record_deep(x, band, self.n_deep, s, log, full);
         }
+    }
+
+    fn figures(&self) -> Vec<(&'static str, f64)> {
+        let c = &self.correction;
+        vec![
+            ("ccp_augmentations", c.augmentations as f64),
+            ("ccp_moved", c.moves.len() as f64),
+            ("ccp_solver_ms", c.solver_time.as_secs_f64() * 1e3),
+        ]
     }
 
     fn as_any(&self) -> &dyn Any {

@@ -15,6 +15,7 @@ impl MethodType for Flip {
         options: &[],
         obstacle_modes: &[ObstacleMode::Naive, ObstacleMode::Ignore],
         panels: &[],
+        figures: &[],
     };
 
     fn build<const D: usize>(_settings: &MethodSettings) -> Box<dyn FluidMethod<D>> {

@@ -103,6 +103,7 @@ impl MethodType for Idp {
         options: &[],
         obstacle_modes: &[ObstacleMode::Naive, ObstacleMode::Ignore],
         panels: &[("idp: density projection", "metrics/idp")],
+        figures: &["idp_iterations", "idp_max_displacement"],
     };
 
     fn build<const D: usize>(s: &MethodSettings) -> Box<dyn FluidMethod<D>> {
@@ -594,6 +595,13 @@ impl<const D: usize> MethodReport<D> for IdpReport<D> {
             };
             log.arrows("world/idp/displacement", &self.moves, style);
         }
+    }
+
+    fn figures(&self) -> Vec<(&'static str, f64)> {
+        vec![
+            ("idp_iterations", self.pcg.iterations as f64),
+            ("idp_max_displacement", self.max_displacement),
+        ]
     }
 
     fn as_any(&self) -> &dyn Any {

@@ -120,6 +120,9 @@ pub struct MethodInfo {
     pub obstacle_modes: &'static [ObstacleMode],
     /// Time-series panels of its metrics in the recording's layout: `(title, entity path)`.
     pub panels: &'static [(&'static str, &'static str)],
+    /// The names of the per-step figures its reports give ([`MethodReport::figures`]), which
+    /// `cellflip report` summarises (median over the steps) in columns `<name>_median`.
+    pub figures: &'static [&'static str],
 }
 
 /// The settings of the methods, as the scene file and the command line give them; each method
@@ -266,6 +269,12 @@ pub trait FluidMethod<const D: usize>: Send {
 pub trait MethodReport<const D: usize>: Any + Debug + Send {
     /// Logs the report: metrics every step, drawings when `full`.
     fn record(&self, s: &State<D>, log: &mut dyn Log<D>, full: bool);
+
+    /// Per-step figures for `cellflip report`: solver statistics by name (each name listed
+    /// in [`MethodInfo::figures`]).
+    fn figures(&self) -> Vec<(&'static str, f64)> {
+        vec![]
+    }
 
     fn as_any(&self) -> &dyn Any;
 }

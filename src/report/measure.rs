@@ -1,0 +1,318 @@
+//! One run of the report's matrix, measured: the errors and costs of [`COLUMNS`] and the time
+//! series the plots and the comparison recording show. Each error's formula is in the README
+//! (section "Speed against error").
+
+use super::RunSpec;
+use crate::bench::peak_memory_mib;
+use crate::methods::{median, MethodKind};
+use crate::metrics::Stage;
+use crate::record::ComparisonSeries;
+use crate::runner::{Limit, Runner};
+use crate::scene::Scene;
+use crate::sim::{Simulation, StepReport};
+use crate::validation::{MartinMoyceProbe, COLUMN_WIDTH_M};
+use std::collections::BTreeMap;
+
+/// The columns of `report.csv` that every run has, with what they hold. Each method adds
+/// `<figure>_median` for the figures it lists ([`crate::methods::MethodInfo::figures`]).
+pub const COLUMNS: &[(&str, &str)] = &[
+    ("scene", "the scene (or variant) as the tables name it"),
+    ("method", "the fluid method"),
+    ("res", "cells along the longest axis"),
+    ("seed", "random seed"),
+    ("tables", "accuracy, stability or both"),
+    ("status", "ok, interrupted, failed: step N: why, or not run: why"),
+    ("dim", "2 or 3"),
+    ("particles", "particles held at the end"),
+    ("steps", "steps run"),
+    ("sim_s", "simulated seconds"),
+    ("volume_min", "lowest V/V* over the run, % (eq. volume)"),
+    ("volume_max", "highest V/V*, %"),
+    ("volume_error", "mean over the steps of |V/V* - 1|, %"),
+    ("volume_end", "V/V* at the end, %"),
+    ("front_error", "martin-moyce-2d: mean relative error of the surge front against experiment, %"),
+    ("column_error", "martin-moyce-2d: mean relative error of the column height, %"),
+    ("rest_speed", "hydrostatic-2d: largest particle speed at the end, m/s"),
+    ("rest_ke", "hydrostatic-2d: kinetic energy per unit mass at the end, m^2/s^2"),
+    ("obstacle_bottom", "first obstacle's lowest point at the end, m"),
+    ("obstacle_lowest", "the lowest it can reach, m: the floor, or for a lid as wide as the tank the height the fluid fills at mu per cell"),
+    ("obstacle_held", "share of steps the first obstacle had to stay"),
+    ("in_solids", "particles inside solid cells at the end"),
+    ("compression", "largest particle count of a cell over mu, over the run"),
+    ("ke_max", "largest kinetic energy per unit mass over the run, m^2/s^2"),
+    ("ke_end", "kinetic energy per unit mass at the end, m^2/s^2"),
+    ("ms_per_step", "median wall time of a step (all stages), ms"),
+    ("ms_per_sim_s", "wall time of the stages per simulated second, ms"),
+    ("peak_mib", "peak resident memory during the run, MiB"),
+    ("pcg_median", "median PCG iterations of the pressure solve"),
+    ("share_emit", "share of the stage in the step time, %"),
+    ("share_p2g", "share of particles-to-grid, %"),
+    ("share_forces", "share of forces, %"),
+    ("share_pressure", "share of the pressure solve, %"),
+    ("share_g2p", "share of grid-to-particles, %"),
+    ("share_advect", "share of advection, %"),
+    ("share_correct", "share of the position correction (ccp, idp), %"),
+    ("share_markings", "share of the markings, %"),
+];
+
+/// A run and what it measured. Figures a run does not have are NaN.
+#[derive(Clone, Debug)]
+pub struct Measured {
+    pub spec: RunSpec,
+    /// The resolution the run had (the scene's when the spec gives none).
+    pub res: usize,
+    pub seed: u64,
+    pub status: String,
+    pub dim: usize,
+    /// The values of [`COLUMNS`] from `particles` on, then the method figures.
+    pub values: BTreeMap<String, f64>,
+    /// `(t, V/V* %)` and `(t, kinetic energy per unit mass)` after every step.
+    pub volume: Vec<(f64, f64)>,
+    pub ke: Vec<(f64, f64)>,
+    /// martin-moyce-2d: `(T, Z)` of the surge front.
+    pub front: Vec<(f64, f64)>,
+}
+
+impl Measured {
+    pub fn ok(&self) -> bool {
+        self.status == "ok"
+    }
+
+    /// A figure by column name (NaN when the run has none).
+    pub fn get(&self, column: &str) -> f64 {
+        self.values.get(column).copied().unwrap_or(f64::NAN)
+    }
+}
+
+/// Runs and measures one spec; a scene that cannot load is a row that says why.
+pub fn run(spec: &RunSpec, stop: &dyn Fn() -> bool) -> Measured {
+    let mut m = Measured {
+        spec: spec.clone(),
+        res: spec.res.unwrap_or(0),
+        seed: spec.seed.unwrap_or(0),
+        status: String::new(),
+        dim: 0,
+        values: BTreeMap::new(),
+        volume: vec![],
+        ke: vec![],
+        front: vec![],
+    };
+    match super::load(spec) {
+        Err(e) => m.status = one_line(&format!("not run: {e:#}")),
+        Ok(scene) => {
+            m.res = scene.file.domain.cells;
+            m.seed = scene.file.simulation.seed;
+            m.dim = scene.dim();
+            match scene.dim() {
+                2 => measure::<2>(&scene, stop, &mut m),
+                _ => measure::<3>(&scene, stop, &mut m),
+            }
+        }
+    }
+    m
+}
+
+/// A message on one line (for CSV rows and table cells): runs of whitespace, line breaks
+/// included, become one space.
+fn one_line(s: &str) -> String {
+    s.split_whitespace().collect::<Vec<_>>().join(" ")
+}
+
+/// What the observer gathers after every step.
+#[derive(Default)]
+struct Gathered {
+    compression: f64,
+    figures: BTreeMap<&'static str, Vec<f64>>,
+    held: u64,
+    probe: Option<MartinMoyceProbe>,
+}
+
+fn measure<const D: usize>(scene: &Scene, stop: &dyn Fn() -> bool, m: &mut Measured) {
+    reset_peak_memory();
+    let sim = Simulation::<D>::new(scene.config::<D>());
+    let h = sim.state.config.cell_size_m;
+    let mu = sim.state.config.mu() as f64;
+    let mut g = Gathered {
+        probe: (scene.name() == "martin-moyce-2d").then(MartinMoyceProbe::default),
+        ..Default::default()
+    };
+    let lowest = obstacle_lowest(&sim) * h;
+    let mut runner = Runner::new(sim);
+    let limit = Limit::SimSeconds(scene.duration_secs());
+    let result = runner.run(limit, stop, |sim, rep| {
+        observe(sim, rep, mu, h, &mut g, m);
+        Ok(())
+    });
+    m.status = match (&result, runner.summary.interrupted) {
+        (Err(e), _) => one_line(&format!("failed: {e:#}")),
+        (Ok(()), true) => "interrupted".into(),
+        (Ok(()), false) => "ok".into(),
+    };
+    finish(&runner, &g, lowest, m);
+}
+
+fn observe<const D: usize>(
+    sim: &Simulation<D>,
+    rep: &StepReport<D>,
+    mu: f64,
+    h: f64,
+    g: &mut Gathered,
+    m: &mut Measured,
+) {
+    let s = &sim.state;
+    m.volume.push((s.time_secs, rep.volume_percent));
+    m.ke.push((s.time_secs, kinetic_energy(&s.particles.vel, h)));
+    let most = s.markings.count.iter().max().copied().unwrap_or(0) as f64;
+    g.compression = g.compression.max(most / mu);
+    g.held += rep.blocked.first().copied().unwrap_or(false) as u64;
+    for (name, v) in rep.method.figures() {
+        g.figures.entry(name).or_default().push(v);
+    }
+    if let (Some(p), Some(sim2)) = (&mut g.probe, as_2d(sim)) {
+        p.observe(sim2);
+    }
+}
+
+/// The simulation as a 2D one, when it is.
+fn as_2d<const D: usize>(sim: &Simulation<D>) -> Option<&Simulation<2>> {
+    (sim as &dyn std::any::Any).downcast_ref::<Simulation<2>>()
+}
+
+/// Kinetic energy per unit mass, `1/2 mean |v|^2`, m^2/s^2.
+fn kinetic_energy<const D: usize>(vel: &[crate::grid::Vector<D>], h: f64) -> f64 {
+    let sum: f64 = vel.iter().map(|v| v.norm_squared()).sum();
+    0.5 * sum * h * h / vel.len().max(1) as f64
+}
+
+/// The lowest the first obstacle can get, cells: the floor, or for a lid as wide as the tank
+/// the height the fluid fills at `mu` per cell.
+fn obstacle_lowest<const D: usize>(sim: &Simulation<D>) -> f64 {
+    let s = &sim.state;
+    let Some(o) = s.solids.obstacles.first() else {
+        return f64::NAN;
+    };
+    let (lo, hi) = o.region_at(&o.offset).bounds();
+    let wide = (0..D)
+        .filter(|&k| k != 1)
+        .all(|k| lo[k] <= 0.5 && hi[k] >= s.grid.dims[k] as f64 - 0.5);
+    if !wide {
+        return 0.0;
+    }
+    let across: usize = (0..D).filter(|&k| k != 1).map(|k| s.grid.dims[k]).product();
+    s.target_volume / across as f64
+}
+
+fn finish<const D: usize>(runner: &Runner<D>, g: &Gathered, lowest: f64, m: &mut Measured) {
+    let (s, sum) = (&runner.sim.state, &runner.summary);
+    let h = s.config.cell_size_m;
+    let mut v = BTreeMap::new();
+    let steps = sum.steps.max(1) as f64;
+    v.insert("particles", s.particles.len() as f64);
+    v.insert("steps", sum.steps as f64);
+    v.insert("sim_s", s.time_secs);
+    v.insert("volume_min", sum.volume_min);
+    v.insert("volume_max", sum.volume_max);
+    let err: f64 = m.volume.iter().map(|(_, x)| (x - 100.0).abs()).sum();
+    v.insert("volume_error", err / steps);
+    v.insert("volume_end", m.volume.last().map_or(f64::NAN, |x| x.1));
+    if let Some(p) = &g.probe {
+        if let Ok(c) = p.compare(0.0, sum.steps, COLUMN_WIDTH_M / h) {
+            v.insert("front_error", 100.0 * c.front_mean_relative_error());
+            v.insert("column_error", 100.0 * c.height_mean_relative_error());
+            m.front = c.front.iter().map(|r| (r.time, r.simulated)).collect();
+        }
+    }
+    if m.spec.label == "hydrostatic-2d" {
+        let speed = s.particles.vel.iter().map(|x| x.norm()).fold(0.0, f64::max) * h;
+        v.insert("rest_speed", speed);
+        v.insert("rest_ke", m.ke.last().map_or(f64::NAN, |x| x.1));
+    }
+    if let Some(o) = s.solids.obstacles.first() {
+        v.insert("obstacle_bottom", o.bottom() * h);
+        v.insert("obstacle_lowest", lowest);
+        v.insert("obstacle_held", g.held as f64 / steps);
+    }
+    let inside = s
+        .particles
+        .pos
+        .iter()
+        .filter(|x| s.solids.solid[s.grid.cell_index_of(x)])
+        .count();
+    v.insert("in_solids", inside as f64);
+    v.insert("compression", g.compression);
+    v.insert("ke_max", m.ke.iter().map(|x| x.1).fold(f64::NAN, f64::max));
+    v.insert("ke_end", m.ke.last().map_or(f64::NAN, |x| x.1));
+    costs(runner, &mut v);
+    m.values = v.into_iter().map(|(k, x)| (k.to_string(), x)).collect();
+    for (name, xs) in &g.figures {
+        m.values
+            .insert(format!("{name}_median"), median(xs).unwrap_or(f64::NAN));
+    }
+}
+
+/// Median step, wall per simulated second, peak memory, PCG, stage shares.
+fn costs<const D: usize>(runner: &Runner<D>, v: &mut BTreeMap<&'static str, f64>) {
+    let sum = &runner.summary;
+    let total: f64 = Stage::ALL
+        .iter()
+        .map(|&st| sum.stage_total(st).as_secs_f64())
+        .sum();
+    v.insert("ms_per_step", sum.step_median().as_secs_f64() * 1e3);
+    v.insert(
+        "ms_per_sim_s",
+        1e3 * total / runner.sim.state.time_secs.max(1e-12),
+    );
+    v.insert("peak_mib", peak_memory_mib().unwrap_or(f64::NAN));
+    v.insert(
+        "pcg_median",
+        median(&sum.pcg_iterations).map_or(f64::NAN, |x| x as f64),
+    );
+    for st in Stage::ALL {
+        let share = 100.0 * sum.stage_total(st).as_secs_f64() / total.max(1e-12);
+        v.insert(share_column(st), share);
+    }
+}
+
+/// The column of a stage's share.
+pub fn share_column(st: Stage) -> &'static str {
+    match st {
+        Stage::Emit => "share_emit",
+        Stage::ParticlesToGrid => "share_p2g",
+        Stage::Forces => "share_forces",
+        Stage::Pressure => "share_pressure",
+        Stage::GridToParticles => "share_g2p",
+        Stage::Advect => "share_advect",
+        Stage::Correct => "share_correct",
+        Stage::Markings => "share_markings",
+    }
+}
+
+/// Resets this process's peak resident memory to its current size (Linux), so that the next
+/// run's peak is its own.
+fn reset_peak_memory() {
+    let _ = std::fs::write("/proc/self/clear_refs", "5");
+}
+
+/// Every method figure column, in registration order.
+pub fn figure_columns() -> Vec<String> {
+    MethodKind::ALL
+        .iter()
+        .flat_map(|k| k.info().figures.iter().map(|f| format!("{f}_median")))
+        .collect()
+}
+
+/// The runs' time series for the comparison recording.
+pub fn comparison_series(results: &[Measured]) -> Vec<ComparisonSeries<'_>> {
+    results
+        .iter()
+        .filter(|m| !m.volume.is_empty())
+        .map(|m| ComparisonSeries {
+            scene: &m.spec.label,
+            method: m.spec.method.name(),
+            res: m.res,
+            seed: m.seed,
+            volume: &m.volume,
+            ke: &m.ke,
+        })
+        .collect()
+}

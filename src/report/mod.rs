@@ -1,0 +1,271 @@
+//! `cellflip report`: speed against error for every method, scene and resolution.
+//!
+//! Runs a matrix of (scene, method, resolution, seed) in one process through the one runner
+//! ([`measure`]), then writes `report.md` (the paper's tables rebuilt, speed against error,
+//! stability, Pareto conclusions), `report.csv` (one row per run, [`measure::COLUMNS`]), plots
+//! as PNG and SVG ([`plots`]) and `report.rrd` (every run's time series side by side). A run
+//! that fails is a row saying why; Ctrl-C stops the matrix and writes what is done. Every
+//! registered method takes part unless `--methods` says otherwise: a new method appears here
+//! without changes to this code.
+
+pub mod measure;
+mod output;
+pub mod plots;
+
+use crate::cli::ReportArgs;
+use crate::methods::MethodKind;
+use crate::scene::{Overrides, Scene, SceneFile};
+use crate::validation::MartinMoyceProbe;
+use anyhow::{Context, Result};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use measure::Measured;
+use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+static INTERRUPTED: AtomicBool = AtomicBool::new(false);
+
+/// Where a run's scene comes from.
+#[derive(Clone, Debug)]
+pub enum Source {
+    /// A built-in scene or a scene file, by name or path.
+    Named(String),
+    /// A variant made in code: its label and TOML text.
+    Text(String),
+}
+
+/// One run of the matrix.
+#[derive(Clone, Debug)]
+pub struct RunSpec {
+    /// The scene as the tables name it (a variant has its own label).
+    pub label: String,
+    pub source: Source,
+    pub method: MethodKind,
+    pub res: Option<usize>,
+    pub seed: Option<u64>,
+    /// Simulated seconds (the scene's duration otherwise).
+    pub duration: Option<f64>,
+    /// In the accuracy tables, in the stability table.
+    pub accuracy: bool,
+    pub stability: bool,
+}
+
+/// A scene of the matrix with the resolutions, duration and tables it is run for.
+struct Entry {
+    label: String,
+    source: Source,
+    res: Vec<Option<usize>>,
+    duration: Option<f64>,
+    accuracy: bool,
+    stability: bool,
+}
+
+impl Entry {
+    fn named(name: &str, res: &[usize], accuracy: bool, stability: bool) -> Self {
+        Self {
+            label: name.to_string(),
+            source: Source::Named(name.to_string()),
+            res: if res.is_empty() {
+                vec![None]
+            } else {
+                res.iter().map(|&r| Some(r)).collect()
+            },
+            duration: None,
+            accuracy,
+            stability,
+        }
+    }
+}
+
+/// The default matrix: the paper's scenes for accuracy, its hard cases for stability.
+fn default_entries(stability: bool) -> Result<Vec<Entry>> {
+    let mut e = vec![
+        Entry::named("dam-2d", &[], true, false),
+        Entry::named("dam-1ppc-2d", &[], true, true),
+        Entry {
+            duration: Some(MartinMoyceProbe::end_time()),
+            ..Entry::named("martin-moyce-2d", &[160, 320, 480], true, false)
+        },
+        Entry {
+            duration: Some(1.0),
+            ..Entry::named("hydrostatic-2d", &[], true, false)
+        },
+        Entry::named("compress-2d", &[], true, true),
+        Entry::named("falling-obstacle-2d", &[], true, false),
+        Entry::named("dam-3d", &[32], true, false),
+    ];
+    if stability {
+        e.push(Entry::named("large-obstacle-2d", &[], false, true));
+        e.push(emitter_at_speed_limit()?);
+        e.push(Entry {
+            label: "dam-2d, 20 s".into(),
+            duration: Some(20.0),
+            ..Entry::named("dam-2d", &[], false, true)
+        });
+    }
+    Ok(e)
+}
+
+/// The 2D dam with its emitter pouring from the start at the scene's speed bound.
+fn emitter_at_speed_limit() -> Result<Entry> {
+    let (_, text) = crate::scene::BUILT_IN
+        .iter()
+        .find(|(n, _)| *n == "dam-2d")
+        .expect("dam-2d");
+    let mut file: SceneFile = toml::from_str(text).context("dam-2d")?;
+    let v = file.simulation.max_speed;
+    for e in &mut file.emitter {
+        e.velocity = vec![0.0, -v];
+        e.start = 0.0;
+    }
+    file.name = "dam-2d-emitter-at-speed-limit".into();
+    file.simulation.duration = 3.0;
+    Ok(Entry {
+        label: file.name.clone(),
+        source: Source::Text(toml::to_string(&file).context("dam-2d variant")?),
+        res: vec![None],
+        duration: None,
+        accuracy: false,
+        stability: true,
+    })
+}
+
+/// The runs `args` ask for.
+pub fn matrix(args: &ReportArgs) -> Result<Vec<RunSpec>> {
+    let stability = args.stability || (args.scenes.is_empty() && !args.no_stability);
+    let entries = match args.scenes.is_empty() {
+        true => default_entries(stability)?,
+        false => args
+            .scenes
+            .iter()
+            .map(|s| Entry::named(s, &[], true, stability))
+            .collect(),
+    };
+    let methods = if args.methods.is_empty() {
+        MethodKind::ALL.to_vec()
+    } else {
+        args.methods.clone()
+    };
+    let seeds: Vec<Option<u64>> = if args.seeds.is_empty() {
+        vec![None]
+    } else {
+        args.seeds.iter().map(|&s| Some(s)).collect()
+    };
+    let mut out = vec![];
+    for e in &entries {
+        let res: Vec<Option<usize>> = if args.res.is_empty() {
+            e.res.clone()
+        } else {
+            args.res.iter().map(|&r| Some(r)).collect()
+        };
+        for &method in &methods {
+            for &r in &res {
+                for &seed in &seeds {
+                    let duration = match (e.duration, args.duration) {
+                        (Some(a), Some(b)) => Some(a.min(b)),
+                        (a, b) => a.or(b),
+                    };
+                    out.push(RunSpec {
+                        label: e.label.clone(),
+                        source: e.source.clone(),
+                        method,
+                        res: r,
+                        seed,
+                        duration,
+                        accuracy: e.accuracy,
+                        stability: e.stability,
+                    });
+                }
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// Loads a run's scene with its overrides.
+pub fn load(spec: &RunSpec) -> Result<Scene> {
+    let o = Overrides {
+        method: Some(spec.method),
+        cells: spec.res,
+        seed: spec.seed,
+        duration: spec.duration,
+        ..Default::default()
+    };
+    match &spec.source {
+        Source::Named(name) => Scene::load(name, &o),
+        Source::Text(text) => Scene::parse(&format!("scene variant '{}'", spec.label), text, &o),
+    }
+}
+
+/// `cellflip report`.
+pub fn report(args: &ReportArgs) -> Result<()> {
+    let specs = matrix(args)?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create the output folder '{}'", args.out.display()))?;
+    let _ = ctrlc::set_handler(|| INTERRUPTED.store(true, Ordering::SeqCst));
+    let stop = || INTERRUPTED.load(Ordering::SeqCst);
+    let results = run_all(&specs, args.quiet, &stop);
+    let interrupted = stop();
+    write_all(&args.out, &specs, &results)?;
+    if !args.quiet {
+        println!(
+            "report: {} of {} runs ({} failed) written to {}",
+            results.len(),
+            specs.len(),
+            results.iter().filter(|m| !m.ok()).count(),
+            args.out.display()
+        );
+    }
+    if interrupted {
+        anyhow::bail!(
+            "stopped by Ctrl-C; wrote the {} runs done to '{}'",
+            results.len(),
+            args.out.display()
+        );
+    }
+    Ok(())
+}
+
+/// Runs the matrix in order with a progress bar, until done or stopped.
+pub fn run_all(specs: &[RunSpec], quiet: bool, stop: &dyn Fn() -> bool) -> Vec<Measured> {
+    let bar = ProgressBar::with_draw_target(Some(specs.len() as u64), ProgressDrawTarget::stderr());
+    if quiet {
+        bar.set_draw_target(ProgressDrawTarget::hidden());
+    }
+    let style = ProgressStyle::with_template(
+        "{bar:30} {pos}/{len} runs  {msg}  elapsed {elapsed}  ETA {eta}",
+    )
+    .expect("a valid progress template");
+    bar.set_style(style);
+    let mut out = vec![];
+    for spec in specs {
+        if stop() {
+            break;
+        }
+        bar.set_message(format!(
+            "{} {} {}",
+            spec.label,
+            spec.method.name(),
+            spec.res.map_or(String::new(), |r| r.to_string())
+        ));
+        out.push(measure::run(spec, stop));
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    out
+}
+
+/// Writes every output, naming the file that could not be written.
+fn write_all(dir: &Path, specs: &[RunSpec], results: &[Measured]) -> Result<()> {
+    let csv = dir.join("report.csv");
+    std::fs::write(&csv, output::csv(results))
+        .with_context(|| format!("cannot write '{}'", csv.display()))?;
+    let figures = plots::all(dir, results)?;
+    let md = dir.join("report.md");
+    let command: Vec<String> = std::env::args().skip(1).collect();
+    let text = output::markdown(specs, results, &figures, &command.join(" "));
+    std::fs::write(&md, text).with_context(|| format!("cannot write '{}'", md.display()))?;
+    let rrd = dir.join("report.rrd");
+    crate::record::write_comparison(&rrd, &measure::comparison_series(results))
+        .with_context(|| format!("cannot write '{}'", rrd.display()))?;
+    Ok(())
+}

@@ -1,0 +1,337 @@
+//! `report.csv` (one row per run, every figure) and `report.md` (the paper's tables rebuilt,
+//! speed against error, stability, and the Pareto conclusions a reader can check).
+
+use super::measure::{figure_columns, share_column, Measured, COLUMNS};
+use super::RunSpec;
+use crate::methods::MethodKind;
+use crate::metrics::Stage;
+use std::fmt::Write;
+
+/// Every column: the documented ones, then the methods' figures.
+fn all_columns() -> Vec<String> {
+    COLUMNS
+        .iter()
+        .map(|(c, _)| c.to_string())
+        .chain(figure_columns())
+        .collect()
+}
+
+/// Quotes a CSV field when it needs it.
+fn field(s: &str) -> String {
+    if s.contains([',', '"', '\n']) {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_string()
+    }
+}
+
+fn tables(spec: &RunSpec) -> &'static str {
+    match (spec.accuracy, spec.stability) {
+        (true, true) => "both",
+        (false, true) => "stability",
+        _ => "accuracy",
+    }
+}
+
+/// `report.csv`.
+pub fn csv(results: &[Measured]) -> String {
+    let columns = all_columns();
+    let mut out = columns.join(",") + "\n";
+    for m in results {
+        let row: Vec<String> = columns
+            .iter()
+            .map(|c| match c.as_str() {
+                "scene" => field(&m.spec.label),
+                "method" => m.spec.method.name().to_string(),
+                "res" => m.res.to_string(),
+                "seed" => m.seed.to_string(),
+                "tables" => tables(&m.spec).into(),
+                "status" => field(&m.status),
+                "dim" => m.dim.to_string(),
+                c => number(m.get(c)),
+            })
+            .collect();
+        out += &(row.join(",") + "\n");
+    }
+    out
+}
+
+/// A figure for the CSV: empty when the run has none.
+fn number(x: f64) -> String {
+    if x.is_nan() {
+        String::new()
+    } else {
+        format!("{x:?}")
+    }
+}
+
+/// A figure for a table, with `digits` decimals; a dash when the run has none.
+fn cell(x: f64, digits: usize) -> String {
+    if x.is_nan() {
+        "-".into()
+    } else {
+        format!("{x:.digits$}")
+    }
+}
+
+/// `report.md`.
+pub fn markdown(
+    specs: &[RunSpec],
+    results: &[Measured],
+    figures: &[String],
+    command: &str,
+) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "# cellflip report\n");
+    let _ = writeln!(
+        s,
+        "{} of {} runs, {} threads; `cellflip {}`. Formulas of every figure: README, section \"Speed against error\". Plots: {}.\n",
+        results.len(),
+        specs.len(),
+        rayon::current_num_threads(),
+        command,
+        figures.iter().map(|f| format!("[{f}]({f})")).collect::<Vec<_>>().join(", ")
+    );
+    volume_table(&mut s, results);
+    stage_table(&mut s, results);
+    speed_error_table(&mut s, results);
+    pareto(&mut s, results);
+    stability_table(&mut s, results);
+    let failed: Vec<&Measured> = results.iter().filter(|m| !m.ok()).collect();
+    if !failed.is_empty() {
+        let _ = writeln!(s, "## Runs that did not finish\n");
+        for m in failed {
+            let _ = writeln!(
+                s,
+                "- {} / {} / {}: {}",
+                m.spec.label,
+                m.spec.method.name(),
+                m.res,
+                m.status
+            );
+        }
+    }
+    s
+}
+
+/// The methods that took part, in registration order.
+fn methods(results: &[Measured]) -> Vec<MethodKind> {
+    MethodKind::ALL
+        .iter()
+        .copied()
+        .filter(|k| results.iter().any(|m| m.spec.method == *k))
+        .collect()
+}
+
+/// The distinct `(label, res)` of the runs picked, in matrix order.
+fn scenes(results: &[Measured], pick: impl Fn(&Measured) -> bool) -> Vec<(String, usize)> {
+    let mut out: Vec<(String, usize)> = vec![];
+    for m in results.iter().filter(|m| pick(m)) {
+        let key = (m.spec.label.clone(), m.res);
+        if !out.contains(&key) {
+            out.push(key);
+        }
+    }
+    out
+}
+
+/// The run of a scene, resolution and method (the first seed).
+fn find<'a>(
+    results: &'a [Measured],
+    scene: &(String, usize),
+    k: MethodKind,
+) -> Option<&'a Measured> {
+    results
+        .iter()
+        .find(|m| m.spec.label == scene.0 && m.res == scene.1 && m.spec.method == k)
+}
+
+/// The paper's table of volume ranges: per scene, each method's lowest .. highest V/V*.
+fn volume_table(s: &mut String, results: &[Measured]) {
+    let ms = methods(results);
+    let _ = writeln!(s, "## Volume range (% of V*, eq. volume)\n");
+    let head: Vec<String> = ms.iter().map(|k| k.name().to_string()).collect();
+    let _ = writeln!(
+        s,
+        "| scene | cells | {} |\n|---|---|{}",
+        head.join(" | "),
+        "---|".repeat(ms.len())
+    );
+    for sc in scenes(results, |m| m.spec.accuracy) {
+        let cells: Vec<String> = ms
+            .iter()
+            .map(|&k| match find(results, &sc, k) {
+                Some(m) if m.ok() => format!(
+                    "{} .. {}",
+                    cell(m.get("volume_min"), 2),
+                    cell(m.get("volume_max"), 2)
+                ),
+                Some(m) => format!("({})", m.status),
+                None => "-".into(),
+            })
+            .collect();
+        let _ = writeln!(s, "| {} | {} | {} |", sc.0, sc.1, cells.join(" | "));
+    }
+    s.push('\n');
+}
+
+/// The paper's table of per-stage times: median ms per step and each stage's share, per
+/// method, on every scene run at its default resolution.
+fn stage_table(s: &mut String, results: &[Measured]) {
+    let _ = writeln!(s, "## Time per step and per stage\n");
+    let names: Vec<&str> = Stage::ALL.iter().map(|st| st.name()).collect();
+    let _ = writeln!(
+        s,
+        "| scene | cells | method | ms/step | {} |\n|---|---|---|---|{}",
+        names
+            .iter()
+            .map(|n| format!("{n} %"))
+            .collect::<Vec<_>>()
+            .join(" | "),
+        "---|".repeat(names.len())
+    );
+    for m in results.iter().filter(|m| m.ok() && m.spec.accuracy) {
+        let shares: Vec<String> = Stage::ALL
+            .iter()
+            .map(|&st| cell(m.get(share_column(st)), 1))
+            .collect();
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {} | {} |",
+            m.spec.label,
+            m.res,
+            m.spec.method.name(),
+            cell(m.get("ms_per_step"), 2),
+            shares.join(" | ")
+        );
+    }
+    s.push('\n');
+}
+
+/// Speed against error: cost and every error of each accuracy run.
+fn speed_error_table(s: &mut String, results: &[Measured]) {
+    let _ = writeln!(s, "## Speed against error\n");
+    let _ = writeln!(
+        s,
+        "| scene | cells | method | ms per simulated s | peak MiB | volume error % | front error % | column error % | compression | in solids | obstacle bottom / lowest (m), held |\n|---|---|---|---|---|---|---|---|---|---|---|"
+    );
+    for m in results.iter().filter(|m| m.ok() && m.spec.accuracy) {
+        let obstacle = if m.get("obstacle_bottom").is_nan() {
+            "-".to_string()
+        } else {
+            format!(
+                "{} / {}, {:.0}%",
+                cell(m.get("obstacle_bottom"), 3),
+                cell(m.get("obstacle_lowest"), 3),
+                100.0 * m.get("obstacle_held")
+            )
+        };
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            m.spec.label,
+            m.res,
+            m.spec.method.name(),
+            cell(m.get("ms_per_sim_s"), 0),
+            cell(m.get("peak_mib"), 0),
+            cell(m.get("volume_error"), 2),
+            cell(m.get("front_error"), 1),
+            cell(m.get("column_error"), 1),
+            cell(m.get("compression"), 2),
+            cell(m.get("in_solids"), 0),
+            obstacle
+        );
+    }
+    s.push('\n');
+}
+
+/// Which runs are on the Pareto front of cost (ms per simulated second) against each error,
+/// among the runs of one scene (all methods and resolutions).
+fn pareto(s: &mut String, results: &[Measured]) {
+    let _ = writeln!(
+        s,
+        "## Pareto front: cost against error\n\nA run is on the front when no other run of the same scene is both cheaper (ms per simulated second) and more accurate.\n"
+    );
+    let mut labels: Vec<&str> = vec![];
+    for m in results.iter().filter(|m| m.ok() && m.spec.accuracy) {
+        if !labels.contains(&m.spec.label.as_str()) {
+            labels.push(&m.spec.label);
+        }
+    }
+    for error in ["volume_error", "front_error"] {
+        for label in &labels {
+            let runs: Vec<&Measured> = results
+                .iter()
+                .filter(|m| m.ok() && m.spec.label == *label && !m.get(error).is_nan())
+                .collect();
+            if runs.len() < 2 {
+                continue;
+            }
+            let front = pareto_front(&runs, error);
+            let names: Vec<String> = front
+                .iter()
+                .map(|m| {
+                    format!(
+                        "{} at {} cells ({} ms/s, {:.2}%)",
+                        m.spec.method.name(),
+                        m.res,
+                        cell(m.get("ms_per_sim_s"), 0),
+                        m.get(error)
+                    )
+                })
+                .collect();
+            let _ = writeln!(s, "- {label}, {error}: {}", names.join("; "));
+        }
+    }
+    s.push('\n');
+}
+
+/// The runs no other run beats on both cost and `error`, cheapest first.
+pub fn pareto_front<'a>(runs: &[&'a Measured], error: &str) -> Vec<&'a Measured> {
+    let mut front: Vec<&Measured> = runs
+        .iter()
+        .copied()
+        .filter(|a| {
+            !runs.iter().any(|b| {
+                let (ca, cb) = (a.get("ms_per_sim_s"), b.get("ms_per_sim_s"));
+                let (ea, eb) = (a.get(error), b.get(error));
+                cb <= ca && eb <= ea && (cb < ca || eb < ea)
+            })
+        })
+        .collect();
+    front.sort_by(|a, b| a.get("ms_per_sim_s").total_cmp(&b.get("ms_per_sim_s")));
+    front
+}
+
+/// Stability on the hard cases: finite, invariants kept, kinetic energy, or where it failed.
+fn stability_table(s: &mut String, results: &[Measured]) {
+    let rows: Vec<&Measured> = results.iter().filter(|m| m.spec.stability).collect();
+    if rows.is_empty() {
+        return;
+    }
+    let _ = writeln!(
+        s,
+        "## Stability on hard cases\n\nEvery step checks the invariants that apply to the method (finite state, particle count, nothing in static solids, and ccp's cell bounds); a run that breaks one stops there.\n"
+    );
+    let _ = writeln!(
+        s,
+        "| scene | cells | method | status | steps | volume range % | kinetic energy max / end (m^2/s^2) | compression |\n|---|---|---|---|---|---|---|---|"
+    );
+    for m in rows {
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {} | {} | {} .. {} | {} / {} | {} |",
+            m.spec.label,
+            m.res,
+            m.spec.method.name(),
+            m.status,
+            cell(m.get("steps"), 0),
+            cell(m.get("volume_min"), 2),
+            cell(m.get("volume_max"), 2),
+            cell(m.get("ke_max"), 4),
+            cell(m.get("ke_end"), 4),
+            cell(m.get("compression"), 2)
+        );
+    }
+    s.push('\n');
+}

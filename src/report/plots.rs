@@ -1,0 +1,341 @@
+//! The report's plots, as PNG and SVG (plotters, with a bundled DejaVu Sans so that no system
+//! font is needed): error against cost per method across resolutions (the Pareto view),
+//! volume over time per method for each scene (the paper's fig. plot_volume), and the surge
+//! front of Martin & Moyce against experiment per method.
+
+use super::measure::Measured;
+use crate::methods::MethodKind;
+use crate::validation::{parse_csv, SURGE_FRONT_CSV};
+use anyhow::{anyhow, Context, Result};
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use std::path::Path;
+
+/// The bundled font (DejaVu Sans, Bitstream Vera licence: assets/DejaVuSans-LICENSE.txt).
+const FONT: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
+const SIZE: (u32, u32) = (900, 560);
+
+/// One line of a chart.
+pub struct Series {
+    pub name: String,
+    pub color: RGBColor,
+    pub points: Vec<(f64, f64)>,
+    /// Markers only (experiment), or a line with markers at its points (few points).
+    pub markers: bool,
+}
+
+/// A chart: title, axes and series.
+pub struct Chart {
+    pub title: String,
+    pub x: String,
+    pub y: String,
+    pub log_x: bool,
+    pub series: Vec<Series>,
+}
+
+/// A method's colour, by its place in the registry.
+fn color(k: MethodKind) -> RGBColor {
+    const PALETTE: [RGBColor; 6] = [
+        RGBColor(31, 119, 180),
+        RGBColor(214, 39, 40),
+        RGBColor(44, 160, 44),
+        RGBColor(148, 103, 189),
+        RGBColor(255, 127, 14),
+        RGBColor(23, 190, 207),
+    ];
+    let i = MethodKind::ALL.iter().position(|m| *m == k).unwrap_or(0);
+    PALETTE[i % PALETTE.len()]
+}
+
+/// Writes every plot the results allow into `dir`; returns the file names.
+pub fn all(dir: &Path, results: &[Measured]) -> Result<Vec<String>> {
+    let _ = plotters::style::register_font("sans-serif", FontStyle::Normal, FONT);
+    let mut charts: Vec<(String, Chart)> = vec![];
+    charts.extend(pareto(results));
+    charts.extend(volumes(results));
+    charts.extend(martin_moyce(results)?);
+    let mut names = vec![];
+    for (stem, chart) in &charts {
+        write(dir, stem, chart)?;
+        names.push(format!("{stem}.png"));
+        names.push(format!("{stem}.svg"));
+    }
+    Ok(names)
+}
+
+/// Writes `stem.svg` and `stem.png`.
+pub fn write(dir: &Path, stem: &str, chart: &Chart) -> Result<()> {
+    let svg = dir.join(format!("{stem}.svg"));
+    {
+        let root = SVGBackend::new(&svg, SIZE).into_drawing_area();
+        draw(&root, chart).map_err(|e| anyhow!("{e}"))?;
+        root.present()
+            .map_err(|e| anyhow!("cannot write '{}': {e}", svg.display()))?;
+    }
+    let mut pixels = vec![0u8; (SIZE.0 * SIZE.1 * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut pixels, SIZE).into_drawing_area();
+        draw(&root, chart).map_err(|e| anyhow!("{e}"))?;
+        root.present().map_err(|e| anyhow!("{e}"))?;
+    }
+    let png = dir.join(format!("{stem}.png"));
+    let img = image::RgbImage::from_raw(SIZE.0, SIZE.1, pixels).expect("a full buffer");
+    img.save(&png)
+        .with_context(|| format!("cannot write '{}'", png.display()))
+}
+
+/// The x and y ranges of all series, padded a little.
+fn ranges(c: &Chart) -> ((f64, f64), (f64, f64)) {
+    let pts = c
+        .series
+        .iter()
+        .flat_map(|s| s.points.iter())
+        .filter(|p| p.0.is_finite() && p.1.is_finite());
+    let (mut x0, mut x1, mut y0, mut y1) = (
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+    );
+    for &(x, y) in pts {
+        (x0, x1, y0, y1) = (x0.min(x), x1.max(x), y0.min(y), y1.max(y));
+    }
+    if !x0.is_finite() {
+        return ((1.0, 2.0), (0.0, 1.0));
+    }
+    let pad = |a: f64, b: f64, log: bool| match log {
+        true => (a / 1.3, b * 1.3),
+        false if b > a => (a - 0.05 * (b - a), b + 0.05 * (b - a)),
+        false => (a - 0.5, b + 0.5),
+    };
+    (pad(x0.max(1e-9), x1.max(1e-9), c.log_x), pad(y0, y1, false))
+}
+
+fn draw<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    c: &Chart,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    root.fill(&WHITE)?;
+    let ((x0, x1), (y0, y1)) = ranges(c);
+    let mut b = ChartBuilder::on(root);
+    b.caption(&c.title, ("sans-serif", 20))
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(60);
+    if c.log_x {
+        let mut chart = b.build_cartesian_2d((x0..x1).log_scale(), y0..y1)?;
+        chart
+            .configure_mesh()
+            .x_desc(&c.x)
+            .y_desc(&c.y)
+            .label_style(("sans-serif", 13))
+            .draw()?;
+        plot_series(&mut chart, c)
+    } else {
+        let mut chart = b.build_cartesian_2d(x0..x1, y0..y1)?;
+        chart
+            .configure_mesh()
+            .x_desc(&c.x)
+            .y_desc(&c.y)
+            .label_style(("sans-serif", 13))
+            .draw()?;
+        plot_series(&mut chart, c)
+    }
+}
+
+fn plot_series<'a, DB: DrawingBackend + 'a, X, Y>(
+    chart: &mut ChartContext<'a, DB, Cartesian2d<X, Y>>,
+    c: &Chart,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>>
+where
+    X: Ranged<ValueType = f64>,
+    Y: Ranged<ValueType = f64>,
+{
+    for s in &c.series {
+        let color = s.color;
+        let pts: Vec<(f64, f64)> = s
+            .points
+            .iter()
+            .copied()
+            .filter(|p| p.0.is_finite() && p.1.is_finite())
+            .collect();
+        let legend =
+            move |(x, y): (i32, i32)| Rectangle::new([(x, y - 4), (x + 14, y + 4)], color.filled());
+        if s.markers {
+            chart
+                .draw_series(pts.iter().map(|&p| Circle::new(p, 4, color.filled())))?
+                .label(&s.name)
+                .legend(legend);
+        } else {
+            chart
+                .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))?
+                .label(&s.name)
+                .legend(legend);
+            if pts.len() <= 12 {
+                chart.draw_series(pts.iter().map(|&p| Circle::new(p, 3, color.filled())))?;
+            }
+        }
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 13))
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()
+}
+
+/// The labels of the accuracy runs, in matrix order.
+fn labels(results: &[Measured]) -> Vec<String> {
+    let mut out: Vec<String> = vec![];
+    for m in results
+        .iter()
+        .filter(|m| m.spec.accuracy && !m.volume.is_empty())
+    {
+        if !out.contains(&m.spec.label) {
+            out.push(m.spec.label.clone());
+        }
+    }
+    out
+}
+
+/// File-name part of a label.
+fn slug(label: &str) -> String {
+    label
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' {
+                c
+            } else {
+                '-'
+            }
+        })
+        .collect()
+}
+
+/// Per scene with more than one resolution: each method's errors against its cost across the
+/// resolutions (volume error, and the surge-front error where there is one).
+fn pareto(results: &[Measured]) -> Vec<(String, Chart)> {
+    let mut out = vec![];
+    for label in labels(results) {
+        let runs: Vec<&Measured> = results
+            .iter()
+            .filter(|m| m.ok() && m.spec.label == label)
+            .collect();
+        let mut resolutions: Vec<usize> = runs.iter().map(|m| m.res).collect();
+        resolutions.dedup();
+        if resolutions.len() < 2 {
+            continue;
+        }
+        for (error, what) in [
+            ("volume_error", "volume error |V/V* - 1| (%)"),
+            ("front_error", "surge-front error (%)"),
+        ] {
+            let series: Vec<Series> = MethodKind::ALL
+                .iter()
+                .map(|&k| Series {
+                    name: k.name().to_string(),
+                    color: color(k),
+                    points: runs
+                        .iter()
+                        .filter(|m| m.spec.method == k)
+                        .map(|m| (m.get("ms_per_sim_s"), m.get(error)))
+                        .collect(),
+                    markers: false,
+                })
+                .filter(|s| s.points.iter().any(|p| p.1.is_finite()))
+                .collect();
+            if series.is_empty() {
+                continue;
+            }
+            let chart = Chart {
+                title: format!("{label}: {what} against cost, resolutions {resolutions:?}"),
+                x: "wall time per simulated second (ms, log)".into(),
+                y: what.into(),
+                log_x: true,
+                series,
+            };
+            out.push((
+                format!(
+                    "pareto-{}-{}",
+                    slug(&label),
+                    error.trim_end_matches("_error")
+                ),
+                chart,
+            ));
+        }
+    }
+    out
+}
+
+/// Per scene: volume over time, one line per method (the first resolution and seed).
+fn volumes(results: &[Measured]) -> Vec<(String, Chart)> {
+    labels(results)
+        .into_iter()
+        .map(|label| {
+            let first = results
+                .iter()
+                .find(|m| m.spec.label == label)
+                .map(|m| (m.res, m.seed));
+            let series = MethodKind::ALL
+                .iter()
+                .filter_map(|&k| {
+                    let m = results.iter().find(|m| {
+                        m.spec.label == label
+                            && m.spec.method == k
+                            && Some((m.res, m.seed)) == first
+                    })?;
+                    Some(Series {
+                        name: k.name().to_string(),
+                        color: color(k),
+                        points: m.volume.clone(),
+                        markers: false,
+                    })
+                })
+                .collect();
+            let chart = Chart {
+                title: format!("{label}: volume over time"),
+                x: "simulated time (s)".into(),
+                y: "V / V* (%)".into(),
+                log_x: false,
+                series,
+            };
+            (format!("volume-{}", slug(&label)), chart)
+        })
+        .collect()
+}
+
+/// The surge front against Martin & Moyce (1952), per method at the middle resolution.
+fn martin_moyce(results: &[Measured]) -> Result<Vec<(String, Chart)>> {
+    let runs: Vec<&Measured> = results.iter().filter(|m| !m.front.is_empty()).collect();
+    if runs.is_empty() {
+        return Ok(vec![]);
+    }
+    let mut res: Vec<usize> = runs.iter().map(|m| m.res).collect();
+    res.sort();
+    res.dedup();
+    let mid = res[res.len() / 2];
+    let data = parse_csv(SURGE_FRONT_CSV)?;
+    let mut series = vec![Series {
+        name: "Martin & Moyce 1952".into(),
+        color: BLACK,
+        points: data,
+        markers: true,
+    }];
+    for m in runs.iter().filter(|m| m.res == mid) {
+        series.push(Series {
+            name: m.spec.method.name().to_string(),
+            color: color(m.spec.method),
+            points: m.front.clone(),
+            markers: false,
+        });
+    }
+    let chart = Chart {
+        title: format!("Martin & Moyce dam break, surge front ({mid} cells)"),
+        x: "T = t sqrt(2g/a)".into(),
+        y: "Z = front / a".into(),
+        log_x: false,
+        series,
+    };
+    Ok(vec![("martin-moyce-front".into(), chart)])
+}

@@ -1,0 +1,245 @@
+//! `cellflip report` on a tiny matrix: every documented column, figures recomputed from an
+//! independent run of the same scene, valid plots, a readable comparison recording, and runs
+//! that fail (a scene that does not load, one that breaks an invariant) as rows, not aborts.
+
+mod common;
+
+use cellflip::methods::MethodKind;
+use cellflip::report::measure::{figure_columns, COLUMNS};
+use cellflip::scene::Overrides;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// A scene whose emitter velocity makes the grid velocity overflow in the first step.
+const OVERFLOW: &str = r#"
+name = "overflow"
+dim = 2
+[domain]
+size = [1.0, 1.0]
+cells = 16
+[[fluid]]
+shape = "box"
+min = [0.0, 0.0]
+max = [0.5, 0.5]
+[[emitter]]
+min = [0.4, 0.8]
+max = [0.6, 0.9]
+velocity = [0.0, -1e300]
+"#;
+
+/// Splits a CSV line, honouring double quotes.
+fn fields(line: &str) -> Vec<String> {
+    let (mut out, mut cur, mut quoted) = (vec![], String::new(), false);
+    let mut chars = line.chars().peekable();
+    while let Some(c) = chars.next() {
+        match (c, quoted) {
+            ('"', true) if chars.peek() == Some(&'"') => {
+                cur.push('"');
+                chars.next();
+            }
+            ('"', _) => quoted = !quoted,
+            (',', false) => out.push(std::mem::take(&mut cur)),
+            _ => cur.push(c),
+        }
+    }
+    out.push(cur);
+    out
+}
+
+/// Runs the tiny matrix once per test binary and returns its folder.
+fn tiny_report() -> PathBuf {
+    static DIR: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+    DIR.get_or_init(|| {
+        let dir = std::env::temp_dir().join(format!("cellflip-report-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(dir.join("overflow.toml"), OVERFLOW).unwrap();
+        std::fs::write(
+            dir.join("broken.toml"),
+            "name = \"broken\"\ndim = 2\n[domain\n",
+        )
+        .unwrap();
+        let scenes = format!(
+            "hydrostatic-2d,dam-2d,{},{}",
+            dir.join("overflow.toml").display(),
+            dir.join("broken.toml").display()
+        );
+        let out = dir.join("out");
+        let o = Command::new(env!("CARGO_BIN_EXE_cellflip"))
+            .args([
+                "report",
+                "--scenes",
+                &scenes,
+                "--res",
+                "16,24",
+                "--duration",
+                "0.1",
+                "-q",
+            ])
+            .args(["--out", out.to_str().unwrap()])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        out
+    })
+    .clone()
+}
+
+/// The CSV's rows as column -> value maps.
+fn rows(dir: &Path) -> Vec<BTreeMap<String, String>> {
+    let text = std::fs::read_to_string(dir.join("report.csv")).unwrap();
+    let mut lines = text.lines();
+    let header = fields(lines.next().unwrap());
+    lines
+        .map(|l| header.iter().cloned().zip(fields(l)).collect())
+        .collect()
+}
+
+#[test]
+fn the_csv_has_every_documented_column_and_a_row_per_run() {
+    let dir = tiny_report();
+    let text = std::fs::read_to_string(dir.join("report.csv")).unwrap();
+    let header = fields(text.lines().next().unwrap());
+    // The README documents exactly the columns the code declares.
+    let readme = include_str!("../README.md");
+    for (c, _) in COLUMNS {
+        assert!(header.contains(&c.to_string()), "{c} missing from the CSV");
+        assert!(
+            readme.contains(&format!("| `{c}` |")),
+            "{c} not documented in the README"
+        );
+    }
+    for c in figure_columns() {
+        assert!(header.contains(&c), "{c} missing");
+    }
+    // 4 scenes x 2 resolutions x every method.
+    assert_eq!(rows(&dir).len(), 4 * 2 * MethodKind::ALL.len());
+}
+
+#[test]
+fn failing_runs_are_rows_that_say_why() {
+    let rows = rows(&tiny_report());
+    let status = |scene: &str| -> Vec<String> {
+        rows.iter()
+            .filter(|r| r["scene"].contains(scene))
+            .map(|r| r["status"].clone())
+            .collect()
+    };
+    assert!(
+        status("overflow")
+            .iter()
+            .all(|s| s.starts_with("failed: step 1: ") && s.contains("not finite")),
+        "{:?}",
+        status("overflow")
+    );
+    assert!(
+        status("broken")
+            .iter()
+            .all(|s| s.starts_with("not run: ") && s.contains("broken.toml")),
+        "{:?}",
+        status("broken")
+    );
+    assert!(status("dam-2d").iter().all(|s| s == "ok"));
+}
+
+#[test]
+fn a_runs_figures_match_an_independent_run_of_the_same_scene() {
+    let rows = rows(&tiny_report());
+    for method in MethodKind::ALL {
+        let row = rows
+            .iter()
+            .find(|r| r["scene"] == "dam-2d" && r["method"] == method.name() && r["res"] == "24")
+            .unwrap();
+        let o = Overrides {
+            method: Some(*method),
+            cells: Some(24),
+            duration: Some(0.1),
+            ..Default::default()
+        };
+        let scene = common::load("dam-2d", &o);
+        let (mut vmin, mut vmax, mut err, mut steps) = (100.0f64, 100.0f64, 0.0, 0);
+        let runner = common::run::<2>(&scene, None, |_, rep| {
+            vmin = vmin.min(rep.volume_percent);
+            vmax = vmax.max(rep.volume_percent);
+            err += (rep.volume_percent - 100.0).abs();
+            steps += 1;
+        });
+        let s = &runner.sim.state;
+        let h = s.config.cell_size_m;
+        let ke = 0.5
+            * s.particles
+                .vel
+                .iter()
+                .map(|v| v.norm_squared())
+                .sum::<f64>()
+            * h
+            * h
+            / s.particles.len() as f64;
+        let num = |c: &str| {
+            row[c]
+                .parse::<f64>()
+                .unwrap_or_else(|_| panic!("{c}: {}", row[c]))
+        };
+        let at = method.name();
+        assert_eq!(num("steps"), steps as f64, "{at}");
+        assert_eq!(num("particles"), s.particles.len() as f64, "{at}");
+        assert_eq!(num("volume_min"), vmin, "{at}");
+        assert_eq!(num("volume_max"), vmax, "{at}");
+        assert!(
+            (num("volume_error") - err / steps as f64).abs() < 1e-12,
+            "{at}"
+        );
+        assert!((num("ke_end") - ke).abs() <= 1e-12 * ke.max(1e-30), "{at}");
+        let shares: f64 = COLUMNS
+            .iter()
+            .filter(|(c, _)| c.starts_with("share_"))
+            .map(|(c, _)| num(c))
+            .sum();
+        assert!(
+            (shares - 100.0).abs() < 1e-6,
+            "{at}: shares sum to {shares}"
+        );
+    }
+}
+
+#[test]
+fn plots_are_valid_png_and_svg_and_the_recording_reads_back() {
+    let dir = tiny_report();
+    let md = std::fs::read_to_string(dir.join("report.md")).unwrap();
+    // Two resolutions: the Pareto view of dam-2d, and a volume plot per scene that ran.
+    for stem in [
+        "pareto-dam-2d-volume",
+        "volume-dam-2d",
+        "volume-hydrostatic-2d",
+    ] {
+        let png =
+            image::open(dir.join(format!("{stem}.png"))).unwrap_or_else(|e| panic!("{stem}: {e}"));
+        assert_eq!((png.width(), png.height()), (900, 560));
+        let rgb = png.to_rgb8();
+        assert!(
+            rgb.pixels().any(|p| p.0 != [255, 255, 255]),
+            "{stem}.png is blank"
+        );
+        let svg = std::fs::read_to_string(dir.join(format!("{stem}.svg"))).unwrap();
+        assert!(
+            svg.starts_with("<svg") && svg.trim_end().ends_with("</svg>") && svg.contains("<text"),
+            "{stem}.svg"
+        );
+        assert!(
+            md.contains(&format!("{stem}.png")),
+            "report.md links {stem}.png"
+        );
+    }
+    let got = common::logged_entities(&dir.join("report.rrd"));
+    for k in MethodKind::ALL {
+        assert!(
+            got.contains(&format!("volume/dam-2d/{}/24", k.name())),
+            "{got:?}"
+        );
+        assert!(
+            got.contains(&format!("kinetic_energy/hydrostatic-2d/{}/16", k.name())),
+            "{got:?}"
+        );
+    }
+}
