@@ -193,7 +193,7 @@ fn stage_table(s: &mut String, results: &[Measured]) {
     for m in results.iter().filter(|m| m.ok() && m.spec.accuracy) {
         let shares: Vec<String> = Stage::ALL
             .iter()
-            .map(|&st| cell(m.get(share_column(st)), 1))
+            .map(|&st| cell(m.get(&share_column(st)), 1))
             .collect();
         let _ = writeln!(
             s,
