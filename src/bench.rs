@@ -3,8 +3,8 @@
 //! pass/fail test.
 
 use crate::cli::BenchArgs;
-use crate::methods::{median, MethodOption};
-use crate::metrics::Stage;
+use crate::methods::MethodOption;
+use crate::metrics::{median, Stage};
 use crate::runner::{Limit, Runner};
 use crate::scene::{Overrides, Scene};
 use crate::sim::correct::band::BandMode;

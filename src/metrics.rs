@@ -24,6 +24,13 @@ pub fn volume_cells(markings: &Markings, mu: u32) -> f64 {
     v
 }
 
+/// The median of some values (the upper one of an even count); `None` when empty.
+pub fn median<T: Copy + PartialOrd>(values: &[T]) -> Option<T> {
+    let mut v = values.to_vec();
+    v.sort_by(|a, b| a.partial_cmp(b).unwrap_or(std::cmp::Ordering::Equal));
+    v.get(v.len() / 2).copied()
+}
+
 /// The simulation's stages, for timings (one slot each).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Stage {

@@ -1,9 +1,8 @@
-//! The one step loop: every command (`run`, `bench`, `validate`) and the tests step a
+//! The one step loop: every command (`run`, `bench`, `validate`, `report`) and the tests step a
 //! simulation through [`Runner::run`], with an observer called after each step, and read what
 //! happened from one [`Summary`], printed in one place ([`Summary::print`]).
 
-use crate::methods::median;
-use crate::metrics::{Stage, StageTimes};
+use crate::metrics::{median, Stage, StageTimes};
 use crate::sim::{Simulation, StepReport};
 use anyhow::Result;
 use std::time::{Duration, Instant};

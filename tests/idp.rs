@@ -28,6 +28,22 @@ fn lattice<const D: usize>(c: [usize; D], k: usize, copies: usize) -> Vec<Vector
     out
 }
 
+/// The projection's inputs with `solid` as the only cells particles may not enter.
+fn inputs<'a, const D: usize>(
+    g: &'a Grid<D>,
+    solid: &'a [bool],
+    k: usize,
+    pcg: &'a PcgSettings,
+) -> Inputs<'a, D> {
+    Inputs {
+        grid: g,
+        solid,
+        particle_free: solid,
+        per_axis: k,
+        pcg,
+    }
+}
+
 /// Projects once, with no solid but the walls unless given, and no resampling.
 fn project<const D: usize>(
     g: &Grid<D>,
@@ -39,13 +55,7 @@ fn project<const D: usize>(
         tolerance: 1e-12,
         ..Default::default()
     };
-    let inputs = Inputs {
-        grid: g,
-        solid,
-        particle_free: solid,
-        per_axis: k,
-        pcg: &settings,
-    };
+    let inputs = inputs(g, solid, k, &settings);
     let mut vel = vec![Vector::<D>::zeros(); pos.len()];
     let rep = project_density::<D, StdRng>(&inputs, pos, &mut vel, None::<Resample<'_, D, StdRng>>);
     assert!(
@@ -104,13 +114,7 @@ fn a_block_at_rest_is_not_moved<const D: usize>(k: usize) {
         }
     }
     let settings = PcgSettings::default();
-    let inputs = Inputs {
-        grid: &g,
-        solid: &solid,
-        particle_free: &solid,
-        per_axis: k,
-        pcg: &settings,
-    };
+    let inputs = inputs(&g, &solid, k, &settings);
     let s = density_errors(&inputs, &pos);
     for i in 0..g.num_cells() {
         let c = g.cell_coords(i);
@@ -211,13 +215,7 @@ fn a_cluster_spreads<const D: usize>(extra: usize) {
     }
     let solid = vec![false; g.num_cells()];
     let settings = PcgSettings::default();
-    let inputs = Inputs {
-        grid: &g,
-        solid: &solid,
-        particle_free: &solid,
-        per_axis: k,
-        pcg: &settings,
-    };
+    let inputs = inputs(&g, &solid, k, &settings);
     let most = |pos: &[Vector<D>]| density_errors(&inputs, pos).into_iter().fold(0.0, f64::min);
     let mut s = most(&pos);
     assert!(s < -CLAMP, "{D}D: starts at {s}");

@@ -7,9 +7,9 @@
 //! the deep's bookkeeping ([`crate::sim::correct::deep`]). The band's geometry (levels,
 //! velocity combination, advection of the grid velocity) is [`crate::sim::band`].
 
-use super::{median, FluidMethod, Known, MethodInfo, MethodOption, MethodReport, MethodSettings, MethodType};
+use super::{FluidMethod, Known, MethodInfo, MethodOption, MethodReport, MethodSettings, MethodType};
 use crate::grid::{MacField, Vector};
-use crate::metrics::{self, InvariantViolation};
+use crate::metrics::{self, median, InvariantViolation};
 use crate::record::{depth_level_classes, Layer, Log, Style};
 use crate::sim::band::Band;
 use crate::sim::correct::band::{BandContext, BandCorrection, BandVariant};

@@ -57,8 +57,9 @@
 //! grid velocity, and keep `s = RESAMPLE_BELOW` instead of the clamp (reference
 //! `resampeOverfullCells`).
 
-use super::{median, FluidMethod, MethodInfo, MethodReport, MethodSettings, MethodType};
+use super::{FluidMethod, MethodInfo, MethodReport, MethodSettings, MethodType};
 use crate::grid::{for_each_cell_weight, Grid, MacField, Vector};
+use crate::metrics::median;
 use crate::record::{Layer, Log, Style};
 use crate::sim::advect::{displace, CELL_MARGIN};
 use crate::sim::pressure::Poisson;

@@ -291,13 +291,6 @@ impl<const D: usize> MethodReport<D> for NoReport {
     }
 }
 
-/// The median of some values (the upper one of an even count); `None` when empty.
-pub fn median<T: Copy + PartialOrd>(values: &[T]) -> Option<T> {
-    let mut v = values.to_vec();
-    v.sort_by(|a, b| a.partial_cmp(b).unwrap_or(std::cmp::Ordering::Equal));
-    v.get(v.len() / 2).copied()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

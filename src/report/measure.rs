@@ -4,8 +4,8 @@
 
 use super::RunSpec;
 use crate::bench::peak_memory_mib;
-use crate::methods::{median, MethodKind};
-use crate::metrics::Stage;
+use crate::methods::MethodKind;
+use crate::metrics::{median, Stage};
 use crate::record::ComparisonSeries;
 use crate::runner::{Limit, Runner};
 use crate::scene::Scene;

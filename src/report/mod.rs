@@ -79,7 +79,7 @@ impl Entry {
 /// The default matrix: the paper's scenes for accuracy, its hard cases for stability.
 fn default_entries(stability: bool) -> Result<Vec<Entry>> {
     let mut e = vec![
-        Entry::named("dam-2d", &[], true, false),
+        Entry::named("dam-2d", &[32, 50, 100], true, false),
         Entry::named("dam-1ppc-2d", &[], true, true),
         Entry {
             duration: Some(MartinMoyceProbe::end_time()),
@@ -91,7 +91,7 @@ fn default_entries(stability: bool) -> Result<Vec<Entry>> {
         },
         Entry::named("compress-2d", &[], true, true),
         Entry::named("falling-obstacle-2d", &[], true, false),
-        Entry::named("dam-3d", &[32], true, false),
+        Entry::named("dam-3d", &[24, 32, 48], true, false),
     ];
     if stability {
         e.push(Entry::named("large-obstacle-2d", &[], false, true));

@@ -7,6 +7,7 @@ use super::measure::Measured;
 use crate::methods::MethodKind;
 use crate::validation::{parse_csv, SURGE_FRONT_CSV};
 use anyhow::{anyhow, Context, Result};
+use plotters::coord::ranged1d::ValueFormatter;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::path::Path;
@@ -29,8 +30,11 @@ pub struct Chart {
     pub title: String,
     pub x: String,
     pub y: String,
+    /// The x values are `log10` of the quantity, labelled with the quantity itself.
     pub log_x: bool,
     pub series: Vec<Series>,
+    /// Where the legend goes (away from the data).
+    pub legend: SeriesLabelPosition,
 }
 
 /// A method's colour, by its place in the registry.
@@ -103,12 +107,11 @@ fn ranges(c: &Chart) -> ((f64, f64), (f64, f64)) {
     if !x0.is_finite() {
         return ((1.0, 2.0), (0.0, 1.0));
     }
-    let pad = |a: f64, b: f64, log: bool| match log {
-        true => (a / 1.3, b * 1.3),
-        false if b > a => (a - 0.05 * (b - a), b + 0.05 * (b - a)),
+    let pad = |a: f64, b: f64| match b > a {
+        true => (a - 0.05 * (b - a), b + 0.05 * (b - a)),
         false => (a - 0.5, b + 0.5),
     };
-    (pad(x0.max(1e-9), x1.max(1e-9), c.log_x), pad(y0, y1, false))
+    (pad(x0, x1), pad(y0, y1))
 }
 
 fn draw<DB: DrawingBackend>(
@@ -122,35 +125,28 @@ fn draw<DB: DrawingBackend>(
         .margin(12)
         .x_label_area_size(40)
         .y_label_area_size(60);
-    if c.log_x {
-        let mut chart = b.build_cartesian_2d((x0..x1).log_scale(), y0..y1)?;
-        chart
-            .configure_mesh()
-            .x_desc(&c.x)
-            .y_desc(&c.y)
-            .label_style(("sans-serif", 13))
-            .draw()?;
-        plot_series(&mut chart, c)
-    } else {
-        let mut chart = b.build_cartesian_2d(x0..x1, y0..y1)?;
-        chart
-            .configure_mesh()
-            .x_desc(&c.x)
-            .y_desc(&c.y)
-            .label_style(("sans-serif", 13))
-            .draw()?;
-        plot_series(&mut chart, c)
-    }
+    let mut chart = b.build_cartesian_2d(x0..x1, y0..y1)?;
+    plot_series(&mut chart, c)
 }
 
+/// The mesh with its axis labels, the series and their legend.
 fn plot_series<'a, DB: DrawingBackend + 'a, X, Y>(
     chart: &mut ChartContext<'a, DB, Cartesian2d<X, Y>>,
     c: &Chart,
 ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>>
 where
-    X: Ranged<ValueType = f64>,
-    Y: Ranged<ValueType = f64>,
+    X: Ranged<ValueType = f64> + ValueFormatter<f64>,
+    Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
 {
+    chart
+        .configure_mesh()
+        .x_desc(&c.x)
+        .y_desc(&c.y)
+        .x_labels(8)
+        .x_label_formatter(&|x: &f64| label(if c.log_x { 10f64.powf(*x) } else { *x }))
+        .light_line_style(RGBColor(238, 238, 238))
+        .label_style(("sans-serif", 13))
+        .draw()?;
     for s in &c.series {
         let color = s.color;
         let pts: Vec<(f64, f64)> = s
@@ -181,8 +177,17 @@ where
         .background_style(WHITE.mix(0.8))
         .border_style(BLACK)
         .label_font(("sans-serif", 13))
-        .position(SeriesLabelPosition::UpperRight)
+        .position(c.legend.clone())
         .draw()
+}
+
+/// A tick label: at most three decimals, no trailing zeros; whole numbers from 100 on.
+fn label(x: f64) -> String {
+    if x.abs() >= 100.0 {
+        return format!("{x:.0}");
+    }
+    let s = format!("{x:.3}");
+    s.trim_end_matches('0').trim_end_matches('.').to_string()
 }
 
 /// The labels of the accuracy runs, in matrix order.
@@ -223,6 +228,7 @@ fn pareto(results: &[Measured]) -> Vec<(String, Chart)> {
             .filter(|m| m.ok() && m.spec.label == label)
             .collect();
         let mut resolutions: Vec<usize> = runs.iter().map(|m| m.res).collect();
+        resolutions.sort();
         resolutions.dedup();
         if resolutions.len() < 2 {
             continue;
@@ -239,7 +245,7 @@ fn pareto(results: &[Measured]) -> Vec<(String, Chart)> {
                     points: runs
                         .iter()
                         .filter(|m| m.spec.method == k)
-                        .map(|m| (m.get("ms_per_sim_s"), m.get(error)))
+                        .map(|m| (m.get("ms_per_sim_s").log10(), m.get(error)))
                         .collect(),
                     markers: false,
                 })
@@ -254,6 +260,7 @@ fn pareto(results: &[Measured]) -> Vec<(String, Chart)> {
                 y: what.into(),
                 log_x: true,
                 series,
+                legend: SeriesLabelPosition::UpperRight,
             };
             out.push((
                 format!(
@@ -299,6 +306,7 @@ fn volumes(results: &[Measured]) -> Vec<(String, Chart)> {
                 y: "V / V* (%)".into(),
                 log_x: false,
                 series,
+                legend: SeriesLabelPosition::LowerLeft,
             };
             (format!("volume-{}", slug(&label)), chart)
         })
@@ -336,6 +344,7 @@ fn martin_moyce(results: &[Measured]) -> Result<Vec<(String, Chart)>> {
         y: "Z = front / a".into(),
         log_x: false,
         series,
+        legend: SeriesLabelPosition::UpperLeft,
     };
     Ok(vec![("martin-moyce-front".into(), chart)])
 }
