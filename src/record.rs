@@ -17,7 +17,7 @@ use crate::sim::markings::{DepthLevel, MarkingClass};
 use crate::sim::{Simulation, StepReport};
 use anyhow::{anyhow, Result};
 use rerun::blueprint::{
-    Blueprint, Horizontal, Spatial2DView, Spatial3DView, TextDocumentView, TextLogView,
+    Blueprint, Horizontal, Spatial2DView, Spatial3DView, Tabs, TextDocumentView, TextLogView,
     TimeSeriesView, Vertical,
 };
 use rerun::RecordingStream;
@@ -662,7 +662,7 @@ fn path_part(s: &str) -> String {
 /// `cellflip report`'s recording: every run's volume and kinetic energy on the `sim_time`
 /// timeline, under `volume/<scene>/<method>/<cells>` and
 /// `kinetic_energy/<scene>/<method>/<cells>` (`_s<seed>` appended when a scene runs with
-/// several seeds), with one panel per scene comparing the methods.
+/// several seeds), with one tab per scene comparing the methods.
 pub fn write_comparison(path: &Path, runs: &[ComparisonSeries<'_>]) -> Result<()> {
     let mut scenes: Vec<String> = vec![];
     for r in runs {
@@ -671,17 +671,18 @@ pub fn write_comparison(path: &Path, runs: &[ComparisonSeries<'_>]) -> Result<()
             scenes.push(s);
         }
     }
+    // One tab per scene: its volume above its kinetic energy, every run a line.
     let panel = |what: &str, s: &String| -> rerun::blueprint::ContainerLike {
         TimeSeriesView::new(format!("{s}: {what}"))
             .with_origin(format!("{what}/{s}"))
             .into()
     };
-    let volume: Vec<_> = scenes.iter().map(|s| panel("volume", s)).collect();
-    let ke: Vec<_> = scenes.iter().map(|s| panel("kinetic_energy", s)).collect();
-    let blueprint = Blueprint::new(Horizontal::new([
-        Vertical::new(volume).into(),
-        Vertical::new(ke).into(),
-    ]));
+    let tabs = scenes.iter().map(|s| {
+        Vertical::new([panel("volume", s), panel("kinetic_energy", s)])
+            .with_name(s.clone())
+            .into()
+    });
+    let blueprint = Blueprint::new(Tabs::new(tabs));
     let rec = rerun::RecordingStreamBuilder::new("cellflip")
         .recording_name("cellflip report")
         .send_properties(false)

@@ -207,11 +207,14 @@ pub fn report(args: &ReportArgs) -> Result<()> {
     let interrupted = stop();
     write_all(&args.out, &specs, &results)?;
     if !args.quiet {
+        let failed = results
+            .iter()
+            .filter(|m| !m.ok() && m.status != "interrupted");
         println!(
             "report: {} of {} runs ({} failed) written to {}",
             results.len(),
             specs.len(),
-            results.iter().filter(|m| !m.ok()).count(),
+            failed.count(),
             args.out.display()
         );
     }
