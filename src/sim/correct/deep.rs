@@ -193,17 +193,11 @@ mod tests {
         let mut u = MacField::zeros(&g);
         u.comp[2].iter_mut().for_each(|v| *v = -3.0);
         let mut n_deep = 0;
-        exchange_with_deep(
-            &g,
-            &mut p,
-            &mut m,
-            None,
-            Band { r: 1 },
-            1,
-            &mut n_deep,
-            &u,
-            &mut rng,
-        );
+        // The exchange at mu = 1, R = 1, with nothing risen from below the interface.
+        let mut exchange = |p: &mut Particles<3>, m: &mut Markings, n_deep: &mut usize| {
+            exchange_with_deep(&g, p, m, None, Band { r: 1 }, 1, n_deep, &u, &mut rng)
+        };
+        exchange(&mut p, &mut m, &mut n_deep);
         assert_eq!((p.len(), n_deep), (32, 64));
         // Empty 5 interface cells and say the deep holds 5 more than its 64 cells: the 5 go
         // back into the interface, one per empty cell, with the grid velocity.
@@ -225,17 +219,7 @@ mod tests {
             m.count[g.cell_index(c)] = 0;
         }
         n_deep += 5;
-        let x = exchange_with_deep(
-            &g,
-            &mut p,
-            &mut m,
-            None,
-            Band { r: 1 },
-            1,
-            &mut n_deep,
-            &u,
-            &mut rng,
-        );
+        let x = exchange(&mut p, &mut m, &mut n_deep);
         assert_eq!((x.removed, x.added, x.unplaced), (0, 5, 0));
         assert_eq!((p.len(), n_deep), (32, 64));
         assert!(m.count.iter().all(|&n| n <= 1));
@@ -247,17 +231,7 @@ mod tests {
             .all(|v| (v[2] + 3.0).abs() < 1e-12));
         // With no room left, more excess stays in the deep and is reported.
         n_deep += 2;
-        let x = exchange_with_deep(
-            &g,
-            &mut p,
-            &mut m,
-            None,
-            Band { r: 1 },
-            1,
-            &mut n_deep,
-            &u,
-            &mut rng,
-        );
+        let x = exchange(&mut p, &mut m, &mut n_deep);
         assert_eq!((x.added, x.unplaced), (0, 2));
         assert_eq!(n_deep, 66);
     }
