@@ -7,7 +7,7 @@ use super::measure::Measured;
 use crate::methods::MethodKind;
 use crate::validation::{parse_csv, SURGE_FRONT_CSV};
 use anyhow::{anyhow, Context, Result};
-use plotters::coord::ranged1d::ValueFormatter;
+use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::path::Path;
@@ -130,14 +130,10 @@ fn draw<DB: DrawingBackend>(
 }
 
 /// The mesh with its axis labels, the series and their legend.
-fn plot_series<'a, DB: DrawingBackend + 'a, X, Y>(
-    chart: &mut ChartContext<'a, DB, Cartesian2d<X, Y>>,
+fn plot_series<'a, DB: DrawingBackend + 'a>(
+    chart: &mut ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
     c: &Chart,
-) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>>
-where
-    X: Ranged<ValueType = f64> + ValueFormatter<f64>,
-    Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
-{
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
     chart
         .configure_mesh()
         .x_desc(&c.x)
