@@ -24,6 +24,14 @@ impl<const D: usize> Particles<D> {
         self.pos.push(x);
         self.vel.push(v);
     }
+
+    /// Keeps the particles flagged in `keep` (one flag per particle), in order.
+    pub fn retain_flagged(&mut self, keep: &[bool]) {
+        let mut it = keep.iter();
+        self.pos.retain(|_| *it.next().unwrap());
+        let mut it = keep.iter();
+        self.vel.retain(|_| *it.next().unwrap());
+    }
 }
 
 /// A region of space in grid units.

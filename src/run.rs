@@ -92,7 +92,7 @@ fn run_dim<const D: usize>(
         r.log_setup(&sim);
         r.log_step(&sim, None, true);
     }
-    if sim.method.imaginary_particles() > 0 && sim.state.particles.is_empty() {
+    if sim.method.particles_not_held() > 0 && sim.state.particles.is_empty() {
         let msg = "the fluid has no free surface, so the band method put every particle in the \
                    deep: the run is grid-only (use --band none)";
         eprintln!("warning: {msg}");

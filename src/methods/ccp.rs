@@ -107,8 +107,8 @@ impl<const D: usize> FluidMethod<D> for CcpSim<D> {
         Some(self.band()?.emitter_counts(&s.markings, s.config.mu()))
     }
 
-    fn imaginary_particles(&self) -> usize {
-        self.n_deep
+    fn particles_not_held(&self) -> isize {
+        self.n_deep as isize
     }
 
     fn particles_to_grid(&mut self, s: &State<D>) -> (MacField<D>, Known<D>) {
@@ -154,8 +154,8 @@ impl<const D: usize> FluidMethod<D> for CcpSim<D> {
         Ok(())
     }
 
-    fn kept_cells(&self, previous: &Markings) -> Option<Vec<bool>> {
-        self.band().map(|_| Band::kept_cells(previous))
+    fn before_markings(&mut self, s: &mut State<D>) -> Option<Vec<bool>> {
+        self.band().map(|_| Band::kept_cells(&s.markings))
     }
 
     fn after_markings(&mut self, s: &mut State<D>, previous: &Markings) {

@@ -7,13 +7,14 @@
 //! | hook | alg. flip / alg. band | who uses it |
 //! |---|---|---|
 //! | [`FluidMethod::start`] | after the first markings | ccp with the band: first exchange with the deep |
-//! | [`FluidMethod::emitter_counts`], [`FluidMethod::imaginary_particles`] | emission | ccp with the band: the deep counts as full |
+//! | [`FluidMethod::emitter_counts`] | emission | the band methods: the deep counts as full |
+//! | [`FluidMethod::particles_not_held`] | the particle-count invariant | ccp's deep, nbflip's resampling |
 //! | [`FluidMethod::particles_to_grid`] | line 1 | ccp with the band: the velocity combination |
 //! | [`FluidMethod::after_projection`] | after line 3 | (IDP's second solve) |
 //! | [`FluidMethod::grid_to_particles`] | line 4 | FLIP/PIC blend by default |
 //! | [`FluidMethod::before_advection`], [`FluidMethod::next_grid_velocity`] | line 5 | ccp keeps `x_bar`; the band advects the grid velocity |
 //! | [`FluidMethod::correct_positions`] | line 6 | ccp: eq. problem3 and the band corrections |
-//! | [`FluidMethod::kept_cells`], [`FluidMethod::after_markings`] | line 7, alg. band line 9 | ccp with the band: the deep |
+//! | [`FluidMethod::before_markings`], [`FluidMethod::after_markings`] | line 7, alg. band line 9 | the band methods: the deep; nbflip's level set and resampling |
 //! | [`FluidMethod::check_invariants`] | after the step | what the method guarantees |
 //! | [`FluidMethod::finish_step`], [`MethodReport::record`], [`FluidMethod::summary`] | reporting | every method |
 //!
@@ -192,9 +193,11 @@ pub trait FluidMethod<const D: usize>: Send {
         None
     }
 
-    /// Particles the method represents without holding them (the band's deep): they count
-    /// towards emitter targets and the particle-count invariant.
-    fn imaginary_particles(&self) -> usize {
+    /// Particles seeded or emitted that the method accounts for without holding them: the
+    /// band's imaginary particles of the deep (ccp), or what resampling deleted net of what it
+    /// seeded (nbflip; negative when it seeded more). Particles held plus these are all particles
+    /// ever seeded or emitted (checked every step).
+    fn particles_not_held(&self) -> isize {
         0
     }
 
@@ -233,8 +236,10 @@ pub trait FluidMethod<const D: usize>: Send {
         Ok(())
     }
 
-    /// Cells that stay fluid in the next markings even without particles.
-    fn kept_cells(&self, _previous: &Markings) -> Option<Vec<bool>> {
+    /// Just before new markings are computed from the particles (`s.markings` are still the
+    /// previous ones): the method may resample its particles (nbflip) and returns the cells
+    /// that stay fluid even without particles.
+    fn before_markings(&mut self, _s: &mut State<D>) -> Option<Vec<bool>> {
         None
     }
 

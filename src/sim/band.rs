@@ -81,29 +81,20 @@ impl Band {
         grid_u: &MacField<D>,
         m: &Markings,
     ) {
-        for a in 0..D {
-            u.comp[a]
-                .par_iter_mut()
-                .zip(known[a].par_iter_mut())
-                .enumerate()
-                .for_each(|(i, (v, k))| {
-                    let f = grid.face_coords(a, i);
-                    let mut below = false;
-                    for side in [0usize, 1] {
-                        // The cells on the two sides of face f along axis a: f - e_a and f.
-                        if (side == 0 && f[a] == 0) || (side == 1 && f[a] == grid.dims[a]) {
-                            continue;
-                        }
-                        let mut c = f;
-                        c[a] -= 1 - side;
-                        below |= m.at_or_below_interface(grid.cell_index(c), self.r);
-                    }
-                    if below {
-                        *v = grid_u.comp[a][i];
-                        *k = true;
-                    }
-                });
-        }
+        combine_velocities(u, known, grid_u, |a, i, _| {
+            let f = grid.face_coords(a, i);
+            // The cells on the two sides of face f along axis a: f - e_a and f.
+            let below = (f[a] > 0).then(|| {
+                let mut c = f;
+                c[a] -= 1;
+                c
+            });
+            let above = (f[a] < grid.dims[a]).then_some(f);
+            [below, above]
+                .into_iter()
+                .flatten()
+                .any(|c| m.at_or_below_interface(grid.cell_index(c), self.r))
+        });
     }
 
     /// Alg. band line 5: the grid velocity advected semi-Lagrangian over `dt`. The next step
@@ -117,6 +108,30 @@ impl Band {
     ) -> MacField<D> {
         let needed: Vec<bool> = (0..grid.num_cells()).map(|c| m.is_fluid(c)).collect();
         advect::advect_velocity(grid, u, dt, &needed)
+    }
+}
+
+/// The velocity combination of the band methods (paper alg. band line 1; Ferstl et al. 2016,
+/// sec. 4): faces for which `take_grid(axis, face, had_particle_weight)` holds take the grid
+/// velocity `grid_u` and count as known; the others keep the particles' velocity `u` where
+/// particles gave weight.
+pub fn combine_velocities<const D: usize>(
+    u: &mut MacField<D>,
+    known: &mut Known<D>,
+    grid_u: &MacField<D>,
+    take_grid: impl Fn(usize, usize, bool) -> bool + Sync,
+) {
+    for a in 0..D {
+        u.comp[a]
+            .par_iter_mut()
+            .zip(known[a].par_iter_mut())
+            .enumerate()
+            .for_each(|(i, (v, k))| {
+                if take_grid(a, i, *k) {
+                    *v = grid_u.comp[a][i];
+                    *k = true;
+                }
+            });
     }
 }
 

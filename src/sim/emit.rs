@@ -23,7 +23,7 @@ pub fn emit<const D: usize>(s: &mut State<D>, m: &dyn FluidMethod<D>) -> usize {
             &s.grid,
             s.time_secs,
             count,
-            m.imaginary_particles(),
+            s.total_particles + added,
             &s.solids.solid,
             c.per_axis,
             c.jitter,
@@ -50,15 +50,15 @@ pub struct Emitter<const D: usize> {
 
 impl<const D: usize> Emitter<D> {
     /// Tops up the emitter's non-solid cells to `mu` particles each (jittered sub-cell
-    /// samples), without the scene's particles (`particles` plus `imaginary` ones, the band
-    /// method's deep) exceeding `until_particles`. Returns how many were added.
+    /// samples), without the particles ever seeded or emitted (`total`, held or not) exceeding
+    /// `until_particles`. Returns how many were added.
     #[allow(clippy::too_many_arguments)]
     pub fn emit(
         &self,
         grid: &Grid<D>,
         time_secs: f64,
         count: &[u32],
-        imaginary: usize,
+        total: usize,
         solid: &[bool],
         per_axis: usize,
         jitter: f64,
@@ -70,7 +70,7 @@ impl<const D: usize> Emitter<D> {
         }
         let mu = per_axis.pow(D as u32);
         let mut room = self.until_particles.map_or(usize::MAX, |n| {
-            n.saturating_sub(particles.len() + imaginary)
+            n.saturating_sub(total)
         });
         let mut added = 0;
         for c in self.region.cells(grid) {

@@ -134,6 +134,19 @@ impl<const D: usize> State<D> {
         }
         100.0 * metrics::volume_cells(&self.markings, self.config.mu()) / self.target_volume
     }
+
+    /// New markings from the particles; cells flagged in `keep` stay fluid without particles.
+    /// Returns the markings they replace.
+    pub fn remark(&mut self, keep: Option<&[bool]>) -> Markings {
+        let new = Markings::compute_keeping(
+            &self.grid,
+            &self.particles.pos,
+            &self.solids.solid,
+            keep,
+            self.solids.moving_mask(),
+        );
+        std::mem::replace(&mut self.markings, new)
+    }
 }
 
 /// A running simulation: the state and the method that steps it.
@@ -253,18 +266,21 @@ impl<const D: usize> Simulation<D> {
     }
 
     /// The invariants every method keeps, checked after every step (O(particles)): particles
-    /// held plus the method's imaginary ones account for every particle seeded or emitted,
+    /// held plus those the method holds no longer account for every particle seeded or emitted,
     /// all state is finite, every particle is inside the domain and outside solids; then the
     /// method's own.
     pub fn check_invariants(&self) -> Result<(), InvariantViolation> {
         let s = &self.state;
-        let imaginary = self.method.imaginary_particles();
-        let expected = s.total_particles.checked_sub(imaginary).ok_or_else(|| {
-            InvariantViolation(format!(
-                "{imaginary} imaginary particles exceed the {} ever seeded or emitted",
-                s.total_particles
-            ))
-        })?;
+        let not_held = self.method.particles_not_held();
+        let expected = s
+            .total_particles
+            .checked_add_signed(-not_held)
+            .ok_or_else(|| {
+                InvariantViolation(format!(
+                    "{not_held} particles not held exceed the {} ever seeded or emitted",
+                    s.total_particles
+                ))
+            })?;
         let p = &s.particles;
         metrics::check_particles(&s.grid, &p.pos, &p.vel, s.solids.particle_free(), expected)?;
         self.method.check_invariants(s)
@@ -274,14 +290,7 @@ impl<const D: usize> Simulation<D> {
 /// New markings from the current positions; the method may keep cells fluid without
 /// particles, and acts on the new markings (the band's exchange with the deep).
 fn refresh_markings<const D: usize>(s: &mut State<D>, m: &mut dyn FluidMethod<D>) {
-    let keep = m.kept_cells(&s.markings);
-    let new = Markings::compute_keeping(
-        &s.grid,
-        &s.particles.pos,
-        &s.solids.solid,
-        keep.as_deref(),
-        s.solids.moving_mask(),
-    );
-    let previous = std::mem::replace(&mut s.markings, new);
+    let keep = m.before_markings(s);
+    let previous = s.remark(keep.as_deref());
     m.after_markings(s, &previous);
 }

@@ -118,7 +118,7 @@ pub fn digest_state<const D: usize>(d: &mut Digest, sim: &Simulation<D>) {
     d.u64(s.steps);
     d.u64(s.total_particles as u64);
     d.f64(s.target_volume);
-    d.u64(sim.method.imaginary_particles() as u64);
+    d.u64(sim.method.particles_not_held() as u64);
 }
 
 /// Feeds a step's report, all but its timings.

@@ -75,10 +75,7 @@ pub fn exchange_with_deep<const D: usize>(
         .iter()
         .map(|x| level(markings, grid.cell_index_of(x)) != DepthLevel::Deep)
         .collect();
-    let mut it = keep.iter();
-    particles.pos.retain(|_| *it.next().unwrap());
-    let mut it = keep.iter();
-    particles.vel.retain(|_| *it.next().unwrap());
+    particles.retain_flagged(&keep);
     out.removed = before - particles.len();
     *n_deep += out.removed;
     // Former interface or deep cells now above the interface first, then the interface.
@@ -212,9 +209,7 @@ mod tests {
             keep.push(!drop);
         }
         assert_eq!(removed, 5);
-        let mut it = keep.iter();
-        p.pos.retain(|_| *it.next().unwrap());
-        p.vel.truncate(p.pos.len());
+        p.retain_flagged(&keep);
         for c in [[0, 0, 4], [0, 1, 4], [0, 2, 4], [0, 3, 4], [3, 3, 4]] {
             m.count[g.cell_index(c)] = 0;
         }
