@@ -107,7 +107,9 @@ pub struct RunArgs {
     /// full (an integer program: small grids only).
     #[arg(long, value_enum)]
     pub band: Option<BandMode>,
-    /// Band interface depth R; the band is R + 1 cells thick (overrides `simulation.band_r`).
+    /// Band depth R: ccp's band interface lies R cells below the surface (the band is R + 1
+    /// cells thick); nbflip keeps particles down to R cells below its level set's zero
+    /// (overrides `simulation.band_r`).
     #[arg(long, value_name = "R")]
     pub band_r: Option<u32>,
     /// How obstacles pass particles (overrides `simulation.obstacle`): couple (ccp), or for

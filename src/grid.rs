@@ -128,6 +128,18 @@ impl<const D: usize> Grid<D> {
         Some(n)
     }
 
+    /// The cells on the two sides of face `i` of axis `a` (one on the domain boundary).
+    pub fn face_cells(&self, a: usize, i: usize) -> impl Iterator<Item = usize> {
+        let f = self.face_coords(a, i);
+        let right = (f[a] < self.dims[a]).then(|| self.cell_index(f));
+        let left = (f[a] > 0).then(|| {
+            let mut c = f;
+            c[a] -= 1;
+            self.cell_index(c)
+        });
+        left.into_iter().chain(right)
+    }
+
     /// Cell centre in grid units.
     pub fn center(&self, c: Cell<D>) -> Vector<D> {
         Vector::<D>::from_fn(|k, _| c[k] as f64 + 0.5)

@@ -170,7 +170,10 @@ fn the_band_holds_fewer_particles_than_the_fluid_on_dam_3d() {
             ..Default::default()
         };
         let sim = Simulation::<3>::new(load("dam-3d", &o).config::<3>());
-        (sim.state.particles.len(), sim.method.particles_not_held() as usize)
+        (
+            sim.state.particles.len(),
+            sim.method.particles_not_held() as usize,
+        )
     };
     let (full, full_deep) = at(BandMode::None);
     let (band, band_deep) = at(BandMode::Paths);

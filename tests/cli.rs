@@ -302,7 +302,8 @@ fn record(dir: &Path, scene: &str, steps: &str, extra: &[&str]) -> BTreeSet<Stri
 #[test]
 fn recordings_log_exactly_the_documented_entities() {
     // Between them these runs log everything: flip in 2D, ccp with the solver cross-check and
-    // an exported problem, the band in 2D (all variants' objectives) and 3D, obstacles, idp.
+    // an exported problem, the band in 2D (all variants' objectives) and 3D, obstacles, idp,
+    // nbflip in 3D.
     let dir = scratch_dir("record");
     let mut logged = BTreeSet::new();
     logged.extend(record(&dir, "hydrostatic-2d", "3", &[]));
@@ -328,6 +329,12 @@ fn recordings_log_exactly_the_documented_entities() {
     logged.extend(record(&dir, "drop-3d", "30", &["--res", "12"]));
     logged.extend(record(&dir, "compress-2d", "20", &[]));
     logged.extend(record(&dir, "dam-2d", "5", &["--method", "idp"]));
+    logged.extend(record(
+        &dir,
+        "dam-3d",
+        "3",
+        &["--method", "nbflip", "--res", "12"],
+    ));
     let documented = common::documented_entities();
     assert!(documented.len() > 30, "the README's table: {documented:?}");
     let undocumented: Vec<&String> = logged

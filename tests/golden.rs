@@ -1,6 +1,7 @@
 //! Results change only on purpose: a digest of the whole state and of every step's report
 //! (all but timings), chained over a fixed number of steps, for every built-in scene with its
-//! default method and with flip, and for the band variants. The digests live in
+//! default method and with flip, for the band variants, and for the other baselines on the
+//! dams. The digests live in
 //! `tests/golden_digests.txt`; after a change that must alter results, regenerate them with
 //! `CELLFLIP_BLESS=1 cargo test --release --test golden` and say why in the commit.
 
@@ -28,6 +29,11 @@ fn cases() -> Vec<(String, Option<MethodKind>, Option<BandMode>, u64)> {
     v.push(("dam-2d".into(), None, Some(BandMode::Paths), 60));
     v.push(("dam-2d".into(), None, Some(BandMode::OneWay), 8));
     v.push(("dam-2d".into(), None, Some(BandMode::Full), 8));
+    // The baselines beyond flip, on the dams.
+    for m in [MethodKind::Idp, MethodKind::Nbflip] {
+        v.push(("dam-2d".into(), Some(m), None, 60));
+        v.push(("dam-3d".into(), Some(m), None, 12));
+    }
     v
 }
 

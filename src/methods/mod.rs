@@ -74,6 +74,7 @@ methods! {
     flip::Flip,
     ccp::Ccp,
     idp::Idp,
+    nbflip::Nbflip,
 }
 
 impl MethodKind {

@@ -57,20 +57,10 @@ pub fn advect_velocity<const D: usize>(
     let mut out = u.clone();
     for a in 0..D {
         out.comp[a].par_iter_mut().enumerate().for_each(|(i, v)| {
-            let f = grid.face_coords(a, i);
-            let below = (f[a] > 0).then(|| {
-                let mut c = f;
-                c[a] -= 1;
-                c
-            });
-            let above = (f[a] < grid.dims[a]).then_some(f);
-            if ![below, above]
-                .into_iter()
-                .flatten()
-                .any(|c| needed[grid.cell_index(c)])
-            {
+            if !grid.face_cells(a, i).any(|c| needed[c]) {
                 return;
             }
+            let f = grid.face_coords(a, i);
             let x = Vector::<D>::from_fn(|k, _| f[k] as f64 + if k == a { 0.0 } else { 0.5 });
             let mut back = x - dt * u.interpolate(grid, &x);
             for k in 0..D {

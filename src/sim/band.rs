@@ -82,18 +82,8 @@ impl Band {
         m: &Markings,
     ) {
         combine_velocities(u, known, grid_u, |a, i, _| {
-            let f = grid.face_coords(a, i);
-            // The cells on the two sides of face f along axis a: f - e_a and f.
-            let below = (f[a] > 0).then(|| {
-                let mut c = f;
-                c[a] -= 1;
-                c
-            });
-            let above = (f[a] < grid.dims[a]).then_some(f);
-            [below, above]
-                .into_iter()
-                .flatten()
-                .any(|c| m.at_or_below_interface(grid.cell_index(c), self.r))
+            grid.face_cells(a, i)
+                .any(|c| m.at_or_below_interface(c, self.r))
         });
     }
 

@@ -69,9 +69,9 @@ impl<const D: usize> Emitter<D> {
             return 0;
         }
         let mu = per_axis.pow(D as u32);
-        let mut room = self.until_particles.map_or(usize::MAX, |n| {
-            n.saturating_sub(total)
-        });
+        let mut room = self
+            .until_particles
+            .map_or(usize::MAX, |n| n.saturating_sub(total));
         let mut added = 0;
         for c in self.region.cells(grid) {
             if room == 0 {

@@ -10,6 +10,7 @@ pub mod band;
 pub mod correct;
 pub mod emit;
 pub mod forces;
+pub mod levelset;
 pub mod markings;
 pub mod pressure;
 pub mod solids;

@@ -1,0 +1,396 @@
+//! Method nbflip: narrow-band FLIP (Ferstl, Ando, Wojtan, Westermann, Thuerey, "Narrow Band
+//! FLIP for Liquid Simulations", CGF 35(2), 2016), as MantaFlow's reference scene
+//! `scenes/flip05_nbflip.py` runs it.
+//!
+//! The liquid is a level set ([`crate::sim::levelset`]); particles live only in a band of `R`
+//! cells below its surface, and the grid velocity, advected semi-Lagrangian, carries the
+//! interior. Per step, in this code's order (alg. flip with the band's hooks):
+//!
+//! 1. particles to grid, then the velocity combination: faces with particle weight and
+//!    `phi >= -r` (`r = R - 1`, the combine band) take the particles' velocity, all others the
+//!    advected grid velocity;
+//! 2. forces, projection and the FLIP update as in flip;
+//! 3. particles advected; the level set advected with the same velocity, the grid velocity
+//!    advected by itself;
+//! 4. the level set rebuilt: the advected one shrunk by a cell and united with the particles'
+//!    spheres, then re-marched `R + 2` layers in and 3 out;
+//! 5. resampling against it: particles outside the liquid or deeper than `R` are deleted, and
+//!    crowded cells thinned; band cells below the surface layer short of `mu` particles get
+//!    new ones, with the grid's velocity;
+//! 6. markings: the level set's inside is fluid, with or without particles.
+//!
+//! MantaFlow resamples right after the FLIP update, against the level set built before the
+//! particles moved; here the level set is rebuilt first, so the particles a step starts with
+//! lie in the band of the level set the step uses. The pressure solve and the advection are
+//! those of the other methods (first-order free surface, forward Euler), so that the band is
+//! the only difference to flip; MantaFlow's scene uses a ghost-fluid surface, RK4 for the
+//! particles and MacCormack for the grid velocity.
+
+use super::{FluidMethod, Known, MethodInfo, MethodOption, MethodReport, MethodSettings, MethodType};
+use crate::grid::{Grid, MacField, Vector};
+use crate::particles::Particles;
+use crate::metrics::{median, InvariantViolation};
+use crate::record::{depth_level_classes, Layer, Log};
+use crate::sim::band::{combine_velocities, Band};
+use crate::sim::levelset::{particle_radius, LevelSet, Side};
+use crate::sim::markings::{DepthLevel, Markings};
+use crate::sim::solids::ObstacleMode;
+use crate::sim::{transfer, State};
+use rand::Rng;
+use std::any::Any;
+
+/// Layers the level set is re-marched into the liquid beyond the band: `R + 2`
+/// (`extrapolateLsSimple(distance = narrowBandWidth + 2, inside = True)` in flip05_nbflip.py).
+const INSIDE_LAYERS_BEYOND_BAND: u32 = 2;
+/// Layers it is re-marched into the air (`extrapolateLsSimple(distance = 3)`, ibid.).
+const OUTSIDE_LAYERS: u32 = 3;
+/// A cell holds at most this many times `mu` particles away from the surface
+/// (`maxParticles = 2 minParticles`, ibid.).
+const MAX_PER_MU: u32 = 2;
+
+/// Narrow-band FLIP, as registered.
+pub struct Nbflip;
+
+/// Narrow-band FLIP in a running simulation.
+pub struct NbflipSim<const D: usize> {
+    /// The band: particles down to `phi = -R`.
+    band: Band,
+    /// The level set of the current markings.
+    phi: LevelSet,
+    /// The level set advected to the end of the step, before the particles are united with it
+    /// (none before the first step).
+    advected: Option<LevelSet>,
+    /// Particles deleted by resampling, net of those seeded.
+    not_held: isize,
+    /// The first particle seeded by the last resampling (those before it passed its test).
+    first_seed: usize,
+    step: NbflipReport,
+    totals: Vec<NbflipReport>,
+}
+
+impl MethodType for Nbflip {
+    const INFO: MethodInfo = MethodInfo {
+        name: "nbflip",
+        about: "narrow-band FLIP: particles only in a band below a level set surface (Ferstl et al. 2016)",
+        options: &[MethodOption::BandR],
+        obstacle_modes: &[ObstacleMode::Naive, ObstacleMode::Ignore],
+        panels: &[("narrow band", "metrics/nbflip")],
+        figures: &["nbflip_seeded", "nbflip_deleted"],
+    };
+
+    fn build<const D: usize>(s: &MethodSettings) -> Box<dyn FluidMethod<D>> {
+        Box::new(NbflipSim::<D> {
+            band: Band { r: s.band_r },
+            phi: LevelSet::default(),
+            advected: None,
+            not_held: 0,
+            first_seed: 0,
+            step: NbflipReport::default(),
+            totals: vec![],
+        })
+    }
+}
+
+impl<const D: usize> NbflipSim<D> {
+    /// `R` as a level-set value.
+    fn r(&self) -> f64 {
+        self.band.r as f64
+    }
+
+    /// Step 4: the level set from the advected one (if any) and the particles.
+    fn rebuild_level_set(&mut self, s: &State<D>) {
+        let particles = LevelSet::from_particles(&s.grid, &s.particles.pos);
+        let mut phi = match &self.advected {
+            Some(a) => a.shrunk_union(&particles),
+            None => particles,
+        };
+        let solid = &s.solids.solid;
+        let inside = self.band.r + INSIDE_LAYERS_BEYOND_BAND;
+        phi.remarch(&s.grid, Side::Inside, inside, solid);
+        phi.remarch(&s.grid, Side::Outside, OUTSIDE_LAYERS, solid);
+        self.phi = phi;
+    }
+
+    /// Resampling against the current level set.
+    fn resampling<'a>(&'a self, grid: &'a Grid<D>, solid: &'a [bool], mu: u32) -> Resampling<'a, D> {
+        Resampling {
+            grid,
+            phi: &self.phi,
+            solid,
+            r: self.r(),
+            mu,
+        }
+    }
+
+}
+
+/// The level of cell `c` in a band `R` deep, read from the level set at its centre: surface
+/// above [`surface_layer`], band down to the combine band `-(R - 1)`, interface down to `-R`
+/// (particles, but the grid's velocity), deep below.
+pub fn level<const D: usize>(phi: &LevelSet, solid: &[bool], r: f64, c: usize) -> DepthLevel {
+    match phi.phi[c] {
+        v if solid[c] || v >= 0.0 => DepthLevel::NotFluid,
+        v if v > surface_layer(D) => DepthLevel::Surface,
+        v if v >= -(r - 1.0) => DepthLevel::Band,
+        v if v >= -r => DepthLevel::Interface,
+        _ => DepthLevel::Deep,
+    }
+}
+
+/// Step 1, the velocity combination: faces of the liquid (next to a fluid cell of `m`) with
+/// particle weight inside the combine band `phi >= -(R - 1)` keep the particles' velocity `u`,
+/// its other faces take the advected grid velocity `grid_u` (MantaFlow's `combineGridVel` with
+/// `narrowBand = R - 1`, `thresh = 0`). Faces in the air are left to the extrapolation, as in
+/// flip: a grid value kept there would gather gravity step after step, which MantaFlow avoids
+/// by adding gravity to the liquid's faces only.
+pub fn combine<const D: usize>(
+    g: &Grid<D>,
+    m: &Markings,
+    phi: &LevelSet,
+    r: f64,
+    u: &mut MacField<D>,
+    known: &mut Known<D>,
+    grid_u: &MacField<D>,
+) {
+    combine_velocities(u, known, grid_u, |a, i, weighted| {
+        g.face_cells(a, i).any(|c| m.is_fluid(c)) && (!weighted || phi.at_face(g, a, i) < -(r - 1.0))
+    });
+}
+
+/// The level set above which a particle is "at the surface": one cell diagonal plus 1 %
+/// (MantaFlow's `adjustNumber`, `SURFACE_LS`). Cells above it are not seeded, and their
+/// particles are never thinned.
+fn surface_layer(dim: usize) -> f64 {
+    -2.0 * particle_radius(dim)
+}
+
+impl<const D: usize> FluidMethod<D> for NbflipSim<D> {
+    fn start(&mut self, s: &mut State<D>) {
+        let keep = self.before_markings(s);
+        s.remark(keep.as_deref());
+        // The first resampling thins the seeded liquid to the band: not part of step 1.
+        self.step = NbflipReport::default();
+    }
+
+    /// Cells deeper than the band count as full: emitters must not fill the deep.
+    fn emitter_counts(&self, s: &State<D>) -> Option<Vec<u32>> {
+        let mu = s.config.mu();
+        let deep = |c| level::<D>(&self.phi, &s.solids.solid, self.r(), c) == DepthLevel::Deep;
+        Some((0..s.grid.num_cells()).map(|c| if deep(c) { mu } else { s.markings.count[c] }).collect())
+    }
+
+    fn particles_not_held(&self) -> isize {
+        self.not_held
+    }
+
+    /// Step 1: particle velocities to the grid, combined with the grid's ([`combine`]).
+    fn particles_to_grid(&mut self, s: &State<D>) -> (MacField<D>, Known<D>) {
+        let (mut u, mut known) = transfer::particles_to_grid(&s.grid, &s.particles.pos, &s.particles.vel);
+        combine(&s.grid, &s.markings, &self.phi, self.r(), &mut u, &mut known, &s.velocity);
+        (u, known)
+    }
+
+    /// Step 3: the level set moves with the projected velocity, and so does the grid velocity.
+    fn next_grid_velocity(&mut self, s: &State<D>, u: MacField<D>, dt: f64) -> MacField<D> {
+        self.advected = Some(self.phi.advected(&s.grid, &u, dt));
+        Band::advect_grid_velocity(&s.grid, &u, dt, &s.markings)
+    }
+
+    /// Steps 4 and 5; the level set's inside stays fluid.
+    fn before_markings(&mut self, s: &mut State<D>) -> Option<Vec<bool>> {
+        self.rebuild_level_set(s);
+        let mu = s.config.mu();
+        let resampling = self.resampling(&s.grid, &s.solids.solid, mu);
+        let rep = resampling.run(&mut s.particles, &s.velocity, &mut s.rng);
+        self.not_held += rep.deleted() as isize - rep.seeded as isize;
+        self.first_seed = s.particles.len() - rep.seeded;
+        self.step.add(&rep);
+        Some((0..s.grid.num_cells()).map(|c| self.phi.phi[c] < 0.0).collect())
+    }
+
+    /// What resampling guarantees: every particle it kept lies inside the liquid and at most
+    /// `R` below its surface, and every particle it seeded lies in a band cell below the
+    /// surface layer; every such cell holds at least `mu` particles.
+    fn check_invariants(&self, s: &State<D>) -> Result<(), InvariantViolation> {
+        let (g, pos) = (&s.grid, &s.particles.pos);
+        if let Some(x) = pos[..self.first_seed].iter().find(|x| {
+            let phi = self.phi.interpolate(g, x);
+            !(-self.r()..=0.0).contains(&phi)
+        }) {
+            let phi = self.phi.interpolate(g, x);
+            return Err(InvariantViolation(format!(
+                "a particle at {:?} has phi = {phi:.3} after resampling, outside the band [-{}, 0]",
+                x.as_slice(),
+                self.r()
+            )));
+        }
+        let resampling = self.resampling(g, &s.solids.solid, s.config.mu());
+        let seedable = |c: usize| resampling.seedable(c);
+        if let Some(x) = pos[self.first_seed..].iter().find(|x| !seedable(g.cell_index_of(x))) {
+            return Err(InvariantViolation(format!("a particle was seeded at {:?}, outside the band", x.as_slice())));
+        }
+        let mu = s.config.mu();
+        match (0..g.num_cells()).find(|&c| seedable(c) && s.markings.count[c] < mu) {
+            Some(c) => Err(InvariantViolation(format!(
+                "band cell {:?} holds {} particles after resampling (mu = {mu})",
+                g.cell_coords(c),
+                s.markings.count[c]
+            ))),
+            None => Ok(()),
+        }
+    }
+
+    fn finish_step(&mut self, s: &State<D>) -> Box<dyn MethodReport<D>> {
+        let mut rep = std::mem::take(&mut self.step);
+        rep.particles = s.particles.len();
+        rep.band_r = self.band.r;
+        rep.phi = self.phi.clone();
+        self.totals.push(NbflipReport { phi: LevelSet::default(), ..rep.clone() });
+        Box::new(rep)
+    }
+
+    fn record_setup(&self, log: &mut dyn Log<D>) {
+        log.classes("world/grid/depth", &depth_level_classes());
+    }
+
+    fn reset_summary(&mut self) {
+        self.totals.clear();
+    }
+
+    fn summary(&self) -> Vec<String> {
+        let (lo, hi) = self
+            .totals
+            .iter()
+            .fold((usize::MAX, 0), |(lo, hi), r| (lo.min(r.particles), hi.max(r.particles)));
+        let sum = |f: fn(&NbflipReport) -> usize| self.totals.iter().map(f).sum::<usize>();
+        let seeded: Vec<usize> = self.totals.iter().map(|r| r.seeded).collect();
+        vec![format!(
+            "narrow band (R = {}): {lo} .. {hi} particles after a step; resampling seeded {} (median {} a step) and deleted {} outside the liquid, {} below the band, {} in crowded cells",
+            self.band.r,
+            sum(|r| r.seeded),
+            median(&seeded).unwrap_or(0),
+            sum(|r| r.outside),
+            sum(|r| r.below),
+            sum(|r| r.crowded),
+        )]
+    }
+}
+
+/// Step 5, Ferstl et al.'s resampling (MantaFlow's `adjustNumber` with `narrowBand = R`,
+/// `minParticles = mu`, `maxParticles = 2 mu`) against a level set.
+pub struct Resampling<'a, const D: usize> {
+    pub grid: &'a Grid<D>,
+    pub phi: &'a LevelSet,
+    /// Cells no particle is seeded in.
+    pub solid: &'a [bool],
+    /// `R`, the band's depth.
+    pub r: f64,
+    pub mu: u32,
+}
+
+impl<const D: usize> Resampling<'_, D> {
+    /// Whether cell `c` is topped up to `mu`: a liquid cell, not solid, below the surface layer
+    /// and at most `R` deep.
+    pub fn seedable(&self, c: usize) -> bool {
+        let v = self.phi.phi[c];
+        !self.solid[c] && v <= surface_layer(D) && v >= -self.r
+    }
+
+    /// Deletes particles outside the liquid (`phi > 0`), deeper than `R`, or beyond `2 mu` in a
+    /// cell away from the surface; then tops up every seedable cell to `mu` with particles
+    /// uniformly at random in it, moving with the grid velocity `u`. The seeds go after the
+    /// particles kept.
+    pub fn run(&self, p: &mut Particles<D>, u: &MacField<D>, rng: &mut impl Rng) -> NbflipReport {
+        let (g, mu) = (self.grid, self.mu);
+        let mut rep = NbflipReport::default();
+        let mut count = vec![0u32; g.num_cells()];
+        let mut keep = Vec::with_capacity(p.len());
+        for x in &p.pos {
+            let (v, c) = (self.phi.interpolate(g, x), g.cell_index_of(x));
+            let deleted = if v > 0.0 {
+                &mut rep.outside
+            } else if v < -self.r {
+                &mut rep.below
+            } else if v <= surface_layer(D) && count[c] >= MAX_PER_MU * mu {
+                &mut rep.crowded
+            } else {
+                count[c] += 1;
+                keep.push(true);
+                continue;
+            };
+            *deleted += 1;
+            keep.push(false);
+        }
+        p.retain_flagged(&keep);
+        for c in (0..g.num_cells()).filter(|&c| count[c] < mu && self.seedable(c)) {
+            let corner = Vector::<D>::from_fn(|k, _| g.cell_coords(c)[k] as f64);
+            for _ in count[c]..mu {
+                let x = corner + Vector::<D>::from_fn(|_, _| rng.random::<f64>());
+                p.push(x, u.interpolate(g, &x));
+                rep.seeded += 1;
+            }
+        }
+        rep
+    }
+}
+
+/// What nbflip did in one step: its resampling, the particles it holds, and the band levels
+/// of every cell by the level set.
+#[derive(Clone, Debug, Default)]
+pub struct NbflipReport {
+    pub seeded: usize,
+    /// Particles deleted outside the liquid (`phi > 0`).
+    pub outside: usize,
+    /// Particles deleted below the band (`phi < -R`).
+    pub below: usize,
+    /// Particles deleted beyond `2 mu` in a cell away from the surface.
+    pub crowded: usize,
+    /// Particles held after the step.
+    pub particles: usize,
+    /// `R` and the level set after the step.
+    pub band_r: u32,
+    pub phi: LevelSet,
+}
+
+impl NbflipReport {
+    pub fn deleted(&self) -> usize {
+        self.outside + self.below + self.crowded
+    }
+
+    /// Adds another resampling of the same step (after emission and at the end).
+    fn add(&mut self, other: &NbflipReport) {
+        self.seeded += other.seeded;
+        self.outside += other.outside;
+        self.below += other.below;
+        self.crowded += other.crowded;
+    }
+}
+
+impl<const D: usize> MethodReport<D> for NbflipReport {
+    fn record(&self, s: &State<D>, log: &mut dyn Log<D>, full: bool) {
+        log.scalar("metrics/nbflip/particles", self.particles as f64);
+        log.scalar("metrics/nbflip/seeded", self.seeded as f64);
+        log.scalar("metrics/nbflip/deleted", self.deleted() as f64);
+        if full {
+            let layer = Layer {
+                order: 1.0,
+                radius_3d: 0.2,
+            };
+            let hidden = [DepthLevel::NotFluid as u8, DepthLevel::Deep as u8];
+            let (phi, solid, r) = (&self.phi, &s.solids.solid, self.band_r as f64);
+            let class = |c| level::<D>(phi, solid, r, c) as u8;
+            log.cell_classes("world/grid/depth", &class, &hidden, layer);
+        }
+    }
+
+    fn figures(&self) -> Vec<(&'static str, f64)> {
+        vec![
+            ("nbflip_seeded", self.seeded as f64),
+            ("nbflip_deleted", self.deleted() as f64),
+        ]
+    }
+
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+}
