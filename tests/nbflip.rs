@@ -11,6 +11,7 @@ use cellflip::methods::nbflip::{combine, NbflipReport, Resampling};
 use cellflip::methods::MethodKind;
 use cellflip::particles::Particles;
 use cellflip::scene::{Overrides, Scene};
+use cellflip::sim::correct::band::BandMode;
 use cellflip::sim::levelset::{particle_radius, LevelSet};
 use cellflip::sim::markings::Markings;
 use cellflip::sim::transfer::particles_to_grid;
@@ -207,4 +208,17 @@ fn the_combination_takes_particles_in_the_band_and_the_grid_below_3d() {
             _ => assert!(!k, "z = {z}"),
         }
     }
+}
+
+#[test]
+fn the_readme_s_comparison_scene_runs_ccp_with_the_band_and_nbflip_at_the_same_depth() {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/docs/scenes/dam-2d-band.toml");
+    let ccp = load(path, &Overrides::default());
+    let m = &ccp.method;
+    assert_eq!(
+        (m.kind, m.band, m.band_r),
+        (MethodKind::Ccp, BandMode::Paths, 6)
+    );
+    let nb = load(path, &with(MethodKind::Nbflip, None));
+    run::<2>(&nb, Some(3), |_, rep| assert_eq!(nbflip(rep).band_r, 6));
 }
