@@ -129,20 +129,11 @@ fn a_tank_at_rest_stays_at_rest_and_keeps_its_volume_2d_and_3d() {
     check::<3>(40);
 }
 
-/// A plane surface at height `h` along the last axis: `phi = x_last - h`.
-fn plane<const D: usize>(g: &Grid<D>, h: f64) -> LevelSet {
-    LevelSet {
-        phi: (0..g.num_cells())
-            .map(|c| g.center(g.cell_coords(c))[D - 1] - h)
-            .collect(),
-    }
-}
-
 #[test]
 fn resampling_deletes_and_seeds_by_the_level_set_2d() {
     // Surface at y = 6, R = 3, mu = 4; the surface layer is phi > -1.43 (rows 5 and up).
     let g = Grid::new([6, 8]);
-    let phi = plane(&g, 6.0);
+    let phi = LevelSet::sampled(&g, |x| x[1] - 6.0);
     let solid = vec![false; g.num_cells()];
     let rs = Resampling {
         grid: &g,
@@ -182,7 +173,7 @@ fn the_combination_takes_particles_in_the_band_and_the_grid_below_3d() {
     // tank; R = 3, so faces at phi >= -2 with particle weight keep the particles' +1 along z,
     // deeper ones take the grid's -7. Particles only in the top four layers.
     let g = Grid::new([4, 4, 12]);
-    let phi = plane(&g, 10.0);
+    let phi = LevelSet::sampled(&g, |x| x[2] - 10.0);
     let mut pos = vec![];
     for c in 0..g.num_cells() {
         let cc = g.cell_coords(c);

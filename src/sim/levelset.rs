@@ -50,6 +50,14 @@ impl LevelSet {
         Self { phi }
     }
 
+    /// The function `f` sampled at the cell centres.
+    pub fn sampled<const D: usize>(grid: &Grid<D>, f: impl Fn(&Vector<D>) -> f64) -> Self {
+        let phi = (0..grid.num_cells())
+            .map(|c| f(&grid.center(grid.cell_coords(c))))
+            .collect();
+        Self { phi }
+    }
+
     /// Multilinear interpolation at `x`, with points nearer a wall than the outermost cell
     /// centres clamped onto them.
     pub fn interpolate<const D: usize>(&self, grid: &Grid<D>, x: &Vector<D>) -> f64 {
@@ -190,11 +198,7 @@ mod tests {
 
     /// A flat surface at height `h` along the last axis: `phi = x_last - h`.
     fn plane<const D: usize>(g: &Grid<D>, h: f64) -> LevelSet {
-        LevelSet {
-            phi: (0..g.num_cells())
-                .map(|c| g.center(g.cell_coords(c))[D - 1] - h)
-                .collect(),
-        }
+        LevelSet::sampled(g, |x| x[D - 1] - h)
     }
 
     #[test]
