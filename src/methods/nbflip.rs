@@ -121,7 +121,6 @@ impl<const D: usize> NbflipSim<D> {
             mu,
         }
     }
-
 }
 
 /// The level of cell `c` in a band `R` deep, read from the level set at its centre: surface
