@@ -31,7 +31,7 @@ use crate::grid::{Grid, MacField, Vector};
 use crate::particles::Particles;
 use crate::metrics::{median, InvariantViolation};
 use crate::record::{depth_level_classes, Layer, Log};
-use crate::sim::band::{combine_velocities, Band};
+use crate::sim::band::{combine_velocities, counts_with_full_deep, Band};
 use crate::sim::levelset::{particle_radius, LevelSet, Side};
 use crate::sim::markings::{DepthLevel, Markings};
 use crate::sim::solids::ObstacleMode;
@@ -173,9 +173,8 @@ impl<const D: usize> FluidMethod<D> for NbflipSim<D> {
 
     /// Cells deeper than the band count as full: emitters must not fill the deep.
     fn emitter_counts(&self, s: &State<D>) -> Option<Vec<u32>> {
-        let mu = s.config.mu();
-        let deep = |c| level::<D>(&self.phi, &s.solids.solid, self.r(), c) == DepthLevel::Deep;
-        Some((0..s.grid.num_cells()).map(|c| if deep(c) { mu } else { s.markings.count[c] }).collect())
+        let level = |c| level::<D>(&self.phi, &s.solids.solid, self.r(), c);
+        Some(counts_with_full_deep(&s.markings, s.config.mu(), level))
     }
 
     fn particles_not_held(&self) -> isize {

@@ -50,12 +50,7 @@ impl Band {
     /// The particle count emitters see: deep cells hold imaginary particles, so they count as
     /// full (`mu`).
     pub fn emitter_counts(&self, m: &Markings, mu: u32) -> Vec<u32> {
-        (0..m.kind.len())
-            .map(|c| match self.level(m, c) {
-                DepthLevel::Deep => mu,
-                _ => m.count[c],
-            })
-            .collect()
+        counts_with_full_deep(m, mu, |c| self.level(m, c))
     }
 
     /// A real particle in the deep, if there is one (there must be none after the exchange
@@ -99,6 +94,21 @@ impl Band {
         let needed: Vec<bool> = (0..grid.num_cells()).map(|c| m.is_fluid(c)).collect();
         advect::advect_velocity(grid, u, dt, &needed)
     }
+}
+
+/// The markings' particle counts with every cell whose `level` is deep counted as full (`mu`):
+/// what emitters see under a band method, whose deep holds no particles.
+pub fn counts_with_full_deep(
+    m: &Markings,
+    mu: u32,
+    level: impl Fn(usize) -> DepthLevel,
+) -> Vec<u32> {
+    (0..m.kind.len())
+        .map(|c| match level(c) {
+            DepthLevel::Deep => mu,
+            _ => m.count[c],
+        })
+        .collect()
 }
 
 /// The velocity combination of the band methods (paper alg. band line 1; Ferstl et al. 2016,
