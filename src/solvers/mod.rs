@@ -3,3 +3,4 @@
 pub mod lp;
 pub mod min_cost_flow;
 pub mod pcg;
+pub mod sinkhorn;
