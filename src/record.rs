@@ -10,6 +10,7 @@
 //! Methods log their own reports through the [`Log`] trait, which names no rerun type.
 
 use crate::grid::Vector;
+use crate::methods::MethodInfo;
 use crate::metrics::Stage;
 use crate::particles::Region;
 use crate::scene::Scene;
@@ -42,6 +43,9 @@ pub trait Log<const D: usize> {
         hidden_3d: &[u8],
         layer: Layer,
     );
+    /// A `[width, height]` image of values in `range`, row 0 at the bottom (grid order), drawn
+    /// with a colour map in its own 2D view ([`crate::methods::MethodInfo::images`]).
+    fn image(&mut self, path: &str, size: [usize; 2], values: &[f32], range: [f32; 2]);
     /// Arrows from the first point to the second of each pair (an empty batch clears).
     fn arrows(&mut self, path: &str, from_to: &[(Vector<D>, Vector<D>)], style: Style);
     /// Line strips through points, each with its colour and label (an empty batch clears).
@@ -120,12 +124,22 @@ fn rgba(c: [u8; 4]) -> rerun::Rgba32 {
 
 /// The world view on the left; on the right the volume, stage times, the pressure solve, the
 /// method's own panels, the log and the scene.
-fn blueprint(dim: usize, method_panels: &[(&str, &str)]) -> Blueprint {
-    let world: rerun::blueprint::ContainerLike = if dim == 2 {
+fn blueprint(dim: usize, info: &MethodInfo) -> Blueprint {
+    let mut world: rerun::blueprint::ContainerLike = if dim == 2 {
         Spatial2DView::new("world").with_origin("world").into()
     } else {
         Spatial3DView::new("world").with_origin("world").into()
     };
+    if !info.images.is_empty() {
+        let mut left = vec![world];
+        left.extend(info.images.iter().map(|&(name, origin)| {
+            rerun::blueprint::ContainerLike::from(Spatial2DView::new(name).with_origin(origin))
+        }));
+        let mut shares = vec![2.0];
+        shares.extend(info.images.iter().map(|_| 1.0));
+        world = Vertical::new(left).with_row_shares(shares).into();
+    }
+    let method_panels = info.panels;
     let series = |name: &str, origin: &str| TimeSeriesView::new(name).with_origin(origin).into();
     let mut right: Vec<rerun::blueprint::ContainerLike> = vec![
         series("volume %", "metrics/volume_percent"),
@@ -161,7 +175,7 @@ impl Recorder {
             .recording_name(scene.name())
             .enabled(true)
             .send_properties(false)
-            .with_blueprint(blueprint(scene.dim(), scene.method.kind.info().panels))
+            .with_blueprint(blueprint(scene.dim(), scene.method.kind.info()))
             .save(path)
             .map_err(|e| anyhow!("cannot write recording '{}': {e}", path.display()))?;
         rec.set_log_time_enabled(false);
@@ -576,6 +590,22 @@ impl<const D: usize> Log<D> for Canvas<'_, D> {
             let pts = pts.with_radii([layer.radius_3d]);
             self.rec.log(path, &pts)
         };
+        self.keep(r);
+    }
+
+    fn image(&mut self, path: &str, [w, h]: [usize; 2], values: &[f32], range: [f32; 2]) {
+        // Image row 0 is the top.
+        let mut bytes = Vec::with_capacity(4 * w * h);
+        for row in (0..h).rev() {
+            for v in &values[row * w..(row + 1) * w] {
+                bytes.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+        let format = rerun::ImageFormat::depth([w as u32, h as u32], rerun::ChannelDatatype::F32);
+        let image = rerun::DepthImage::new(bytes, format)
+            .with_colormap(rerun::components::Colormap::Viridis)
+            .with_depth_range([range[0] as f64, range[1] as f64]);
+        let r = self.rec.log(path, &image);
         self.keep(r);
     }
 

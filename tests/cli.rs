@@ -303,7 +303,7 @@ fn record(dir: &Path, scene: &str, steps: &str, extra: &[&str]) -> BTreeSet<Stri
 fn recordings_log_exactly_the_documented_entities() {
     // Between them these runs log everything: flip in 2D, ccp with the solver cross-check and
     // an exported problem, the band in 2D (all variants' objectives) and 3D, obstacles, idp,
-    // nbflip in 3D.
+    // nbflip and powerpic in 3D.
     let dir = scratch_dir("record");
     let mut logged = BTreeSet::new();
     logged.extend(record(&dir, "hydrostatic-2d", "3", &[]));
@@ -334,6 +334,12 @@ fn recordings_log_exactly_the_documented_entities() {
         "dam-3d",
         "3",
         &["--method", "nbflip", "--res", "12"],
+    ));
+    logged.extend(record(
+        &dir,
+        "dam-3d",
+        "2",
+        &["--method", "powerpic", "--res", "12"],
     ));
     let documented = common::documented_entities();
     assert!(documented.len() > 30, "the README's table: {documented:?}");

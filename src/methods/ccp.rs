@@ -56,6 +56,7 @@ impl MethodType for Ccp {
         ],
         obstacle_modes: &[ObstacleMode::Couple],
         panels: &[("correction", "metrics/correction"), ("band", "metrics/band")],
+        images: &[],
         figures: &["ccp_augmentations", "ccp_moved", "ccp_solver_ms"],
     };
 
@@ -111,12 +112,12 @@ impl<const D: usize> FluidMethod<D> for CcpSim<D> {
         self.n_deep as isize
     }
 
-    fn particles_to_grid(&mut self, s: &State<D>) -> (MacField<D>, Known<D>) {
+    fn particles_to_grid(&mut self, s: &State<D>) -> anyhow::Result<(MacField<D>, Known<D>)> {
         let (mut u, mut known) = transfer::particles_to_grid(&s.grid, &s.particles.pos, &s.particles.vel);
         if let Some(b) = self.band() {
             b.combine_with_grid(&s.grid, &mut u, &mut known, &s.velocity, &s.markings);
         }
-        (u, known)
+        Ok((u, known))
     }
 
     fn before_advection(&mut self, s: &State<D>) {

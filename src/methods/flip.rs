@@ -15,6 +15,7 @@ impl MethodType for Flip {
         options: &[],
         obstacle_modes: &[ObstacleMode::Naive, ObstacleMode::Ignore],
         panels: &[],
+        images: &[],
         figures: &[],
     };
 

@@ -104,6 +104,7 @@ impl MethodType for Idp {
         options: &[],
         obstacle_modes: &[ObstacleMode::Naive, ObstacleMode::Ignore],
         panels: &[("idp: density projection", "metrics/idp")],
+        images: &[],
         figures: &["idp_iterations", "idp_max_displacement"],
     };
 

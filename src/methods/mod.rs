@@ -75,6 +75,7 @@ methods! {
     ccp::Ccp,
     idp::Idp,
     nbflip::Nbflip,
+    powerpic::Powerpic,
 }
 
 impl MethodKind {
@@ -122,6 +123,8 @@ pub struct MethodInfo {
     pub obstacle_modes: &'static [ObstacleMode],
     /// Time-series panels of its metrics in the recording's layout: `(title, entity path)`.
     pub panels: &'static [(&'static str, &'static str)],
+    /// Images of its own `(title, entity path)`, each in a 2D view below the world view.
+    pub images: &'static [(&'static str, &'static str)],
     /// The names of the per-step figures its reports give ([`MethodReport::figures`]), which
     /// `cellflip report` summarises (median over the steps) in columns `<name>_median`.
     pub figures: &'static [&'static str],
@@ -146,6 +149,8 @@ pub struct MethodSettings {
     pub export_lp: Option<(u64, PathBuf)>,
     /// IDP: resample degenerate cells (`simulation.idp_resample`).
     pub idp_resample: bool,
+    /// Power PIC's parameters (`[simulation.powerpic]`).
+    pub powerpic: powerpic::PowerPicSettings,
 }
 
 impl MethodSettings {
@@ -203,8 +208,12 @@ pub trait FluidMethod<const D: usize>: Send {
     }
 
     /// Alg. flip line 1: particle velocities to the grid's faces, and which faces got one.
-    fn particles_to_grid(&mut self, s: &State<D>) -> (MacField<D>, Known<D>) {
-        transfer::particles_to_grid(&s.grid, &s.particles.pos, &s.particles.vel)
+    fn particles_to_grid(&mut self, s: &State<D>) -> anyhow::Result<(MacField<D>, Known<D>)> {
+        Ok(transfer::particles_to_grid(
+            &s.grid,
+            &s.particles.pos,
+            &s.particles.vel,
+        ))
     }
 
     /// After the pressure projection, with the projected velocity.
@@ -331,6 +340,7 @@ mod tests {
             cross_check: false,
             export_lp: None,
             idp_resample: false,
+            powerpic: Default::default(),
         };
         let e = s.check_given(&[MethodOption::Band]).unwrap_err();
         assert!(e.contains("--band") && e.contains("'flip'") && e.contains("ccp"));

@@ -75,6 +75,7 @@ impl MethodType for Nbflip {
         options: &[MethodOption::BandR],
         obstacle_modes: &[ObstacleMode::Naive, ObstacleMode::Ignore],
         panels: &[("narrow band", "metrics/nbflip")],
+        images: &[],
         figures: &["nbflip_seeded", "nbflip_deleted"],
     };
 
@@ -182,10 +183,10 @@ impl<const D: usize> FluidMethod<D> for NbflipSim<D> {
     }
 
     /// Step 1: particle velocities to the grid, combined with the grid's ([`combine`]).
-    fn particles_to_grid(&mut self, s: &State<D>) -> (MacField<D>, Known<D>) {
+    fn particles_to_grid(&mut self, s: &State<D>) -> anyhow::Result<(MacField<D>, Known<D>)> {
         let (mut u, mut known) = transfer::particles_to_grid(&s.grid, &s.particles.pos, &s.particles.vel);
         combine(&s.grid, &s.markings, &self.phi, self.r(), &mut u, &mut known, &s.velocity);
-        (u, known)
+        Ok((u, known))
     }
 
     /// Step 3: the level set moves with the projected velocity, and so does the grid velocity.

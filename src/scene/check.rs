@@ -6,6 +6,7 @@ use super::{
     EmitterFile, MotionKind, ObstacleFile, RegionFile, Scene, SceneFile, Shape, SimulationFile,
 };
 use crate::grid::Grid;
+use crate::methods::powerpic::PowerPicSettings;
 use crate::methods::MethodSettings;
 use crate::particles;
 use crate::sim::correct::band::BandMode;
@@ -437,6 +438,7 @@ fn simulation(ch: &Checker, s: &SimulationFile) -> Checked<MethodSettings> {
         t > 0.0 && t < 1.0,
         format!("must be in (0, 1), got {t}"),
     )?;
+    powerpic(ch, &s.powerpic, ppc_per_axis(s.ppc, dim).unwrap_or(1))?;
     Ok(MethodSettings {
         kind: s.method,
         solver: s.solver,
@@ -446,7 +448,60 @@ fn simulation(ch: &Checker, s: &SimulationFile) -> Checked<MethodSettings> {
         cross_check: false,
         export_lp: None,
         idp_resample: s.idp_resample,
+        powerpic: s.powerpic,
     })
+}
+
+/// Section `simulation.powerpic`: a kernel that reaches a transport cell from anywhere, a
+/// particle volume that fits in a cell, and tolerances that can be met.
+fn powerpic(ch: &Checker, p: &PowerPicSettings, per_axis: usize) -> Checked<()> {
+    let range = |key: &str, ok: bool, why: String| -> Checked<()> {
+        match ok {
+            true => Ok(()),
+            false => ch.err(&format!("simulation.powerpic.{key}"), ErrorKind::Range, why),
+        }
+    };
+    range(
+        "refine",
+        (1..=8).contains(&p.refine),
+        format!(
+            "must be 1 to 8 transport cells per cell and axis, got {}",
+            p.refine
+        ),
+    )?;
+    let (e, min) = (p.epsilon, p.min_epsilon(ch.dim));
+    range(
+        "epsilon",
+        e.is_finite() && e >= min && e <= 4.0,
+        format!(
+            "must be in [{min:.5}, 4] cells^2, got {e}: below, the kernel vanishes before the              nearest transport cell; above, it spans many cells"
+        ),
+    )?;
+    let t = p.tau(per_axis);
+    range(
+        "tau",
+        t.is_finite() && t > 0.0 && t <= 0.5,
+        format!("must be a half-width in (0, 0.5] cells, got {t}"),
+    )?;
+    let v = p.eta * (2.0 * t).powi(ch.dim as i32);
+    range(
+        "eta",
+        p.eta.is_finite() && p.eta > 0.0 && v <= 1.0,
+        format!(
+            "must be positive with eta (2 tau)^d at most one cell (the particle volume), got              eta = {} and a volume of {v} cells",
+            p.eta
+        ),
+    )?;
+    range(
+        "delta",
+        p.delta > 0.0 && p.delta < 1.0,
+        format!("must be in (0, 1), got {}", p.delta),
+    )?;
+    range(
+        "max_iterations",
+        p.max_iterations >= 1,
+        "must be at least 1".into(),
+    )
 }
 
 /// Sections `fluid` and `solid`: at least some fluid (or an emitter), every region valid.

@@ -9,6 +9,7 @@ mod check;
 pub use check::{ErrorKind, SceneError};
 
 use crate::grid::Vector;
+use crate::methods::powerpic::PowerPicSettings;
 use crate::methods::{MethodKind, MethodSettings};
 use crate::particles::{Region, SpiralBlock};
 use crate::sim::correct::band::BandMode;
@@ -208,6 +209,8 @@ pub struct SimulationFile {
     /// Method idp: resample cells over twice the rest density (Kugelstadt et al.'s optional
     /// step; off as in their 3D scene).
     pub idp_resample: bool,
+    /// Method powerpic's parameters (defaults: Levi's, sec. Evaluation).
+    pub powerpic: PowerPicSettings,
 }
 
 impl Default for SimulationFile {
@@ -230,6 +233,7 @@ impl Default for SimulationFile {
             band_r: 3,
             obstacle: None,
             idp_resample: false,
+            powerpic: PowerPicSettings::default(),
         }
     }
 }

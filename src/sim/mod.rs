@@ -215,10 +215,10 @@ impl<const D: usize> Simulation<D> {
         }
         // Line 1: particles to grid.
         let mut u = rep.times.time(Stage::ParticlesToGrid, || {
-            let (mut u, mut known) = m.particles_to_grid(s);
+            let (mut u, mut known) = m.particles_to_grid(s)?;
             transfer::extrapolate(&s.grid, &mut u, &mut known, 2);
-            u
-        });
+            anyhow::Ok(u)
+        })?;
         let u_old = u.clone();
         // Lines 2-3: forces and the pressure projection.
         rep.times

@@ -14,6 +14,26 @@ pub fn particles_to_grid<const D: usize>(
     pos: &[Vector<D>],
     vel: &[Vector<D>],
 ) -> (MacField<D>, [Vec<bool>; D]) {
+    splat(grid, pos, vel, None)
+}
+
+/// As [`particles_to_grid`] for points of masses `mass`: `u_f = sum_p m_p w_fp v_p / sum_p
+/// m_p w_fp` (Power PIC's transport cells).
+pub fn weighted_to_grid<const D: usize>(
+    grid: &Grid<D>,
+    pos: &[Vector<D>],
+    vel: &[Vector<D>],
+    mass: &[f64],
+) -> (MacField<D>, [Vec<bool>; D]) {
+    splat(grid, pos, vel, Some(mass))
+}
+
+fn splat<const D: usize>(
+    grid: &Grid<D>,
+    pos: &[Vector<D>],
+    vel: &[Vector<D>],
+    mass: Option<&[f64]>,
+) -> (MacField<D>, [Vec<bool>; D]) {
     // A fixed number of contiguous chunks, each with its own accumulator, summed in chunk
     // order: a few grid-sized buffers, and bit-identical results whatever the thread count.
     const CHUNKS: usize = 4;
@@ -21,15 +41,17 @@ pub fn particles_to_grid<const D: usize>(
     let partials: Vec<[(Vec<f64>, Vec<f64>); D]> = pos
         .par_chunks(chunk)
         .zip(vel.par_chunks(chunk))
-        .map(|(xs, vs)| {
+        .enumerate()
+        .map(|(k, (xs, vs))| {
             let mut acc: [(Vec<f64>, Vec<f64>); D] = std::array::from_fn(|a| {
                 (vec![0.0; grid.num_faces(a)], vec![0.0; grid.num_faces(a)])
             });
-            for (x, v) in xs.iter().zip(vs) {
+            for (i, (x, v)) in xs.iter().zip(vs).enumerate() {
+                let m = mass.map_or(1.0, |m| m[k * chunk + i]);
                 for (a, (sum, wsum)) in acc.iter_mut().enumerate() {
                     for_each_face_weight(grid, a, x, |i, w| {
-                        sum[i] += w * v[a];
-                        wsum[i] += w;
+                        sum[i] += m * w * v[a];
+                        wsum[i] += m * w;
                     });
                 }
             }
