@@ -16,7 +16,7 @@ use cellflip::sim::levelset::{particle_radius, LevelSet};
 use cellflip::sim::markings::Markings;
 use cellflip::sim::transfer::particles_to_grid;
 use cellflip::sim::{Simulation, StepReport};
-use common::{load, run, with};
+use common::{load, run, run_at_rest, with};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 
@@ -109,16 +109,7 @@ fn a_deep_tank_holds_the_band_s_share_of_flip_s_particles_2d_and_3d() {
 fn a_tank_at_rest_stays_at_rest_and_keeps_its_volume_2d_and_3d() {
     fn check<const D: usize>(steps: u64) {
         let scene = tank(D, 16, 10, MethodKind::Nbflip, 3);
-        let mut fastest = 0.0f64;
-        run::<D>(&scene, Some(steps), |sim, rep| {
-            let v = &sim.state.particles.vel;
-            fastest = v.iter().map(|v| v.norm()).fold(fastest, f64::max);
-            let at = format!("{D}D step {}", sim.state.steps);
-            assert!(
-                (rep.volume_percent - 100.0).abs() < 1e-9,
-                "{at}: {}",
-                rep.volume_percent
-            );
+        let (_, fastest) = run_at_rest::<D>(&scene, steps, |rep, at| {
             assert_eq!(nbflip(rep).deleted(), 0, "{at}");
         });
         // Gravity adds 3.2 cells/s a step here; the projection takes it back to the

@@ -10,7 +10,7 @@ use cellflip::methods::powerpic::PowerPicReport;
 use cellflip::methods::MethodKind;
 use cellflip::scene::{Overrides, Scene};
 use cellflip::sim::StepReport;
-use common::{load, run, with};
+use common::{load, run, run_at_rest, with};
 
 fn powerpic<const D: usize>(rep: &StepReport<D>) -> &PowerPicReport {
     rep.method_report::<PowerPicReport>()
@@ -38,16 +38,7 @@ fn a_tank_at_rest_stays_at_rest_and_keeps_its_volume_2d_and_3d() {
     fn check<const D: usize>(steps: u64) {
         let scene = tank(D, "").unwrap();
         let start = scene.config::<D>();
-        let mut fastest = 0.0f64;
-        let runner = run::<D>(&scene, Some(steps), |sim, rep| {
-            let v = &sim.state.particles.vel;
-            fastest = v.iter().map(|v| v.norm()).fold(fastest, f64::max);
-            let at = format!("{D}D step {}", sim.state.steps);
-            assert!(
-                (rep.volume_percent - 100.0).abs() < 1e-9,
-                "{at}: {}",
-                rep.volume_percent
-            );
+        let (runner, fastest) = run_at_rest::<D>(&scene, steps, |rep, at| {
             assert!(powerpic(rep).converged, "{at}");
         });
         let seeded = cellflip::sim::Simulation::new(start).state.particles.pos;

@@ -291,10 +291,10 @@ impl<const D: usize> FluidMethod<D> for PowerPicSim<D> {
             .map(|p| {
                 let (mut mass, mut centre) = (0.0, Vector::<D>::zeros());
                 let (mut un, mut du) = (Vector::<D>::zeros(), Vector::<D>::zeros());
-                plan.for_each_in_row(tg, pos, p, |j, t| {
+                plan.for_each_in_row(tg, pos, p, |j, xj, t| {
                     let (a, b) = at_cells[slot[j] as usize];
                     mass += t;
-                    centre += t * tg.center(j);
+                    centre += t * xj;
                     un += t * a;
                     du += t * b;
                 });

@@ -268,13 +268,19 @@ impl<const D: usize> Transport<D> {
         }
     }
 
-    /// Calls `f(j, log K_pj + g_j)` for the cells with capacity within the reach of point `x`.
+    /// Calls `f(j, x_j, log K_pj + g_j)` for the cells with capacity within the reach of point
+    /// `x`.
     #[inline]
-    fn for_each_cell(&self, tg: &TransportGrid<D>, x: &Vector<D>, mut f: impl FnMut(usize, f64)) {
+    fn for_each_cell(
+        &self,
+        tg: &TransportGrid<D>,
+        x: &Vector<D>,
+        mut f: impl FnMut(usize, Vector<D>, f64),
+    ) {
         tg.for_each_in_box(tg.cell_of(x), self.reach, |j, xj| {
             let d2 = (xj - x).norm_squared();
             if d2 <= self.radius2 && tg.capacity[j] > 0.0 {
-                f(j, self.g[j] - d2 * self.inv_eps);
+                f(j, xj, self.g[j] - d2 * self.inv_eps);
             }
         });
     }
@@ -311,7 +317,7 @@ impl<const D: usize> Transport<D> {
             .par_iter()
             .map(|x| {
                 let mut lse = LogSumExp::EMPTY;
-                self.for_each_cell(tg, x, |_, v| lse.add(v));
+                self.for_each_cell(tg, x, |_, _, v| lse.add(v));
                 (lse.sum > 0.0).then(|| log_v - lse.value())
             })
             .collect();
@@ -359,16 +365,16 @@ impl<const D: usize> Transport<D> {
             .fold(0.0, f64::max)
     }
 
-    /// Calls `f(j, T_pj)` for every cell of point `p`'s row.
+    /// Calls `f(j, x_j, T_pj)` for every cell of point `p`'s row (`x_j` its centre).
     pub fn for_each_in_row(
         &self,
         tg: &TransportGrid<D>,
         points: &[Vector<D>],
         p: usize,
-        mut f: impl FnMut(usize, f64),
+        mut f: impl FnMut(usize, Vector<D>, f64),
     ) {
         let fp = self.f[p];
-        self.for_each_cell(tg, &points[p], |j, v| f(j, (fp + v).exp()));
+        self.for_each_cell(tg, &points[p], |j, xj, v| f(j, xj, (fp + v).exp()));
     }
 
     /// Calls `f(p, T_pj)` for every point of cell `j`'s column.
@@ -387,24 +393,6 @@ impl<const D: usize> Transport<D> {
     pub fn active_cells(&self) -> impl Iterator<Item = usize> + '_ {
         self.active.iter().map(|&j| j as usize)
     }
-
-    /// `sum_p T_pj` of every cell (zero where no point reaches).
-    pub fn column_sums(&self, tg: &TransportGrid<D>, points: &[Vector<D>]) -> Vec<f64> {
-        let sums: Vec<f64> = self
-            .active
-            .par_iter()
-            .map(|&j| {
-                let mut s = 0.0;
-                self.for_each_in_column(tg, points, j as usize, |_, t| s += t);
-                s
-            })
-            .collect();
-        let mut out = vec![0.0; tg.grid.num_cells()];
-        for (&j, s) in self.active.iter().zip(sums) {
-            out[j as usize] = s;
-        }
-        out
-    }
 }
 
 #[cfg(test)]
@@ -413,8 +401,21 @@ mod tests {
     use rand::rngs::StdRng;
     use rand::{Rng, SeedableRng};
 
-    /// `n` random points in a box of `cells` transport cells of side `h`, each of volume
-    /// `fill` times a cell's over `per_cell` points a cell, the cells in `solid` blocked.
+    /// `sum_p T_pj` of every cell (zero where no point reaches), through the columns.
+    fn column_sums<const D: usize>(
+        t: &Transport<D>,
+        tg: &TransportGrid<D>,
+        points: &[Vector<D>],
+    ) -> Vec<f64> {
+        let mut out = vec![0.0; tg.grid.num_cells()];
+        for j in t.active_cells() {
+            t.for_each_in_column(tg, points, j, |_, v| out[j] += v);
+        }
+        out
+    }
+
+    /// `n` random points in a box of `cells` transport cells of side 0.5, the middle cell
+    /// blocked, their volumes together `fill` times the free volume.
     fn instance<const D: usize>(
         cells: [usize; D],
         n: usize,
@@ -453,17 +454,17 @@ mod tests {
         );
         for p in 0..pts.len() {
             let mut row = 0.0;
-            t.for_each_in_row(tg, pts, p, |_, v| row += v);
+            t.for_each_in_row(tg, pts, p, |_, _, v| row += v);
             assert!(
                 (row / t.volume - 1.0).abs() < 1e-12,
                 "row {p}: {row} for {}",
                 t.volume
             );
         }
-        let cols = t.column_sums(tg, pts);
+        let cols = column_sums(t, tg, pts);
         let mut by_rows = vec![0.0; cols.len()];
         for p in 0..pts.len() {
-            t.for_each_in_row(tg, pts, p, |j, v| by_rows[j] += v);
+            t.for_each_in_row(tg, pts, p, |j, _, v| by_rows[j] += v);
         }
         for j in 0..cols.len() {
             assert!((cols[j] - by_rows[j]).abs() <= 1e-12 * (1.0 + cols[j]));
@@ -545,9 +546,9 @@ mod tests {
         let t = Transport::solve(&tg, &[x], 0.2, &s, None).unwrap();
         assert_eq!(t.iterations, 1);
         let (mut mass, mut centre, mut peak) = (0.0, Vector::<2>::zeros(), 0.0f64);
-        t.for_each_in_row(&tg, &[x], 0, |j, v| {
+        t.for_each_in_row(&tg, &[x], 0, |_, xj, v| {
             mass += v;
-            centre += v * tg.center(j);
+            centre += v * xj;
             peak = peak.max(v);
         });
         assert!((mass - 0.2).abs() < 1e-15);

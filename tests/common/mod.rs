@@ -48,6 +48,26 @@ pub fn run_config<const D: usize>(
     runner
 }
 
+/// Runs a tank at rest for `steps` steps, checking after every step that the volume is 100 %
+/// and whatever `check` checks; returns the runner and the fastest particle speed seen
+/// (cells/s).
+pub fn run_at_rest<const D: usize>(
+    scene: &Scene,
+    steps: u64,
+    mut check: impl FnMut(&StepReport<D>, &str),
+) -> (Runner<D>, f64) {
+    let mut fastest = 0.0f64;
+    let runner = run::<D>(scene, Some(steps), |sim, rep| {
+        let v = &sim.state.particles.vel;
+        fastest = v.iter().map(|v| v.norm()).fold(fastest, f64::max);
+        let at = format!("{D}D step {}", sim.state.steps);
+        let volume = rep.volume_percent;
+        assert!((volume - 100.0).abs() < 1e-9, "{at}: volume {volume} %");
+        check(rep, &at);
+    });
+    (runner, fastest)
+}
+
 /// [`run_config`] on a scene, for `steps` steps or (`None`) the scene's duration.
 pub fn run<const D: usize>(
     scene: &Scene,
