@@ -168,10 +168,21 @@ impl<const D: usize> Grid<D> {
         })
     }
 
-    /// The point of cell `c` closest to `q`, kept `margin` away from the cell's walls
-    /// (paper eq. best_cell_pos, `phi_close`, with `margin` = epsilon).
+    /// The point of cell `c` closest to `q` (paper eq. best_cell_pos, `phi_close`, with
+    /// `margin` = epsilon): a component where `q` lies within the cell's extent is kept as it is,
+    /// even within `margin` of a wall; one outside it (`|v_k| >= 0.5` with `v = q - centre`) goes to
+    /// the near wall, `margin` inside.
     pub fn closest_in_cell(&self, q: &Vector<D>, c: Cell<D>, margin: f64) -> Vector<D> {
-        Vector::<D>::from_fn(|k, _| q[k].clamp(c[k] as f64 + margin, (c[k] + 1) as f64 - margin))
+        Vector::<D>::from_fn(|k, _| {
+            let (lo, hi) = (c[k] as f64, (c[k] + 1) as f64);
+            if q[k] >= hi {
+                hi - margin
+            } else if q[k] <= lo {
+                lo + margin
+            } else {
+                q[k]
+            }
+        })
     }
 }
 
@@ -366,11 +377,19 @@ mod tests {
     }
 
     #[test]
-    fn closest_in_cell_respects_margin() {
+    fn closest_in_cell_moves_only_the_components_outside_the_cell() {
         let g = Grid::new([4, 4]);
-        let q = Vector::<2>::new(3.7, 0.2);
-        let p = g.closest_in_cell(&q, [1, 0], 0.01);
-        assert_eq!(p, Vector::<2>::new(1.99, 0.2));
+        // Outside along x: to the wall, margin inside; inside along y: kept, even near the wall.
+        let p = g.closest_in_cell(&Vector::<2>::new(3.7, 0.005), [1, 0], 0.01);
+        assert_eq!(p, Vector::<2>::new(1.99, 0.005));
+        let p = g.closest_in_cell(&Vector::<2>::new(0.2, 0.999), [1, 0], 0.01);
+        assert_eq!(p, Vector::<2>::new(1.01, 0.999));
+        // On a face counts as outside (|v_k| >= 0.5); a point inside is its own closest point.
+        let g3 = Grid::new([4, 4, 4]);
+        let p = g3.closest_in_cell(&Vector::<3>::new(2.0, 1.995, 1.0), [1, 1, 1], 0.01);
+        assert_eq!(p, Vector::<3>::new(1.99, 1.995, 1.01));
+        let q = Vector::<3>::new(1.001, 1.5, 1.999);
+        assert_eq!(g3.closest_in_cell(&q, [1, 1, 1], 0.01), q);
         assert_eq!(g.moore_neighbors([0, 0]).count(), 3);
         assert_eq!(Grid::new([4, 4, 4]).moore_neighbors([1, 1, 1]).count(), 26);
     }

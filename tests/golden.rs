@@ -30,7 +30,7 @@ fn cases() -> Vec<(String, Option<MethodKind>, Option<BandMode>, u64)> {
     v.push(("dam-2d".into(), None, Some(BandMode::OneWay), 8));
     v.push(("dam-2d".into(), None, Some(BandMode::Full), 8));
     // The baselines beyond flip, on the dams.
-    for m in [MethodKind::Idp, MethodKind::Nbflip] {
+    for m in [MethodKind::Idp, MethodKind::Nbflip, MethodKind::Powerpic] {
         v.push(("dam-2d".into(), Some(m), None, 60));
         v.push(("dam-3d".into(), Some(m), None, 12));
     }
