@@ -162,8 +162,17 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
     partial.iter().sum()
 }
 
+/// Largest absolute value; NaN if any value is NaN (`f64::max` would drop it and report a NaN
+/// system as solved).
 fn max_abs(a: &[f64]) -> f64 {
-    a.par_iter().map(|v| v.abs()).reduce(|| 0.0, f64::max)
+    let nan_max = |m: f64, v: f64| {
+        if m.is_nan() || v.is_nan() {
+            f64::NAN
+        } else {
+            m.max(v)
+        }
+    };
+    a.par_iter().map(|v| v.abs()).reduce(|| 0.0, nan_max)
 }
 
 /// Solves `A x = b` starting from `x = 0`; `x` receives the solution.
@@ -180,6 +189,14 @@ pub fn solve<const D: usize>(
     let target = settings.tolerance * max_abs(b);
     let mut r = b.to_vec();
     let mut res = max_abs(&r);
+    if !res.is_finite() {
+        // Nothing to iterate on: report the non-finite residual, unconverged.
+        return PcgStats {
+            iterations: 0,
+            residual: res,
+            converged: false,
+        };
+    }
     if res <= target || n == 0 {
         return PcgStats {
             iterations: 0,
@@ -196,7 +213,8 @@ pub fn solve<const D: usize>(
     for it in 1..=settings.max_iterations {
         a.apply(&s, &mut az);
         let denom = dot(&s, &az);
-        if denom <= 0.0 {
+        // Not positive, or NaN: the system is not positive definite (or not finite).
+        if denom <= 0.0 || denom.is_nan() {
             return PcgStats {
                 iterations: it,
                 residual: res,
@@ -334,5 +352,20 @@ mod tests {
         let stats = solve(&a, &b, &mut x, &PcgSettings::default());
         assert!(stats.converged);
         assert!(stats.iterations < 64, "{} iterations", stats.iterations);
+    }
+
+    #[test]
+    fn a_nan_right_hand_side_is_not_converged_2d_and_3d() {
+        fn check<const D: usize>(dims: [usize; D]) {
+            let grid = Grid::new(dims);
+            let a = laplacian(&grid, &vec![true; grid.num_cells()]);
+            let mut b = vec![0.0; a.len()];
+            b[a.len() / 2] = f64::NAN;
+            let mut x = vec![0.0; a.len()];
+            let stats = solve(&a, &b, &mut x, &PcgSettings::default());
+            assert!(!stats.converged && stats.residual.is_nan(), "{stats:?}");
+        }
+        check([8, 8]);
+        check([6, 6, 6]);
     }
 }
