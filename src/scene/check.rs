@@ -102,7 +102,8 @@ fn key_at(text: &str, offset: usize) -> String {
 
 /// `k` with `k^dim = ppc`, if there is one.
 pub(super) fn ppc_per_axis(ppc: usize, dim: usize) -> Option<usize> {
-    (1..=ppc).find(|k| k.pow(dim as u32) == ppc)
+    let root = (ppc as f64).powf(1.0 / dim as f64).round() as usize;
+    (root.saturating_sub(1)..=root + 1).find(|k| *k > 0 && k.checked_pow(dim as u32) == Some(ppc))
 }
 
 type Checked<T> = Result<T, SceneError>;
@@ -298,14 +299,14 @@ pub(super) fn check(source: &str, file: SceneFile) -> Checked<Scene> {
         size: &size,
         h: 0.0,
     };
+    name(&ch, &file.name)?;
     let (dims, h) = domain(&ch, file.domain.cells)?;
     ch.h = h;
     let method = simulation(&ch, &file.simulation)?;
     regions(&ch, &file)?;
-    file.emitter
-        .iter()
-        .enumerate()
-        .try_for_each(|(i, e)| emitter(&ch, &format!("emitter[{i}]"), e))?;
+    file.emitter.iter().enumerate().try_for_each(|(i, e)| {
+        emitter(&ch, &format!("emitter[{i}]"), e, file.simulation.max_speed)
+    })?;
     obstacles(&ch, &file.obstacle)?;
     let obstacle_mode = obstacle_mode(&ch, &file.simulation, &method)?;
     let scene = Scene {
@@ -317,10 +318,29 @@ pub(super) fn check(source: &str, file: SceneFile) -> Checked<Scene> {
         file,
     };
     match dim {
-        2 => obstacles_start_clear::<2>(&ch, &scene),
-        _ => obstacles_start_clear::<3>(&ch, &scene),
+        2 => obstacles_start_clear::<2>(&ch, &scene).and(regions_cover_cells::<2>(&ch, &scene)),
+        _ => obstacles_start_clear::<3>(&ch, &scene).and(regions_cover_cells::<3>(&ch, &scene)),
     }?;
     Ok(scene)
+}
+
+/// The longest scene name: it becomes a file name (`recordings/<name>.rrd`).
+pub const MAX_NAME_BYTES: usize = 100;
+
+/// Key `name`: it names the default recording file, so it must be a plain file name.
+fn name(ch: &Checker, name: &str) -> Checked<()> {
+    let why = if name.is_empty() {
+        "must not be empty".to_string()
+    } else if name.len() > MAX_NAME_BYTES {
+        format!("must be at most {MAX_NAME_BYTES} bytes, got {}", name.len())
+    } else if name.contains(['/', '\\']) || name.contains("..") {
+        format!("names the recording file, so it must not contain '/', '\\' or '..', got {name:?}")
+    } else if name.chars().any(char::is_control) {
+        format!("must not contain control characters, got {name:?}")
+    } else {
+        return Ok(());
+    };
+    ch.err("name", ErrorKind::Range, why)
 }
 
 /// Section `domain`: the tank's size in whole cells, at least 4 per axis. Returns the cells
@@ -331,8 +351,8 @@ fn domain(ch: &Checker, cells: usize) -> Checked<(Vec<usize>, f64)> {
         let why = format!("every extent must be positive, got {x}");
         return ch.err("domain.size", ErrorKind::Range, why);
     }
-    if cells < 4 {
-        let why = format!("needs at least 4 cells per axis, got {cells}");
+    if !(4..=MAX_CELLS).contains(&cells) {
+        let why = format!("needs 4 to {MAX_CELLS} cells along the longest axis, got {cells}");
         return ch.err("domain.cells", ErrorKind::Range, why);
     }
     let longest = ch.size.iter().cloned().fold(0.0, f64::max);
@@ -353,13 +373,31 @@ fn domain(ch: &Checker, cells: usize) -> Checked<(Vec<usize>, f64)> {
         }
         dims.push(rounded as usize);
     }
-    let total: usize = dims.iter().product();
-    if total > 200_000_000 {
-        let why = format!("{total} cells is more than this program can hold");
-        return ch.err("domain.cells", ErrorKind::Range, why);
+    let total = dims.iter().try_fold(1usize, |t, &n| t.checked_mul(n));
+    match total.filter(|&t| t <= MAX_TOTAL_CELLS) {
+        Some(_) => Ok((dims, h)),
+        None => {
+            let why = format!(
+                "{} cells is more than this program can hold ({MAX_TOTAL_CELLS})",
+                dims.iter()
+                    .map(|n| n.to_string())
+                    .collect::<Vec<_>>()
+                    .join(" x ")
+            );
+            ch.err("domain.cells", ErrorKind::Range, why)
+        }
     }
-    Ok((dims, h))
 }
+
+/// The most cells along the longest axis (cell indices are `u32` in the correction).
+const MAX_CELLS: usize = 1 << 16;
+/// The most cells in all (about 2 GB of grid arrays at the least).
+const MAX_TOTAL_CELLS: usize = 200_000_000;
+/// The most steps a run may need at its shortest possible step (see [`step_count`]).
+pub const MAX_STEPS: f64 = 1e7;
+/// The tightest pressure tolerance that f64 arithmetic can meet: residuals stall near
+/// 1e-16 times the right-hand side.
+const MIN_PRESSURE_TOLERANCE: f64 = 1e-14;
 
 /// Section `simulation`: the ranges of its numbers, and the method's settings.
 fn simulation(ch: &Checker, s: &SimulationFile) -> Checked<MethodSettings> {
@@ -435,9 +473,18 @@ fn simulation(ch: &Checker, s: &SimulationFile) -> Checked<MethodSettings> {
     let t = s.pressure_tolerance;
     range(
         "pressure_tolerance",
-        t > 0.0 && t < 1.0,
-        format!("must be in (0, 1), got {t}"),
+        (MIN_PRESSURE_TOLERANCE..1.0).contains(&t),
+        format!("must be in [{MIN_PRESSURE_TOLERANCE:e}, 1) (f64 cannot do better), got {t:e}"),
     )?;
+    range(
+        "seed",
+        i64::try_from(s.seed).is_ok(),
+        format!(
+            "must be below 2^63 (TOML integers are signed), got {}",
+            s.seed
+        ),
+    )?;
+    step_count(ch, s)?;
     powerpic(ch, &s.powerpic, ppc_per_axis(s.ppc, dim).unwrap_or(1))?;
     Ok(MethodSettings {
         kind: s.method,
@@ -450,6 +497,54 @@ fn simulation(ch: &Checker, s: &SimulationFile) -> Checked<MethodSettings> {
         idp_resample: s.idp_resample,
         powerpic: s.powerpic,
     })
+}
+
+/// The run ends in about [`MAX_STEPS`] steps at most, however the fluid moves: a step is
+/// never much shorter (a factor of 2 at most) than the smallest of `max_dt`, `cfl` cells at
+/// `max_speed`, and the time gravity takes to move a resting particle `cfl` cells (see
+/// `sim::timestep`). The key named is the one that sets that shortest step.
+fn step_count(ch: &Checker, s: &SimulationFile) -> Checked<()> {
+    let g = s
+        .gravity
+        .as_deref()
+        .unwrap()
+        .iter()
+        .fold(0.0f64, |m, g| m.max(g.abs()))
+        / ch.h;
+    let v = s.max_speed / ch.h;
+    let bounds = [
+        ("max_dt", s.max_dt),
+        ("cfl", s.cfl / v),
+        (
+            "gravity",
+            if g > 0.0 {
+                (s.cfl / g).sqrt()
+            } else {
+                f64::INFINITY
+            },
+        ),
+    ];
+    let (key, dt) =
+        bounds.into_iter().fold(
+            ("max_dt", f64::INFINITY),
+            |a, b| {
+                if b.1 < a.1 {
+                    b
+                } else {
+                    a
+                }
+            },
+        );
+    let steps = s.duration / dt;
+    if steps <= MAX_STEPS {
+        return Ok(());
+    }
+    let why = format!(
+        "steps could shrink to {dt:.3e} s, so the {} s run could take {steps:.3e} steps \
+         (at most {MAX_STEPS:e})",
+        s.duration
+    );
+    ch.err(&format!("simulation.{key}"), ErrorKind::Range, why)
 }
 
 /// Section `simulation.powerpic`: a kernel that reaches a transport cell from anywhere, a
@@ -522,11 +617,17 @@ fn regions(ch: &Checker, file: &SceneFile) -> Checked<()> {
     Ok(())
 }
 
-/// One `[[emitter]]`: a box in the tank, a velocity, start before stop, a fill in (0, 1].
-fn emitter(ch: &Checker, key: &str, e: &EmitterFile) -> Checked<()> {
+/// One `[[emitter]]`: a box in the tank, a velocity within `max_speed`, start before stop, a
+/// fill in (0, 1].
+fn emitter(ch: &Checker, key: &str, e: &EmitterFile, max_speed: f64) -> Checked<()> {
     ch.inside(&format!("{key}.min"), &e.min)?;
     ch.inside(&format!("{key}.max"), &e.max)?;
     ch.len(&format!("{key}.velocity"), &e.velocity)?;
+    let speed = e.velocity.iter().fold(0.0f64, |a, v| a.hypot(*v));
+    if speed > max_speed {
+        let why = format!("{speed} m/s is faster than simulation.max_speed ({max_speed} m/s)");
+        return ch.err(&format!("{key}.velocity"), ErrorKind::Range, why);
+    }
     if !(e.start.is_finite() && e.start >= 0.0) {
         let why = format!("must be a time >= 0 s, got {}", e.start);
         return ch.err(&format!("{key}.start"), ErrorKind::Range, why);
@@ -646,6 +747,29 @@ fn obstacles_start_clear<const D: usize>(ch: &Checker, scene: &Scene) -> Checked
         cells
             .into_iter()
             .for_each(|c| holder[c] = Some(name.clone()));
+    }
+    Ok(())
+}
+
+/// Every fluid region and emitter holds at least one cell centre at the scene's resolution:
+/// one that holds none would seed or emit nothing.
+fn regions_cover_cells<const D: usize>(ch: &Checker, scene: &Scene) -> Checked<()> {
+    let config = scene.config::<D>();
+    let grid = Grid::new(config.dims);
+    let fluid = config.fluid.iter().map(|r| ("fluid", r));
+    let emitters = config.emitters.iter().map(|e| ("emitter", &e.region));
+    let mut index = std::collections::HashMap::new();
+    for (section, region) in fluid.chain(emitters) {
+        let i = index.entry(section).or_insert(0);
+        if region.cells(&grid).next().is_none() {
+            let why = format!(
+                "holds no cell centre at this resolution (cells of {} m), so it would {} nothing",
+                ch.h,
+                if section == "fluid" { "seed" } else { "emit" }
+            );
+            return ch.err(&format!("{section}[{i}]"), ErrorKind::Geometry, why);
+        }
+        *i += 1;
     }
     Ok(())
 }

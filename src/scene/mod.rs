@@ -5,6 +5,7 @@
 //! [`SceneError`] that names the file, the key and the reason.
 
 mod check;
+mod memory;
 
 pub use check::{ErrorKind, SceneError};
 
@@ -327,7 +328,8 @@ impl Overrides {
         if let Some(c) = self.cells {
             file.domain.cells = c;
         }
-        if sim.gravity.is_none() {
+        // The default gravity (an unchecked `dim` gets none: the check refuses it).
+        if sim.gravity.is_none() && (2..=3).contains(&file.dim) {
             let mut g = vec![0.0; file.dim];
             if file.dim > 1 {
                 g[1] = -9.81;

@@ -48,6 +48,22 @@ pub fn run_config<const D: usize>(
     runner
 }
 
+/// [`run_config`] that returns a failed step's error instead of panicking.
+pub fn try_run_config<const D: usize>(
+    config: SimConfig<D>,
+    limit: Limit,
+    mut check: impl FnMut(&Simulation<D>, &StepReport<D>),
+) -> anyhow::Result<()> {
+    Runner::new(Simulation::new(config)).run(
+        limit,
+        || false,
+        |sim, rep| {
+            check(sim, rep);
+            Ok(())
+        },
+    )
+}
+
 /// Runs a tank at rest for `steps` steps, checking after every step that the volume is 100 %
 /// and whatever `check` checks; returns the runner and the fastest particle speed seen
 /// (cells/s).
