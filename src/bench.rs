@@ -24,7 +24,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
     if args.steps == 0 {
         bail!("--steps: must be at least 1");
     }
-    println!(
+    crate::outln!(
         "scene {}, {} measured steps per resolution after {} warm-up steps, {} threads",
         args.scene,
         args.steps,
@@ -45,6 +45,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
                 ..Default::default()
             };
             let scene = Scene::load(&args.scene, &overrides)?;
+            scene.ensure_fits_in_memory()?;
             let given = [
                 (MethodOption::Band, band.is_some()),
                 (MethodOption::CrossCheck, args.cross_check),
@@ -85,7 +86,7 @@ fn bench_dim<const D: usize>(scene: &Scene, args: &BenchArgs) -> Result<Measured
         |_, _| Ok(()),
     )?;
     let (sim, s) = (&runner.sim.state, &runner.summary);
-    println!(
+    crate::outln!(
         "\n{} at {:?} cells ({}), {} particles, {} fluid cells, median PCG iterations {}",
         scene.name(),
         sim.grid.dims,
@@ -94,23 +95,23 @@ fn bench_dim<const D: usize>(scene: &Scene, args: &BenchArgs) -> Result<Measured
         sim.markings.fluid_cells(),
         median(&s.pcg_iterations).unwrap_or(0)
     );
-    println!("  {:<10} {:>12}", "stage", "median ms");
+    crate::outln!("  {:<10} {:>12}", "stage", "median ms");
     for st in Stage::ALL {
-        println!(
+        crate::outln!(
             "  {:<10} {:>12.2}",
             st.name(),
             s.stage_median(st).as_secs_f64() * 1e3
         );
     }
     let step = s.step_median();
-    println!("  {:<10} {:>12.2}", "step", step.as_secs_f64() * 1e3);
+    crate::outln!("  {:<10} {:>12.2}", "step", step.as_secs_f64() * 1e3);
     let shares: Vec<f64> = s
         .step_times
         .iter()
         .map(|t| t.get(Stage::Correct).as_secs_f64() / t.total().as_secs_f64())
         .collect();
     if s.stage_total(Stage::Correct) > Duration::ZERO {
-        println!(
+        crate::outln!(
             "  correction stage: {:.1}% of the step (median of per-step shares{})",
             100.0 * median(&shares).unwrap_or(0.0),
             if args.cross_check {
@@ -120,9 +121,9 @@ fn bench_dim<const D: usize>(scene: &Scene, args: &BenchArgs) -> Result<Measured
             }
         );
     }
-    s.method_lines.iter().for_each(|l| println!("  {l}"));
+    s.method_lines.iter().for_each(|l| crate::outln!("  {l}"));
     if let Some(m) = peak_memory_mib() {
-        println!("  peak memory (process so far): {m:.0} MiB");
+        crate::outln!("  peak memory (process so far): {m:.0} MiB");
     }
     Ok(Measured {
         step,
@@ -135,9 +136,9 @@ fn print_band_ratios(res: usize, results: &[(&str, Measured)]) {
     let Some(((first, base), rest)) = results.split_first().filter(|(_, r)| !r.is_empty()) else {
         return;
     };
-    println!("\n  at {res} cells, relative to band {first}:");
+    crate::outln!("\n  at {res} cells, relative to band {first}:");
     for (name, m) in rest {
-        println!(
+        crate::outln!(
             "  band {name}: step time ratio {:.2} ({:.1} / {:.1} ms); particles held {} vs {} ({:.1}%)",
             m.step.as_secs_f64() / base.step.as_secs_f64(),
             m.step.as_secs_f64() * 1e3,

@@ -7,8 +7,10 @@
 pub mod bench;
 pub mod cli;
 pub mod grid;
+pub mod interrupt;
 pub mod methods;
 pub mod metrics;
+pub mod out;
 pub mod particles;
 pub mod record;
 pub mod report;

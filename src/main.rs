@@ -2,14 +2,22 @@
 
 use anyhow::Result;
 use cellflip::cli::{Cli, Command, ValidateArgs};
-use cellflip::{bench, report, run, scene, validation};
+use cellflip::{bench, interrupt, report, run, scene, validation};
 use clap::Parser;
+use std::io::Write;
 
+/// Exit status: 0, 1 on an error, 128 + the signal's number after a run stopped by a signal
+/// (its recording and summary finished first).
 fn main() {
     let cli = Cli::parse();
-    if let Err(e) = dispatch(cli) {
-        eprintln!("error: {e:#}");
-        std::process::exit(1);
+    let result = dispatch(cli);
+    if let Err(e) = &result {
+        let _ = writeln!(std::io::stderr(), "error: {e:#}");
+    }
+    match (interrupt::signal(), result) {
+        (Some(sig), _) => std::process::exit(interrupt::exit_code(sig)),
+        (None, Err(_)) => std::process::exit(1),
+        (None, Ok(())) => {}
     }
 }
 
@@ -23,11 +31,11 @@ fn dispatch(cli: Cli) -> Result<()> {
                 .unwrap_or(0);
             for (name, text) in scene::BUILT_IN {
                 let s = scene::Scene::parse(name, text, &Default::default())?;
-                println!("{name:<width$}  {}D  {}", s.dim(), s.file.description);
+                cellflip::outln!("{name:<width$}  {}D  {}", s.dim(), s.file.description);
             }
-            println!("\nmethods (--method):");
+            cellflip::outln!("\nmethods (--method):");
             for m in cellflip::methods::MethodKind::ALL {
-                println!("  {:<8}  {}", m.name(), m.info().about);
+                cellflip::outln!("  {:<8}  {}", m.name(), m.info().about);
             }
             Ok(())
         }
@@ -45,30 +53,34 @@ fn validate(args: &ValidateArgs) -> Result<()> {
         args.shift
     );
     let hs = validation::hydrostatic(500)?;
-    println!(
+    cellflip::outln!(
         "hydrostatic-2d, 500 steps: max particle speed {:.3e} sqrt(gH); volume {:.3}% .. {:.3}%",
-        hs.speed_fraction, hs.volume_min, hs.volume_max
+        hs.speed_fraction,
+        hs.volume_min,
+        hs.volume_max
     );
     let overrides = scene::Overrides {
         cells: args.res,
         ..Default::default()
     };
     let mm = validation::martin_moyce(&overrides, args.shift)?;
-    println!(
+    cellflip::outln!(
         "\nmartin-moyce-2d: {:.0} cells per column width, {} steps, time shift {} in T",
-        mm.cells_per_a, mm.steps, mm.shift_t
+        mm.cells_per_a,
+        mm.steps,
+        mm.shift_t
     );
     print_comparison(("T", "Z exp", "Z sim"), &mm.front, "surge front");
-    println!();
+    cellflip::outln!();
     print_comparison(("tau", "H exp", "H sim"), &mm.height, "column height");
     Ok(())
 }
 
 fn print_comparison(header: (&str, &str, &str), rows: &[validation::Row], what: &str) {
-    println!("{:>6} {:>8} {:>8}", header.0, header.1, header.2);
+    cellflip::outln!("{:>6} {:>8} {:>8}", header.0, header.1, header.2);
     for r in rows {
-        println!("{:>6.2} {:>8.2} {:>8.2}", r.time, r.measured, r.simulated);
+        cellflip::outln!("{:>6.2} {:>8.2} {:>8.2}", r.time, r.measured, r.simulated);
     }
     let e = validation::mean_relative_error(rows);
-    println!("{what}: mean relative error {:.1}%", 100.0 * e);
+    cellflip::outln!("{what}: mean relative error {:.1}%", 100.0 * e);
 }

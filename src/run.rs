@@ -2,6 +2,7 @@
 //! handling and the summary at the end.
 
 use crate::cli::RunArgs;
+use crate::interrupt::{self, Watchdog};
 use crate::methods::MethodOption;
 use crate::record::Recorder;
 use crate::runner::{Limit, Runner};
@@ -10,10 +11,7 @@ use crate::sim::Simulation;
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
-
-static INTERRUPTED: AtomicBool = AtomicBool::new(false);
 
 impl RunArgs {
     fn overrides(&self) -> Overrides {
@@ -50,6 +48,7 @@ impl RunArgs {
 /// `cellflip run`.
 pub fn run(args: &RunArgs) -> Result<()> {
     let scene = Scene::load(&args.scene, &args.overrides())?;
+    scene.ensure_fits_in_memory()?;
     scene
         .method
         .check_given(&args.method_options())
@@ -69,7 +68,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
             .with_context(|| format!("cannot create directory '{}'", dir.display()))?;
         Some(dir.join(format!("{}.rrd", scene.name())))
     };
-    let _ = ctrlc::set_handler(|| INTERRUPTED.store(true, Ordering::SeqCst));
+    interrupt::install()?;
     match scene.dim() {
         2 => run_dim::<2>(&scene, limit, out.as_deref(), args),
         3 => run_dim::<3>(&scene, limit, out.as_deref(), args),
@@ -84,33 +83,51 @@ fn run_dim<const D: usize>(
     args: &RunArgs,
 ) -> Result<()> {
     let recorder = out.map(|p| Recorder::create(p, scene)).transpose()?;
+    match simulate::<D>(scene, limit, recorder.as_ref(), out, args) {
+        Ok((runner, result)) => finish(scene, runner, result, recorder, out, args),
+        Err(e) => {
+            if let Some(r) = recorder {
+                r.abandon();
+            }
+            Err(e)
+        }
+    }
+}
+
+/// Sets the scene up and runs it, recording as it goes; the runner (with its summary) and
+/// how the run ended.
+fn simulate<const D: usize>(
+    scene: &Scene,
+    limit: Limit,
+    recorder: Option<&Recorder>,
+    out: Option<&Path>,
+    args: &RunArgs,
+) -> Result<(Runner<D>, Result<()>)> {
     let mut config = scene.config::<D>();
     config.method.export_lp = args.export_lp.map(|n| (n, mps_path(scene, out, n)));
     config.method.cross_check = args.cross_check;
     let sim = Simulation::<D>::new(config);
-    if let Some(r) = &recorder {
+    if let Some(r) = recorder {
         r.log_setup(&sim);
-        r.log_step(&sim, None, true);
+        r.log_step(&sim, None, true)?;
     }
     if sim.method.particles_not_held() > 0 && sim.state.particles.is_empty() {
         let msg = "the fluid has no free surface, so the band method put every particle in the \
                    deep: the run is grid-only (use --band none)";
         eprintln!("warning: {msg}");
-        if let Some(r) = &recorder {
+        if let Some(r) = recorder {
             r.warn(&sim, msg);
         }
     }
     let mut runner = Runner::new(sim);
     let bar = progress_bar(limit);
     let t0 = Instant::now();
-    let interrupted = || INTERRUPTED.load(Ordering::SeqCst);
+    let watchdog = Watchdog::start(recorder.map(|r| Box::new(r.finisher()) as _));
+    let interrupted = || interrupt::signal().is_some();
     let result = runner.run(limit, interrupted, |sim, rep| {
-        if let Some(r) = &recorder {
-            r.log_step(
-                sim,
-                Some(rep),
-                sim.state.steps.is_multiple_of(args.record_every),
-            );
+        if let Some(r) = recorder {
+            let full = sim.state.steps.is_multiple_of(args.record_every);
+            r.log_step(sim, Some(rep), full)?;
         }
         show_progress(
             &bar,
@@ -120,17 +137,35 @@ fn run_dim<const D: usize>(
         );
         Ok(())
     });
+    watchdog.done();
     bar.finish_and_clear();
-    if let Some(r) = &recorder {
-        match &result {
-            Err(e) => r.error(&runner.sim, &format!("{e:#}")),
-            Ok(()) if runner.summary.interrupted => r.warn(&runner.sim, "run stopped by Ctrl-C"),
-            Ok(()) => {}
-        }
-    }
+    Ok((runner, result))
+}
+
+/// Ends the recording (with the run's error or interruption in its log), prints the summary
+/// and says how the run ended: an error, or `Ok` (the caller exits 128 + the signal's number
+/// after an interrupted run).
+fn finish<const D: usize>(
+    scene: &Scene,
+    runner: Runner<D>,
+    result: Result<()>,
+    recorder: Option<Recorder>,
+    out: Option<&Path>,
+    args: &RunArgs,
+) -> Result<()> {
     if let Some(r) = recorder {
-        r.finish()
-            .with_context(|| format!("cannot finish the recording '{}'", out.unwrap().display()))?;
+        let sim = &runner.sim;
+        match (&result, interrupt::signal()) {
+            (Err(e), _) => r.error(sim, &format!("{e:#}")),
+            (Ok(()), Some(sig)) => r.warn(sim, &format!("run stopped by {}", interrupt::name(sig))),
+            (Ok(()), None) => {}
+        }
+        match &result {
+            Ok(()) => r.finish().with_context(|| {
+                format!("cannot finish the recording '{}'", out.unwrap().display())
+            })?,
+            Err(_) => r.abandon(),
+        }
     }
     if !args.quiet {
         let mut title = format!(
@@ -144,9 +179,10 @@ fn run_dim<const D: usize>(
         }
         title += ")";
         runner.summary.print(&title);
-        if let Some(p) = out {
-            println!(
-                "recording: {}  (open with: rerun {})",
+        if let Some(p) = out.filter(|p| p.exists()) {
+            let mb = std::fs::metadata(p).map_or(0.0, |m| m.len() as f64 / 1e6);
+            crate::outln!(
+                "recording: {}, {mb:.1} MB  (open with: rerun {})",
                 p.display(),
                 p.display()
             );

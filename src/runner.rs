@@ -114,44 +114,47 @@ impl Summary {
     pub fn print(&self, title: &str) {
         let per_step = |d: Duration| d.as_secs_f64() * 1e3 / self.steps.max(1) as f64;
         let stopped = if self.interrupted {
-            " [stopped by Ctrl-C]"
+            " [stopped by a signal]"
         } else {
             ""
         };
-        println!(
+        crate::outln!(
             "{title}: {} steps, {:.3} s simulated in {:.2} s wall ({:.2} ms/step){stopped}",
             self.steps,
             self.sim_secs,
             self.wall.as_secs_f64(),
             per_step(self.wall),
         );
-        println!(
+        crate::outln!(
             "particles {} at the end ({} .. {} after a step; {} emitted); volume {:.2}% .. {:.2}% of V*",
             self.particles, self.particles_range.0, self.particles_range.1, self.emitted, self.volume_min, self.volume_max
         );
         let its: usize = self.pcg_iterations.iter().sum();
-        println!(
+        crate::outln!(
             "pressure: {:.1} PCG iterations per step (max {}); steps shortened after projection: {}",
             its as f64 / self.steps.max(1) as f64,
             self.pcg_iterations.iter().max().unwrap_or(&0),
             self.dt_shortened
         );
         for (name, bottom, blocked) in &self.obstacles {
-            println!(
+            crate::outln!(
                 "obstacle {name}: lowest point at {bottom:.3} m at the end; had to stay on {blocked} of {} steps",
                 self.steps
             );
         }
-        self.method_lines.iter().for_each(|l| println!("{l}"));
+        self.method_lines.iter().for_each(|l| crate::outln!("{l}"));
         let total: Duration = self.step_times.iter().map(|t| t.total()).sum();
-        println!(
+        crate::outln!(
             "{:<10} {:>10} {:>12} {:>8}",
-            "stage", "total s", "ms/step", "share"
+            "stage",
+            "total s",
+            "ms/step",
+            "share"
         );
         for st in Stage::ALL {
             let d = self.stage_total(st);
             let share = 100.0 * d.as_secs_f64() / total.as_secs_f64().max(1e-12);
-            println!(
+            crate::outln!(
                 "{:<10} {:>10.3} {:>12.3} {:>7.1}%",
                 st.name(),
                 d.as_secs_f64(),

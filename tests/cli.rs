@@ -403,38 +403,218 @@ fn options_a_method_lacks_are_refused_before_anything_is_written() {
     assert!(String::from_utf8_lossy(&o.stderr).contains("--band"));
 }
 
-#[test]
-fn ctrl_c_stops_the_run_and_leaves_a_valid_recording() {
-    let dir = scratch_dir("ctrlc");
-    let out = dir.join("dam.rrd");
-    let mut child = Command::new(env!("CARGO_BIN_EXE_cellflip"))
-        .args([
-            "run",
-            "dam-2d",
-            "--duration",
-            "1000",
-            "-q",
-            "--out",
-            out.to_str().unwrap(),
-        ])
+/// A recording that reads back whole: every message decodes, the stream ends with its footer
+/// (what `rerun rrd verify` checks), and it holds particles and the log.
+fn assert_valid_recording(path: &Path, what: &str) {
+    let got = common::logged_entities(path);
+    assert!(
+        got.contains("world/particles") && got.contains("log"),
+        "{what}: {got:?}"
+    );
+    let bytes = std::fs::read(path).unwrap();
+    let tail = &bytes[bytes.len().saturating_sub(256)..];
+    assert!(
+        tail.windows(8).any(|w| w == b"RRF2FOOT"),
+        "{what}: the recording has no footer"
+    );
+}
+
+/// Starts a long dam run recording to `out`; returns once it has recorded some steps.
+fn start_long_run(out: &Path) -> std::process::Child {
+    let child = Command::new(env!("CARGO_BIN_EXE_cellflip"))
+        .args(["run", "dam-2d", "--duration", "1000", "-q", "--out"])
+        .arg(out)
+        .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    // Wait until the run has written something, then interrupt it.
     let t0 = std::time::Instant::now();
-    while std::fs::metadata(&out).map(|m| m.len()).unwrap_or(0) < 50_000 {
+    while std::fs::metadata(out).map(|m| m.len()).unwrap_or(0) < 50_000 {
         assert!(t0.elapsed().as_secs() < 60, "the run wrote nothing");
         std::thread::sleep(std::time::Duration::from_millis(100));
     }
-    let kill = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(kill.success());
-    let status = child.wait().unwrap();
-    assert!(status.success(), "{status:?}");
-    let got = common::logged_entities(&out);
+    child
+}
+
+#[test]
+fn signals_stop_the_run_with_their_exit_status_and_a_valid_recording() {
+    let dir = scratch_dir("signals");
+    for (signal, status) in [("INT", 130), ("TERM", 143), ("HUP", 129)] {
+        let out = dir.join(format!("dam-{signal}.rrd"));
+        let child = start_long_run(&out);
+        let kill = Command::new("kill")
+            .args([&format!("-{signal}"), &child.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(kill.success());
+        let o = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(status), "SIG{signal}: {err}");
+        assert!(!err.contains("panicked"), "SIG{signal}: {err}");
+        assert_valid_recording(&out, &format!("SIG{signal}"));
+    }
+}
+
+#[test]
+fn a_full_device_stops_the_run_naming_the_file_and_the_os_error() {
+    // At creation: nothing can be written.
+    let o = cellflip(&["run", "dam-2d", "--steps", "3", "-q", "--out", "/dev/full"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && !err.contains("panicked"), "{err}");
     assert!(
-        got.contains("world/particles") && got.contains("log"),
-        "{got:?}"
+        err.contains("'/dev/full'") && err.contains("No space left on device"),
+        "{err}"
     );
+    // Mid-run: a file size limit (RLIMIT_FSIZE, with SIGXFSZ ignored) fails a later write
+    // with EFBIG; the run stops at once, and what was written stays readable.
+    let dir = scratch_dir("fsize");
+    let out = dir.join("dam.rrd");
+    let o = Command::new("sh")
+        .arg("-c")
+        .arg(format!(
+            "trap '' XFSZ; ulimit -f 400; exec '{}' run dam-2d --duration 1000 -q --out '{}'",
+            env!("CARGO_BIN_EXE_cellflip"),
+            out.display()
+        ))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(err.contains(&format!("'{}'", out.display())), "{err}");
+    assert!(err.contains("File too large"), "{err}");
+    assert!(!common::logged_entities(&out).is_empty());
+}
+
+#[test]
+fn a_closed_or_full_standard_output_does_not_panic() {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_cellflip"))
+        .arg("list")
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let o = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success() && err.is_empty(), "closed pipe: {err}");
+    let o = Command::new(env!("CARGO_BIN_EXE_cellflip"))
+        .args(["run", "dam-2d", "--steps", "2", "--no-record"])
+        .stdout(std::fs::File::create("/dev/full").unwrap())
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        o.status.success() && !err.contains("panicked"),
+        "full: {err}"
+    );
+    assert!(
+        err.contains("cannot write to standard output"),
+        "full: {err}"
+    );
+}
+
+/// Values that used to panic, abort, hang, write outside `recordings/` or never end are
+/// refused up front, naming the key.
+#[test]
+fn hostile_values_are_refused_naming_the_key() {
+    use ErrorKind::{Geometry, Range};
+    let good = |from: &str, to: &str| {
+        assert!(GOOD.contains(from), "{from}");
+        GOOD.replacen(from, to, 1)
+    };
+    let cases = [
+        (
+            "name-path",
+            good("name = \"tiny\"", "name = \"../x\""),
+            "name",
+            Range,
+        ),
+        (
+            "name-control",
+            good("name = \"tiny\"", "name = \"a\\u0007b\""),
+            "name",
+            Range,
+        ),
+        (
+            "cells-2-32",
+            good("cells = 8", "cells = 4294967296"),
+            "domain.cells",
+            Range,
+        ),
+        (
+            "cells-max",
+            good("cells = 8", "cells = 9223372036854775807"),
+            "domain.cells",
+            Range,
+        ),
+        (
+            "ppc-wrap",
+            good("duration = 0.05", "ppc = 8589934593"),
+            "simulation.ppc",
+            Range,
+        ),
+        (
+            "max-dt",
+            good("duration = 0.05", "max_dt = 1e-300"),
+            "simulation.max_dt",
+            Range,
+        ),
+        (
+            "cfl",
+            good("duration = 0.05", "cfl = 1e-300"),
+            "simulation.cfl",
+            Range,
+        ),
+        (
+            "gravity",
+            good("duration = 0.05", "gravity = [0.0, -1e300]"),
+            "simulation.gravity",
+            Range,
+        ),
+        (
+            "tolerance",
+            good("duration = 0.05", "pressure_tolerance = 1e-200"),
+            "simulation.pressure_tolerance",
+            Range,
+        ),
+        (
+            "thin-fluid",
+            good("max = [0.5, 0.5]", "max = [0.01, 0.5]"),
+            "fluid[0]",
+            Geometry,
+        ),
+    ];
+    for (test, text, key, kind) in &cases {
+        rejects(test, text, key, *kind);
+    }
+    let emitter = format!(
+        "{GOOD}[[emitter]]\nmin = [0.5, 0.6]\nmax = [0.7, 0.8]\nvelocity = [0.0, -1e300]\n"
+    );
+    rejects("emitter-speed", &emitter, "emitter[0].velocity", Range);
+    let o = cellflip(&[
+        "run",
+        "dam-2d",
+        "--seed",
+        "9223372036854775808",
+        "--steps",
+        "1",
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && !err.contains("panicked"), "{err}");
+    assert!(err.contains("simulation.seed"), "{err}");
+    let o = cellflip(&[
+        "run",
+        "dam-3d",
+        "--res",
+        "580",
+        "--steps",
+        "1",
+        "--no-record",
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("domain.cells") && err.contains("available"),
+        "{err}"
+    );
+    let o = cellflip(&["bench", "--scene", "dam-2d", "--steps", "0"]);
+    assert!(!o.status.success() && !String::from_utf8_lossy(&o.stderr).contains("panicked"));
 }

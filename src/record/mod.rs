@@ -9,6 +9,10 @@
 //!
 //! Methods log their own reports through the [`Log`] trait, which names no rerun type.
 
+mod file;
+
+pub use file::RrdFile;
+
 use crate::grid::Vector;
 use crate::methods::MethodInfo;
 use crate::metrics::Stage;
@@ -161,6 +165,7 @@ fn blueprint(dim: usize, info: &MethodInfo) -> Blueprint {
 /// Writes one run to an `.rrd` file.
 pub struct Recorder {
     rec: RecordingStream,
+    file: RrdFile,
     dims: Vec<usize>,
     max_speed: f64,
     last_flush: Cell<Instant>,
@@ -169,14 +174,17 @@ pub struct Recorder {
 }
 
 impl Recorder {
-    /// Opens `path` for writing; fails (naming the path) before anything is simulated.
+    /// Opens `path` for writing ([`RrdFile`]); fails (naming the path) before anything is
+    /// simulated.
     pub fn create(path: &Path, scene: &Scene) -> Result<Self> {
+        let file = RrdFile::create(path)?;
+        let sink: Box<dyn rerun::sink::LogSink> = Box::new(file.clone());
         let rec = rerun::RecordingStreamBuilder::new("cellflip")
             .recording_name(scene.name())
             .enabled(true)
             .send_properties(false)
             .with_blueprint(blueprint(scene.dim(), scene.method.kind.info()))
-            .save(path)
+            .set_sinks(vec![sink])
             .map_err(|e| anyhow!("cannot write recording '{}': {e}", path.display()))?;
         rec.set_log_time_enabled(false);
         let header = format!(
@@ -192,6 +200,7 @@ impl Recorder {
         rec.log_static("scene", &rerun::TextDocument::from_markdown(header))?;
         Ok(Self {
             rec,
+            file,
             dims: scene.dims.clone(),
             max_speed: scene.file.simulation.max_speed / scene.cell_size_m,
             last_flush: Cell::new(Instant::now()),
@@ -251,12 +260,15 @@ impl Recorder {
 
     /// The state after a step: particles, markings and obstacles when `full`, metrics when
     /// `rep` is given.
+    ///
+    /// Fails when the file cannot be written (checked every step, flushed every two seconds);
+    /// the first step recorded gives the file its name.
     pub fn log_step<const D: usize>(
         &self,
         sim: &Simulation<D>,
         rep: Option<&StepReport<D>>,
         full: bool,
-    ) {
+    ) -> Result<()> {
         let mut c = self.canvas(sim);
         let s = &sim.state;
         if full {
@@ -294,6 +306,10 @@ impl Recorder {
         }
         self.report(c.result);
         self.flush_now_and_then();
+        if rep.is_some() {
+            self.file.commit()?;
+        }
+        self.file.check()
     }
 
     /// Each obstacle's shape where it is now, and its trail (its centre over the steps).
@@ -346,20 +362,40 @@ impl Recorder {
     }
 
     /// Bounds what a crash can lose: everything logged more than two seconds ago is on disk.
+    /// A failed write shows in the file's [`RrdFile::check`].
     fn flush_now_and_then(&self) {
         if self.last_flush.get().elapsed() > Duration::from_secs(2) {
-            if let Err(e) = self.rec.flush_blocking() {
-                eprintln!("warning: recording: {e}");
-            }
+            let _ = self.rec.flush_blocking();
             self.last_flush.set(Instant::now());
         }
     }
 
-    /// Flushes everything and writes the file's footer.
+    /// Flushes everything and writes the file's footer; the file takes its name even if no
+    /// step was recorded (an interrupted run).
     pub fn finish(self) -> Result<()> {
-        self.rec.flush_blocking().map_err(|e| anyhow!("{e}"))?;
-        drop(self.rec);
-        Ok(())
+        let _ = self.rec.flush_blocking();
+        self.file.commit()?;
+        self.file.finish()
+    }
+
+    /// After a run that failed (the run's error says why; a failure to finish adds nothing):
+    /// the recording is finished as far as it goes, or removed if it never took its name (no
+    /// step was recorded).
+    pub fn abandon(self) {
+        let _ = self.rec.flush_blocking();
+        let _ = self.file.finish();
+        self.file.discard();
+    }
+
+    /// A closure that finishes the recording from another thread with what was logged so far
+    /// (the signal watchdog: a step that does not end in time is not waited for).
+    pub fn finisher(&self) -> impl FnOnce() -> Result<()> + Send + 'static {
+        let (rec, file) = (self.rec.clone(), self.file.clone());
+        move || {
+            let _ = rec.flush_blocking();
+            file.commit()?;
+            file.finish()
+        }
     }
 }
 

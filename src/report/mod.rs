@@ -20,9 +20,6 @@ use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use measure::Measured;
 use std::path::Path;
-use std::sync::atomic::{AtomicBool, Ordering};
-
-static INTERRUPTED: AtomicBool = AtomicBool::new(false);
 
 /// Where a run's scene comes from.
 #[derive(Clone, Debug)]
@@ -190,10 +187,12 @@ pub fn load(spec: &RunSpec) -> Result<Scene> {
         duration: spec.duration,
         ..Default::default()
     };
-    match &spec.source {
+    let scene = match &spec.source {
         Source::Named(name) => Scene::load(name, &o),
         Source::Text(text) => Scene::parse(&format!("scene variant '{}'", spec.label), text, &o),
-    }
+    }?;
+    scene.ensure_fits_in_memory()?;
+    Ok(scene)
 }
 
 /// `cellflip report`.
@@ -201,8 +200,8 @@ pub fn report(args: &ReportArgs) -> Result<()> {
     let specs = matrix(args)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create the output folder '{}'", args.out.display()))?;
-    let _ = ctrlc::set_handler(|| INTERRUPTED.store(true, Ordering::SeqCst));
-    let stop = || INTERRUPTED.load(Ordering::SeqCst);
+    crate::interrupt::install()?;
+    let stop = || crate::interrupt::signal().is_some();
     let results = run_all(&specs, args.quiet, &stop);
     let interrupted = stop();
     write_all(&args.out, &specs, &results)?;
@@ -210,7 +209,7 @@ pub fn report(args: &ReportArgs) -> Result<()> {
         let failed = results
             .iter()
             .filter(|m| !m.ok() && m.status != "interrupted");
-        println!(
+        crate::outln!(
             "report: {} of {} runs ({} failed) written to {}",
             results.len(),
             specs.len(),
@@ -220,7 +219,8 @@ pub fn report(args: &ReportArgs) -> Result<()> {
     }
     if interrupted {
         anyhow::bail!(
-            "stopped by Ctrl-C; wrote the {} runs done to '{}'",
+            "stopped by {}; wrote the {} runs done to '{}'",
+            crate::interrupt::name(crate::interrupt::signal().unwrap_or(0)),
             results.len(),
             args.out.display()
         );

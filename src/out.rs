@@ -1,0 +1,36 @@
+//! Standard output that never panics: `println!` panics when the output is a closed pipe
+//! (`cellflip list | head -1`) or a full device. [`outln!`](crate::outln) drops what cannot be
+//! written instead; a failure other than a closed pipe is reported once on stderr. What the
+//! run writes to files (recordings, reports) is unaffected.
+
+use std::io::Write;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+static FAILED: AtomicBool = AtomicBool::new(false);
+
+/// Writes one line to standard output (see the module doc).
+pub fn line(args: std::fmt::Arguments) {
+    if FAILED.load(Ordering::Relaxed) {
+        return;
+    }
+    if let Err(e) = writeln!(std::io::stdout().lock(), "{args}") {
+        FAILED.store(true, Ordering::Relaxed);
+        if e.kind() != std::io::ErrorKind::BrokenPipe {
+            let _ = writeln!(
+                std::io::stderr(),
+                "warning: cannot write to standard output: {e}"
+            );
+        }
+    }
+}
+
+/// `println!` through [`line`].
+#[macro_export]
+macro_rules! outln {
+    () => {
+        $crate::out::line(format_args!(""))
+    };
+    ($($arg:tt)*) => {
+        $crate::out::line(format_args!($($arg)*))
+    };
+}

@@ -1,0 +1,222 @@
+//! The `.rrd` file a recording goes to: our own rerun sink rather than rerun's file sink, so
+//! that a failed write (a full disk, a vanished directory) stops the run at once with the OS
+//! error and the file's name, and what was written before stays a readable recording.
+//!
+//! - Every message is written whole or not at all: a write that fails is cut back to the last
+//!   whole message, and nothing is written after it but the footer (which may not fit either:
+//!   the file is then readable but has no footer).
+//! - The file is first written beside its final name (`.NAME.partial`) and takes the name once
+//!   the run's first step is recorded ([`RrdFile::commit`]), so a run that fails before that
+//!   leaves an earlier recording of the same name alone. Special files (`/dev/null`, a pipe)
+//!   are written directly.
+
+use anyhow::{anyhow, bail, Result};
+use rerun::external::re_log_encoding::{EncodeError, Encoder, EncodingOptions};
+use rerun::log::LogMsg;
+use rerun::sink::{LogSink, SinkFlushError};
+use std::fs::File;
+use std::io::{Seek, SeekFrom, Write};
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::Duration;
+
+/// A file that takes each `write_all` whole or, failing, cuts itself back to where it was.
+struct WholeWrites {
+    file: File,
+    len: u64,
+}
+
+impl Write for WholeWrites {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.write_all(buf).map(|()| buf.len())
+    }
+
+    fn write_all(&mut self, buf: &[u8]) -> std::io::Result<()> {
+        match self.file.write_all(buf) {
+            Ok(()) => {
+                self.len += buf.len() as u64;
+                Ok(())
+            }
+            Err(e) => {
+                // Best effort: special files cannot be cut.
+                let _ = self.file.set_len(self.len);
+                let _ = self.file.seek(SeekFrom::Start(self.len));
+                Err(e)
+            }
+        }
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.file.flush()
+    }
+}
+
+struct State {
+    encoder: Option<Encoder<WholeWrites>>,
+    /// The first failure, in words; nothing is written after it.
+    error: Option<String>,
+    /// Where the file is until [`RrdFile::commit`] renames it (`None`: written in place).
+    partial: Option<PathBuf>,
+}
+
+/// One recording's file: the sink rerun writes to, and the run's handle on it (clones share).
+#[derive(Clone)]
+pub struct RrdFile {
+    path: PathBuf,
+    state: Arc<Mutex<State>>,
+}
+
+impl RrdFile {
+    /// Creates the file (beside `path` until committed) and writes the stream's header.
+    pub fn create(path: &Path) -> Result<Self> {
+        let special = std::fs::metadata(path).is_ok_and(|m| !m.is_file());
+        let partial = (!special).then(|| partial_path(path));
+        let at = partial.as_deref().unwrap_or(path);
+        let fail =
+            |e: &dyn std::fmt::Display| anyhow!("cannot write recording '{}': {e}", path.display());
+        let file = File::create(at).map_err(|e| fail(&e))?;
+        let version = rerun::build_info().version;
+        let writer = WholeWrites { file, len: 0 };
+        let encoder = Encoder::new_eager(version, EncodingOptions::PROTOBUF_COMPRESSED, writer)
+            .map_err(|e| {
+                let _ = partial.as_deref().map(std::fs::remove_file);
+                fail(&os_error(e))
+            })?;
+        Ok(Self {
+            path: path.to_path_buf(),
+            state: Arc::new(Mutex::new(State {
+                encoder: Some(encoder),
+                error: None,
+                partial,
+            })),
+        })
+    }
+
+    fn lock(&self) -> MutexGuard<'_, State> {
+        self.state.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// Fails, naming the file and the OS error, once a write has failed or the file is gone
+    /// (its directory removed: writes to an unlinked file succeed but are lost).
+    pub fn check(&self) -> Result<()> {
+        let s = self.lock();
+        if let Some(e) = &s.error {
+            bail!("cannot write recording '{}': {e}", self.path.display());
+        }
+        let at = s.partial.as_deref().unwrap_or(&self.path);
+        if s.encoder.is_some() && !at.exists() {
+            bail!(
+                "cannot write recording '{}': the file (or its directory) was removed during the run",
+                self.path.display()
+            );
+        }
+        Ok(())
+    }
+
+    /// Gives the file its name (once; later calls do nothing).
+    pub fn commit(&self) -> Result<()> {
+        let mut s = self.lock();
+        if let Some(partial) = s.partial.take() {
+            std::fs::rename(&partial, &self.path).map_err(|e| {
+                anyhow!(
+                    "cannot rename '{}' to '{}': {e}",
+                    partial.display(),
+                    self.path.display()
+                )
+            })?;
+        }
+        Ok(())
+    }
+
+    /// Writes the footer and closes the file; then [`check`](Self::check)s. Idempotent.
+    pub fn finish(&self) -> Result<()> {
+        {
+            let mut s = self.lock();
+            if let Some(mut encoder) = s.encoder.take() {
+                if let Err(e) = encoder.finish().and_then(|()| encoder.flush_blocking()) {
+                    s.error
+                        .get_or_insert(format!("{} (the file has no footer)", os_error(e)));
+                }
+            }
+        }
+        self.check()
+    }
+
+    /// Closes the file and removes it if it never took its name (a run that failed before
+    /// its first step).
+    pub fn discard(&self) {
+        let mut s = self.lock();
+        s.encoder = None;
+        if let Some(partial) = s.partial.take() {
+            let _ = std::fs::remove_file(partial);
+        }
+    }
+}
+
+impl LogSink for RrdFile {
+    fn send(&self, msg: LogMsg) {
+        let mut s = self.lock();
+        if s.error.is_some() {
+            return;
+        }
+        if let Some(Err(e)) = s.encoder.as_mut().map(|enc| enc.append(&msg)) {
+            s.error = Some(os_error(e));
+        }
+    }
+
+    fn flush_blocking(&self, _timeout: Duration) -> Result<(), SinkFlushError> {
+        let mut s = self.lock();
+        if let Some(Err(e)) = s.encoder.as_mut().map(|enc| enc.flush_blocking()) {
+            s.error.get_or_insert(os_error(e));
+        }
+        match &s.error {
+            Some(e) => Err(SinkFlushError::failed(e.clone())),
+            None => Ok(()),
+        }
+    }
+}
+
+/// The OS error of a failed write as the OS says it ("No space left on device (os error 28)").
+fn os_error(e: EncodeError) -> String {
+    match e {
+        EncodeError::Write(io) => io.to_string(),
+        e => e.to_string(),
+    }
+}
+
+/// `dir/.NAME.partial` for `dir/NAME`.
+fn partial_path(path: &Path) -> PathBuf {
+    let name = path
+        .file_name()
+        .map_or_else(|| "recording".into(), |n| n.to_string_lossy());
+    path.with_file_name(format!(".{name}.partial"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_earlier_recording_is_replaced_only_once_a_step_is_committed() {
+        let dir = std::env::temp_dir().join(format!("cellflip-rrdfile-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("run.rrd");
+        std::fs::write(&path, b"earlier").unwrap();
+        // A run that fails before its first step: the earlier file stays, no partial is left.
+        let f = RrdFile::create(&path).unwrap();
+        assert!(partial_path(&path).exists());
+        f.discard();
+        assert_eq!(std::fs::read(&path).unwrap(), b"earlier");
+        assert!(!partial_path(&path).exists());
+        // A run that records a step: the new file takes the name and ends with its footer.
+        let f = RrdFile::create(&path).unwrap();
+        f.commit().unwrap();
+        f.finish().unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        assert!(bytes.starts_with(b"RRF2"), "not an rrd stream");
+        let tail = &bytes[bytes.len().saturating_sub(256)..];
+        assert!(tail.windows(8).any(|w| w == b"RRF2FOOT"), "no footer");
+        assert!(!partial_path(&path).exists());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
