@@ -235,13 +235,21 @@ fn ccp_dam_front_does_not_depend_on_the_step_size() {
             dam_front(MethodKind::Ccp, cfl, seconds),
             dam_front(MethodKind::Flip, cfl, seconds),
         );
-        assert!(flip > start + 5.0, "cfl {cfl}: flip's front {flip} barely moved");
+        assert!(
+            flip > start + 5.0,
+            "cfl {cfl}: flip's front {flip} barely moved"
+        );
         let rel = (ccp - flip).abs() / (flip - start);
         assert!(rel < 0.03, "cfl {cfl}: ccp's front {ccp}, flip's {flip}");
         ccp
     };
     front(0.01);
     let fronts = [0.05, 0.2, 1.0].map(front);
-    let (lo, hi) = fronts.iter().fold((f64::MAX, f64::MIN), |(a, b), &f| (a.min(f), b.max(f)));
-    assert!((hi - lo) / hi < 0.05, "fronts at cfl 0.05, 0.2, 1: {fronts:?}");
+    let (lo, hi) = fronts
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(a, b), &f| (a.min(f), b.max(f)));
+    assert!(
+        (hi - lo) / hi < 0.05,
+        "fronts at cfl 0.05, 0.2, 1: {fronts:?}"
+    );
 }
