@@ -10,6 +10,7 @@ use cellflip::runner::Limit;
 use cellflip::scene::Overrides;
 use cellflip::sim::correct::band::BandMode;
 use cellflip::sim::correct::problem::{self, Directions};
+use cellflip::sim::correct::{self, CorrectionSettings};
 use cellflip::sim::markings::Markings;
 use cellflip::solvers::{lp, min_cost_flow};
 use common::{ccp, load, run_config};
@@ -208,6 +209,31 @@ fn exported_problems_have_the_solvers_optimum_2d_and_3d() {
     let equal_rows =
         exported_problems_read_back::<2>(60, 13) + exported_problems_read_back::<3>(30, 14);
     assert!(equal_rows > 0, "no instance had a cell with equal bounds");
+}
+
+#[test]
+fn a_failed_solve_is_exported_as_a_fallback_not_an_optimum() {
+    // The markings of a closed 3x3 box full at mu = 1 (every cell inner: it keeps its
+    // particle) with one particle gone: no assignment meets the bounds, the flow solver fails
+    // and every particle keeps its cell.
+    let g = Grid::new([3, 3]);
+    let full: Vec<Vector<2>> = (0..9).map(|c| g.center(g.cell_coords(c))).collect();
+    let solid = vec![false; 9];
+    let prev = Markings::compute(&g, &full, &solid);
+    let x_bar = full[1..].to_vec();
+    let mut pos = x_bar.clone();
+    let settings = CorrectionSettings::default();
+    let rep = correct::correct(
+        &g, &x_bar, &mut pos, &prev, &solid, 1, &settings, None, None, true,
+    )
+    .unwrap();
+    let why = rep.fallback.expect("the solver failed");
+    assert!(why.starts_with("flow solver failed"), "{why}");
+    let mps = rep.mps.unwrap();
+    let first = format!("* fallback objective {:.17e} ({why})\n", 0.0);
+    assert!(mps.starts_with(&first), "{mps}");
+    assert!(!mps.contains("optimal"), "{mps}");
+    assert_eq!(pos, x_bar);
 }
 
 #[test]

@@ -140,19 +140,16 @@ pub fn correct<const D: usize>(
                 penalty,
                 mu,
             };
-            correct_band(&inputs, pos, settings, ctx, &mut rep);
+            let first_cost = correct_band(&inputs, pos, settings, ctx, &mut rep);
             if want_mps {
-                rep.mps = Some(band_mps(&problem, &rep, settings, ctx.variant));
+                rep.mps = Some(band_mps(&problem, &rep, first_cost, settings, ctx.variant));
             }
         }
         None => {
             let choice = solve(&problem, settings, &mut rep);
             if want_mps {
-                let comment = format!(
-                    "optimal objective {:.17e} ({} solver)",
-                    rep.objective,
-                    settings.solver.name()
-                );
+                let comment =
+                    objective_comment(rep.objective, settings.solver, rep.fallback.as_deref());
                 rep.mps = Some(lp::to_mps(
                     &problem.assignment,
                     "cellflip-correction",
@@ -211,11 +208,23 @@ fn solve<const D: usize>(
     choice
 }
 
+/// An exported problem's objective line: eq. problem3's objective (`sigma_solid_obj`
+/// included) at the solver's optimum, or, when the solver failed, at the fallback (every
+/// particle in its previous cell) and why.
+fn objective_comment(cost: f64, solver: Solver, fallback: Option<&str>) -> String {
+    match fallback {
+        None => format!("optimal objective {cost:.17e} ({} solver)", solver.name()),
+        Some(why) => format!("fallback objective {cost:.17e} ({why})"),
+    }
+}
+
 /// The band method's problem as MPS: eq. problem3 with the bounds of eq. band_con_update,
-/// without the band row, and the first solve's optimum where there was one.
+/// without the band row, and `first_cost`, its objective at the first solve: the optimum (not
+/// for `full`, whose solve has the band row) or the fallback's.
 fn band_mps<const D: usize>(
     problem: &CorrectionProblem<D>,
     rep: &CorrectionReport<D>,
+    first_cost: f64,
     settings: &CorrectionSettings,
     variant: BandVariant,
 ) -> String {
@@ -226,12 +235,9 @@ fn band_mps<const D: usize>(
         variant.name(),
         b.alpha
     )];
-    if variant != BandVariant::Full && rep.fallback.is_none() {
-        comment.push(format!(
-            "optimal objective {:.17e} ({} solver)",
-            b.first_objective,
-            settings.solver.name()
-        ));
+    if variant != BandVariant::Full || rep.fallback.is_some() {
+        let fallback = rep.fallback.as_deref();
+        comment.push(objective_comment(first_cost, settings.solver, fallback));
     }
     lp::to_mps(&problem.assignment, "cellflip-correction", &comment)
 }
@@ -248,14 +254,15 @@ struct BandInputs<'a, const D: usize> {
 }
 
 /// The band method's correction: the variant of `ctx`, and with cross-checking every other
-/// variant on the same problem, for their objectives.
+/// variant on the same problem, for their objectives. Returns eq. problem3's objective at the
+/// first solve, for the exported problem.
 fn correct_band<const D: usize>(
     inp: &BandInputs<'_, D>,
     pos: &mut [Vector<D>],
     settings: &CorrectionSettings,
     ctx: BandContext,
     rep: &mut CorrectionReport<D>,
-) {
+) -> f64 {
     let x_hat = pos.to_vec();
     let run = |variant| {
         let ctx = BandContext { variant, ..ctx };
@@ -297,6 +304,7 @@ fn correct_band<const D: usize>(
         .filter(|(h, x)| grid.cell_index_of(h) != grid.cell_index_of(x))
         .map(|(h, x)| (*h, *x))
         .collect();
+    out.first_cost
 }
 
 fn overfull_cells<const D: usize>(grid: &Grid<D>, pos: &[Vector<D>], mu: u32) -> usize {
