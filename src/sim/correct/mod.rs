@@ -75,8 +75,12 @@ impl Default for CorrectionSettings {
 /// What one correction did.
 #[derive(Clone, Debug, Default)]
 pub struct CorrectionReport<const D: usize> {
-    /// `sum sigma_obj` of the final positions.
+    /// The displacement: `sum |x - x_hat|^2` over the particles that end outside
+    /// `C_new_solid`.
     pub objective: f64,
+    /// The solid penalty: `sum sigma_solid_obj` over the particles that end in `C_new_solid`
+    /// (eq. solid_penalty2; 0 without obstacles). With `objective`, what the solver minimised.
+    pub penalty: f64,
     /// Cells holding more than `mu` particles after advection, before the correction.
     pub overfull_before: usize,
     pub solver_time: Duration,
@@ -95,6 +99,13 @@ pub struct CorrectionReport<const D: usize> {
     pub mps: Option<String>,
     /// The band correction, with the band method.
     pub band: Option<BandCorrection<D>>,
+}
+
+impl<const D: usize> CorrectionReport<D> {
+    /// Eq. problem3's objective with `sigma_solid_obj`: the displacement plus the penalty.
+    pub fn total(&self) -> f64 {
+        self.objective + self.penalty
+    }
 }
 
 /// Corrects `pos` (the advected positions `x_hat` on entry, `x` on return) given the previous
@@ -146,10 +157,10 @@ pub fn correct<const D: usize>(
             }
         }
         None => {
-            let choice = solve(&problem, settings, &mut rep);
+            let choice = solve(&problem, settings, penalty, &mut rep);
             if want_mps {
-                let comment =
-                    objective_comment(rep.objective, settings.solver, rep.fallback.as_deref());
+                let cost = problem.assignment.objective(&choice);
+                let comment = objective_comment(cost, settings.solver, rep.fallback.as_deref());
                 rep.mps = Some(lp::to_mps(
                     &problem.assignment,
                     "cellflip-correction",
@@ -163,11 +174,12 @@ pub fn correct<const D: usize>(
 }
 
 /// Eq. problem3 without the band: the solver's choice of candidate per particle (every
-/// particle's previous cell if the solver fails), its objective, and with `cross_check` the
-/// other solver's answer on the same problem.
+/// particle's previous cell if the solver fails), its objective's two parts, and with
+/// `cross_check` the other solver's answer on the same problem.
 fn solve<const D: usize>(
     problem: &CorrectionProblem<D>,
     settings: &CorrectionSettings,
+    penalty: Option<&[f64]>,
     rep: &mut CorrectionReport<D>,
 ) -> Vec<u32> {
     let t0 = Instant::now();
@@ -190,7 +202,12 @@ fn solve<const D: usize>(
             problem.stay.clone()
         }
     };
-    rep.objective = problem.assignment.objective(&choice);
+    let a = &problem.assignment;
+    let ends = choice.iter().map(|&k| {
+        let k = k as usize;
+        (problem.bin_cell[a.cand_bin[k] as usize], a.cand_cost[k])
+    });
+    (rep.objective, rep.penalty) = objective_parts(ends, penalty);
     if settings.cross_check {
         let other = match settings.solver {
             Solver::Flow => Solver::Simplex,
@@ -202,10 +219,25 @@ fn solve<const D: usize>(
         rep.cross_check = Some(other_result.and_then(|(c, _)| {
             problem.assignment.check(&c)?;
             let o = problem.assignment.objective(&c);
-            Ok((o - rep.objective).abs() / rep.objective.abs().max(1.0))
+            Ok((o - rep.total()).abs() / rep.total().abs().max(1.0))
         }));
     }
     choice
+}
+
+/// Splits eq. problem3's objective by where the particles end: the displacement `sum |x -
+/// x_hat|^2` of those outside `C_new_solid`, and the penalty `sum sigma_solid_obj` (their
+/// cell's) of those in it. `ends` yields each particle's final cell and squared displacement.
+fn objective_parts(
+    ends: impl Iterator<Item = (usize, f64)>,
+    penalty: Option<&[f64]>,
+) -> (f64, f64) {
+    ends.fold((0.0, 0.0), |(d, s), (c, cost)| {
+        match penalty.map(|p| p[c]) {
+            Some(p) if p > 0.0 => (d, s + p),
+            _ => (d + cost, s),
+        }
+    })
 }
 
 /// An exported problem's objective line: eq. problem3's objective (`sigma_solid_obj`
@@ -295,9 +327,11 @@ fn correct_band<const D: usize>(
     rep.solver_time = out.solve_time;
     rep.augmentations = out.augmentations;
     rep.fallback = out.fallback;
-    rep.objective = report.objective;
     rep.band = Some(report);
     let grid = inp.grid;
+    let ends = pos.iter().zip(&x_hat);
+    let ends = ends.map(|(x, h)| (grid.cell_index_of(x), (x - h).norm_squared()));
+    (rep.objective, rep.penalty) = objective_parts(ends, inp.penalty);
     rep.moves = x_hat
         .iter()
         .zip(pos.iter())
