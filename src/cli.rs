@@ -120,7 +120,8 @@ pub struct RunArgs {
     /// with a band, run every band variant on each step's problem and record their objectives.
     #[arg(long)]
     pub cross_check: bool,
-    /// Write the correction problem of step N as free-format MPS next to the recording.
+    /// Write the correction problem of step N as free-format MPS next to the recording (in
+    /// recordings/ with --no-record), as <scene>-<method>-<cells>[-band-<band>]-step<N>.mps.
     #[arg(long, value_name = "N")]
     pub export_lp: Option<u64>,
     /// Where to write the recording [default: recordings/<scene>.rrd].

@@ -7,6 +7,7 @@ use crate::methods::MethodOption;
 use crate::record::Recorder;
 use crate::runner::{Limit, Runner};
 use crate::scene::{Overrides, Scene};
+use crate::sim::correct::band::BandMode;
 use crate::sim::Simulation;
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -58,6 +59,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
         Some(n) => Limit::Steps(n),
         None => Limit::SimSeconds(scene.duration_secs()),
     };
+    check_export_step(args.export_lp, limit)?;
     let out = if args.no_record {
         None
     } else if let Some(p) = &args.out {
@@ -104,7 +106,10 @@ fn simulate<const D: usize>(
     args: &RunArgs,
 ) -> Result<(Runner<D>, Result<()>)> {
     let mut config = scene.config::<D>();
-    config.method.export_lp = args.export_lp.map(|n| (n, mps_path(scene, out, n)));
+    config.method.export_lp = match args.export_lp {
+        Some(n) => Some((n, mps_path(scene, out, n)?)),
+        None => None,
+    };
     config.method.cross_check = args.cross_check;
     let sim = Simulation::<D>::new(config);
     if let Some(r) = recorder {
@@ -188,15 +193,58 @@ fn finish<const D: usize>(
             );
         }
     }
-    result
+    result.and_then(|()| check_export_written(args.export_lp, runner.sim.state.steps))
 }
 
-/// Where `--export-lp` writes: beside the recording, or in `recordings/` without one.
-fn mps_path(scene: &Scene, out: Option<&Path>, step: u64) -> PathBuf {
-    let name = format!("{}-step{step}.mps", scene.name());
+/// `--export-lp N` must name a step the run can reach: steps count from 1 and, with
+/// `--steps M`, end at M. Checked before anything is written.
+fn check_export_step(export: Option<u64>, limit: Limit) -> Result<()> {
+    match (export, limit) {
+        (Some(0), _) => bail!("--export-lp 0: steps are numbered from 1"),
+        (Some(n), Limit::Steps(m)) if n > m => bail!(
+            "--export-lp {n}: the run has only {m} steps (--steps {m}), so step {n} is never \
+             reached"
+        ),
+        _ => Ok(()),
+    }
+}
+
+/// A run limited by time (or stopped by Ctrl-C) may end before the step `--export-lp` asked
+/// for; then no problem was written, and the run fails saying so (its recording is finished).
+fn check_export_written(export: Option<u64>, steps: u64) -> Result<()> {
+    match export {
+        Some(n) if steps < n => bail!(
+            "--export-lp {n}: the run ended after {steps} steps, so step {n} was never reached \
+             and no problem was written"
+        ),
+        _ => Ok(()),
+    }
+}
+
+/// Where `--export-lp` writes step `step`'s problem: beside the recording, or without one in
+/// `recordings/` (created here, so that a missing folder fails before the run, not at step
+/// `step`). The name says what tells runs of a scene apart: method, cells per axis and band,
+/// e.g. `dam-3d-ccp-50x50x50-band-paths-step3.mps`.
+fn mps_path(scene: &Scene, out: Option<&Path>, step: u64) -> Result<PathBuf> {
+    let cells: Vec<String> = scene.dims.iter().map(usize::to_string).collect();
+    let mut name = format!(
+        "{}-{}-{}",
+        scene.name(),
+        scene.method.kind.name(),
+        cells.join("x")
+    );
+    if scene.method.band != BandMode::None {
+        name += &format!("-band-{}", scene.method.band.name());
+    }
+    name += &format!("-step{step}.mps");
     match out {
-        Some(p) => p.with_file_name(name),
-        None => Path::new("recordings").join(name),
+        Some(p) => Ok(p.with_file_name(name)),
+        None => {
+            let dir = Path::new("recordings");
+            std::fs::create_dir_all(dir)
+                .with_context(|| format!("cannot create directory '{}'", dir.display()))?;
+            Ok(dir.join(name))
+        }
     }
 }
 

@@ -10,8 +10,14 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 fn cellflip(args: &[&str]) -> Output {
+    cellflip_in(Path::new("."), args)
+}
+
+/// `cellflip args` run from the folder `dir`.
+fn cellflip_in(dir: &Path, args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_cellflip"))
         .args(args)
+        .current_dir(dir)
         .env_remove("RERUN")
         .output()
         .expect("the binary runs")
@@ -359,7 +365,7 @@ fn recordings_log_exactly_the_documented_entities() {
         missing.is_empty(),
         "in the README but never logged: {missing:?}"
     );
-    let mps = std::fs::read_to_string(dir.join("dam-2d-step3.mps")).unwrap();
+    let mps = std::fs::read_to_string(dir.join("dam-2d-ccp-50x50-step3.mps")).unwrap();
     assert!(
         mps.starts_with("* optimal objective ")
             && mps.contains("\nROWS\n")
@@ -401,6 +407,80 @@ fn options_a_method_lacks_are_refused_before_anything_is_written() {
     ]);
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("--band"));
+}
+
+#[test]
+fn exported_problems_are_named_after_the_run_beside_the_recording_or_in_recordings() {
+    let dir = scratch_dir("export-names");
+    let out = dir.join("run.rrd");
+    let args = [
+        "run",
+        "dam-3d",
+        "--res",
+        "12",
+        "--steps",
+        "2",
+        "--export-lp",
+        "2",
+        "-q",
+    ];
+    let o = cellflip(&[&args[..], &["--out", out.to_str().unwrap()]].concat());
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let mps = std::fs::read_to_string(dir.join("dam-3d-ccp-12x12x12-band-paths-step2.mps"));
+    assert!(mps.unwrap().contains("\nROWS\n"));
+    // Without a recording, in recordings/ of the working folder, which need not exist yet.
+    let args = [
+        "run",
+        "dam-2d",
+        "--res",
+        "20",
+        "--steps",
+        "1",
+        "--export-lp",
+        "1",
+    ];
+    let o = cellflip_in(&dir, &[&args[..], &["--no-record", "-q"]].concat());
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let mps = std::fs::read_to_string(dir.join("recordings/dam-2d-ccp-20x20-step1.mps"));
+    assert!(mps.unwrap().starts_with("* optimal objective "));
+}
+
+#[test]
+fn export_lp_for_a_step_the_run_never_reaches_is_refused() {
+    let dir = scratch_dir("export-late");
+    let out = dir.join("x.rrd");
+    let run = |extra: &[&str]| {
+        let args = [
+            "run",
+            "dam-2d",
+            "--res",
+            "12",
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        let o = cellflip(&[&args[..], extra].concat());
+        assert!(!o.status.success(), "{extra:?} accepted");
+        String::from_utf8_lossy(&o.stderr).to_string()
+    };
+    // Up front, before anything is written.
+    let err = run(&["--steps", "3", "--export-lp", "5"]);
+    assert!(
+        err.contains("--export-lp 5") && err.contains("only 3 steps"),
+        "{err}"
+    );
+    let err = run(&["--steps", "3", "--export-lp", "0"]);
+    assert!(
+        err.contains("--export-lp 0") && err.contains("from 1"),
+        "{err}"
+    );
+    assert!(!out.exists(), "wrote a recording");
+    // A run limited by time fails at its end, its recording complete.
+    let err = run(&["--duration", "0.02", "--export-lp", "1000", "-q"]);
+    assert!(err.contains("step 1000 was never reached"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(common::logged_entities(&out).contains("world/particles"));
+    let files: Vec<_> = std::fs::read_dir(&dir).unwrap().collect();
+    assert_eq!(files.len(), 1, "{files:?}");
 }
 
 /// A recording that reads back whole: every message decodes, the stream ends with its footer

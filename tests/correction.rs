@@ -10,6 +10,7 @@ use cellflip::runner::Limit;
 use cellflip::scene::Overrides;
 use cellflip::sim::correct::band::BandMode;
 use cellflip::sim::correct::problem::{self, Directions};
+use cellflip::sim::correct::{self, CorrectionSettings};
 use cellflip::sim::markings::Markings;
 use cellflip::solvers::{lp, min_cost_flow};
 use common::{ccp, load, run_config};
@@ -97,6 +98,142 @@ fn flow_and_simplex_agree_on_600_random_2d_instances() {
 #[test]
 fn flow_and_simplex_agree_on_500_random_3d_instances() {
     agree_on_random_instances::<3>(500, 12);
+}
+
+/// Reads back the free-format MPS that `lp::to_mps` writes (N, E, L and G rows, RANGES, UP
+/// bounds) with the standard's meaning of each row type and range, and returns the optimum of
+/// its LP relaxation by microlp: what any LP solver finds for an exported file.
+fn solve_mps(text: &str) -> f64 {
+    use microlp::{ComparisonOp, OptimizationDirection, Problem};
+    use std::collections::HashMap;
+    let mut section = "";
+    let mut rows: Vec<(&str, &str)> = vec![];
+    let mut columns: Vec<(&str, Vec<(&str, f64)>)> = vec![];
+    let (mut rhs, mut range, mut up) = (HashMap::new(), HashMap::new(), HashMap::new());
+    for line in text.lines().filter(|l| !l.starts_with('*')) {
+        let f: Vec<&str> = line.split_whitespace().collect();
+        let num = |s: &str| s.parse::<f64>().unwrap_or_else(|e| panic!("{line}: {e}"));
+        if !line.starts_with(' ') {
+            section = f[0];
+            continue;
+        }
+        match section {
+            "ROWS" => rows.push((f[1], f[0])),
+            "COLUMNS" => {
+                if columns.last().is_none_or(|(c, _)| *c != f[0]) {
+                    columns.push((f[0], vec![]));
+                }
+                let entries = &mut columns.last_mut().unwrap().1;
+                entries.extend(f[1..].chunks(2).map(|e| (e[0], num(e[1]))));
+            }
+            "RHS" => {
+                rhs.insert(f[1], num(f[2]));
+            }
+            "RANGES" => {
+                range.insert(f[1], num(f[2]));
+            }
+            "BOUNDS" if f[0] == "UP" => {
+                up.insert(f[2], num(f[3]));
+            }
+            _ => panic!("unexpected line in {section}: {line}"),
+        }
+    }
+    let mut lp = Problem::new(OptimizationDirection::Minimize);
+    let mut terms: HashMap<&str, Vec<_>> = HashMap::new();
+    for (name, entries) in &columns {
+        let kind = |row: &str| rows.iter().find(|r| r.0 == row).unwrap().1;
+        let cost = entries
+            .iter()
+            .find(|e| kind(e.0) == "N")
+            .map_or(0.0, |e| e.1);
+        let v = lp.add_var(cost, (0.0, up.get(name).copied().unwrap_or(f64::INFINITY)));
+        for &(row, a) in entries.iter().filter(|e| kind(e.0) != "N") {
+            terms.entry(row).or_default().push((v, a));
+        }
+    }
+    for &(row, kind) in rows.iter().filter(|r| r.1 != "N") {
+        let (r, span) = (
+            rhs.get(row).copied().unwrap_or(0.0),
+            range.get(row).copied(),
+        );
+        let (lo, hi) = match (kind, span) {
+            ("E", None) => (r, r),
+            ("E", Some(s)) => (r.min(r + s), r.max(r + s)),
+            ("L", s) => (r - s.map_or(f64::INFINITY, f64::abs), r),
+            ("G", s) => (r, r + s.map_or(f64::INFINITY, f64::abs)),
+            _ => panic!("row type {kind}"),
+        };
+        let t = terms[row].as_slice();
+        if lo == hi {
+            lp.add_constraint(t, ComparisonOp::Eq, lo);
+            continue;
+        }
+        if lo.is_finite() {
+            lp.add_constraint(t, ComparisonOp::Ge, lo);
+        }
+        if hi.is_finite() {
+            lp.add_constraint(t, ComparisonOp::Le, hi);
+        }
+    }
+    let outcome = lp.solve().unwrap();
+    assert!(outcome.is_optimal(), "{outcome:?}");
+    outcome.solution().unwrap().objective()
+}
+
+/// Exported problems mean what the solvers solve: read back from MPS (inner cells that must
+/// keep a full count as `E` rows, others as `L` rows with ranges), they have the flow
+/// solver's optimum.
+fn exported_problems_read_back<const D: usize>(count: usize, seed: u64) -> usize {
+    let mut rng = StdRng::seed_from_u64(seed);
+    let mut equal_rows = 0;
+    for n in 0..count {
+        let (g, x_bar, x_hat, solid, mu) = random_instance::<D>(&mut rng, n % 2 == 0);
+        let prev = Markings::compute(&g, &x_bar, &solid);
+        let dirs = Directions::VonNeumann;
+        let p = problem::build(&g, &x_bar, &x_hat, &prev, &solid, mu, dirs, None, None).unwrap();
+        let a = &p.assignment;
+        let (flow, _) = min_cost_flow::solve(a).unwrap_or_else(|e| panic!("instance {n}: {e}"));
+        let mps = lp::to_mps(a, "t", &[]);
+        equal_rows += mps.lines().filter(|l| l.starts_with(" E bin")).count();
+        let (of, om) = (a.objective(&flow), solve_mps(&mps));
+        assert!(
+            (of - om).abs() <= 1e-9 * of.abs().max(1.0),
+            "instance {n} ({D}D, mu {mu}): flow {of} vs the exported problem {om}"
+        );
+    }
+    equal_rows
+}
+
+#[test]
+fn exported_problems_have_the_solvers_optimum_2d_and_3d() {
+    let equal_rows =
+        exported_problems_read_back::<2>(60, 13) + exported_problems_read_back::<3>(30, 14);
+    assert!(equal_rows > 0, "no instance had a cell with equal bounds");
+}
+
+#[test]
+fn a_failed_solve_is_exported_as_a_fallback_not_an_optimum() {
+    // The markings of a closed 3x3 box full at mu = 1 (every cell inner: it keeps its
+    // particle) with one particle gone: no assignment meets the bounds, the flow solver fails
+    // and every particle keeps its cell.
+    let g = Grid::new([3, 3]);
+    let full: Vec<Vector<2>> = (0..9).map(|c| g.center(g.cell_coords(c))).collect();
+    let solid = vec![false; 9];
+    let prev = Markings::compute(&g, &full, &solid);
+    let x_bar = full[1..].to_vec();
+    let mut pos = x_bar.clone();
+    let settings = CorrectionSettings::default();
+    let rep = correct::correct(
+        &g, &x_bar, &mut pos, &prev, &solid, 1, &settings, None, None, true,
+    )
+    .unwrap();
+    let why = rep.fallback.expect("the solver failed");
+    assert!(why.starts_with("flow solver failed"), "{why}");
+    let mps = rep.mps.unwrap();
+    let first = format!("* fallback objective {:.17e} ({why})\n", 0.0);
+    assert!(mps.starts_with(&first), "{mps}");
+    assert!(!mps.contains("optimal"), "{mps}");
+    assert_eq!(pos, x_bar);
 }
 
 #[test]

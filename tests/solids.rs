@@ -8,6 +8,7 @@ mod common;
 use cellflip::grid::Vector;
 use cellflip::methods::ccp::CcpReport;
 use cellflip::methods::MethodKind;
+use cellflip::runner::Limit;
 use cellflip::scene::{Overrides, Scene};
 use cellflip::sim::correct::band::BandMode;
 use cellflip::sim::solids::ObstacleMode;
@@ -432,4 +433,76 @@ fn falling_obstacles_reach_the_floor_in_3d_with_the_band() {
         assert_ne!(s.method.band, BandMode::None);
         reaches_the_floor(name, 3, &s);
     }
+}
+
+/// Runs `scene` for `steps` steps and checks after each that the correction's objective and
+/// penalty split eq. problem3's objective as documented: both >= 0, a penalty only when the
+/// obstacle had to stay (a particle ended in a cell it wanted), and whatever `check` checks.
+/// Returns the steps with a penalty.
+fn split_objective<const D: usize>(
+    scene: &Scene,
+    cross_check: bool,
+    steps: u64,
+    mut check: impl FnMut(&CcpReport<D>, &str),
+) -> usize {
+    let mut config = scene.config::<D>();
+    config.method.cross_check = cross_check;
+    let mut penalised = 0;
+    common::run_config::<D>(config, Limit::Steps(steps), |sim, rep| {
+        let at = format!("{} step {}", scene.name(), sim.state.steps);
+        let r = common::ccp(rep);
+        let c = &r.correction;
+        assert!(c.objective >= 0.0 && c.penalty >= 0.0, "{at}: {c:?}");
+        if c.penalty > 0.0 {
+            penalised += 1;
+            assert!(rep.blocked[0], "{at}: penalty {} but it moved", c.penalty);
+        }
+        check(r, &at);
+    });
+    penalised
+}
+
+#[test]
+fn objective_and_penalty_add_up_to_the_solvers_optimum() {
+    // The spiral's lid presses particles into the cells it wants: the simplex's optimum of the
+    // same problem (the cross-check) is the flow solver's objective + penalty.
+    let o = Overrides {
+        cells: Some(48),
+        ..Default::default()
+    };
+    let spiral = load("spiral-2d", &o);
+    let penalised = split_objective::<2>(&spiral, true, 32, |r, at| {
+        let d = r.correction.cross_check.clone().unwrap();
+        let d = d.unwrap_or_else(|e| panic!("{at}: {e}"));
+        assert!(
+            d <= 1e-9,
+            "{at}: objective + penalty is {d:e} off the simplex's"
+        );
+    });
+    assert!(penalised > 0, "no step had a penalty");
+}
+
+#[test]
+fn objective_and_penalty_split_the_band_correction_alike() {
+    // With the band: the displacement of the particles outside the cells the box wants, so the
+    // band's objective (every particle's displacement) exactly when no particle is in them.
+    let o = Overrides {
+        band: Some(BandMode::Paths),
+        ..Default::default()
+    };
+    let large = load("large-obstacle-2d", &o);
+    let penalised = split_objective::<2>(&large, false, 45, |r, at| {
+        let (c, b) = (&r.correction, r.correction.band.as_ref().unwrap());
+        if c.penalty == 0.0 {
+            assert_eq!(c.objective, b.objective, "{at}");
+        } else {
+            assert!(
+                c.objective <= b.objective,
+                "{at}: {} > {}",
+                c.objective,
+                b.objective
+            );
+        }
+    });
+    assert!(penalised > 0, "no step had a penalty");
 }

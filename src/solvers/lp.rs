@@ -139,8 +139,19 @@ pub fn solve_with(p: &BoundedAssignment, side: &[SideConstraint]) -> Result<Vec<
         .collect()
 }
 
+/// The MPS row type of a binding bin: `E` when its bounds meet (an inner cell that must keep
+/// exactly its count), else `L` on the upper bound with the lower bound as a range.
+fn bin_row_type(p: &BoundedAssignment, b: usize) -> char {
+    if p.lower[b] == p.upper[b] {
+        'E'
+    } else {
+        'L'
+    }
+}
+
 /// The problem in free-format MPS (rows `item<i>` and `bin<b>`, columns `x<k>`), with
-/// `comment` lines (e.g. the optimal objective) as `*` comments at the top.
+/// `comment` lines (e.g. the optimal objective) as `*` comments at the top. A bin row is `E`
+/// when its bounds are equal, else `L` with a `RANGES` entry when it has a lower bound.
 pub fn to_mps(p: &BoundedAssignment, name: &str, comment: &[String]) -> String {
     let mut s = String::new();
     for c in comment {
@@ -152,7 +163,7 @@ pub fn to_mps(p: &BoundedAssignment, name: &str, comment: &[String]) -> String {
     }
     let binding = binding_bins(p);
     for b in (0..p.bins()).filter(|&b| binding[b]) {
-        let _ = writeln!(s, " L bin{b}");
+        let _ = writeln!(s, " {} bin{b}", bin_row_type(p, b));
     }
     let _ = writeln!(s, "COLUMNS");
     for i in 0..p.items() {
@@ -173,7 +184,8 @@ pub fn to_mps(p: &BoundedAssignment, name: &str, comment: &[String]) -> String {
         let _ = writeln!(s, " rhs bin{b} {}", p.upper[b]);
     }
     let _ = writeln!(s, "RANGES");
-    for b in (0..p.bins()).filter(|&b| binding[b] && p.lower[b] > 0) {
+    let ranged = |b: usize| binding[b] && p.lower[b] > 0 && bin_row_type(p, b) == 'L';
+    for b in (0..p.bins()).filter(|&b| ranged(b)) {
         let _ = writeln!(s, " rng bin{b} {}", p.upper[b] - p.lower[b]);
     }
     let _ = writeln!(s, "BOUNDS");
@@ -204,5 +216,63 @@ mod tests {
         let mps = to_mps(&p, "t", &["optimal objective 1".into()]);
         assert!(mps.starts_with("* optimal objective 1\nNAME t\nROWS\n N cost\n E item0"));
         assert!(mps.contains(" L bin0") && !mps.contains(" L bin1") && mps.ends_with("ENDATA\n"));
+    }
+
+    #[test]
+    fn mps_writes_equal_bounds_as_e_rows_and_lower_bounds_as_ranges() {
+        // bin0 must hold exactly 1 (E), bin1 1..2 (L, range 1), bin2 at most 1 with two
+        // candidates (L), bin3 cannot bind (no row).
+        let p = BoundedAssignment {
+            item_start: vec![0, 2, 5, 7],
+            cand_bin: vec![0, 1, 0, 1, 2, 2, 3],
+            cand_cost: vec![0.0, 0.5, 0.25, 0.0, 1.0, 0.0, 2.0],
+            lower: vec![1, 1, 0, 0],
+            upper: vec![1, 2, 1, 1],
+        };
+        let want = "\
+* c
+NAME t
+ROWS
+ N cost
+ E item0
+ E item1
+ E item2
+ E bin0
+ L bin1
+ L bin2
+COLUMNS
+ x0 cost 0e0 item0 1
+ x0 bin0 1
+ x1 cost 5e-1 item0 1
+ x1 bin1 1
+ x2 cost 2.5e-1 item1 1
+ x2 bin0 1
+ x3 cost 0e0 item1 1
+ x3 bin1 1
+ x4 cost 1e0 item1 1
+ x4 bin2 1
+ x5 cost 0e0 item2 1
+ x5 bin2 1
+ x6 cost 2e0 item2 1
+RHS
+ rhs item0 1
+ rhs item1 1
+ rhs item2 1
+ rhs bin0 1
+ rhs bin1 2
+ rhs bin2 1
+RANGES
+ rng bin1 1
+BOUNDS
+ UP bnd x0 1
+ UP bnd x1 1
+ UP bnd x2 1
+ UP bnd x3 1
+ UP bnd x4 1
+ UP bnd x5 1
+ UP bnd x6 1
+ENDATA
+";
+        assert_eq!(to_mps(&p, "t", &["c".into()]), want);
     }
 }

@@ -169,6 +169,7 @@ pub fn digest_report<const D: usize>(d: &mut Digest, rep: &StepReport<D>) {
     if let Some(r) = rep.method_report::<CcpReport<D>>() {
         let c = &r.correction;
         d.f64(c.objective);
+        d.f64(c.penalty);
         d.u64(c.overfull_before as u64);
         d.u64(c.augmentations as u64);
         d.u64(c.fallback.is_some() as u64);

@@ -594,6 +594,9 @@ pub struct BandOutcome<const D: usize> {
     pub solve_time: Duration,
     pub augmentations: usize,
     pub fallback: Option<String>,
+    /// Eq. problem3's objective (`sigma_solid_obj` included) at the first solve's choice: the
+    /// value an LP solver finds for the exported problem (but for `full`).
+    pub first_cost: f64,
 }
 
 /// Corrects the advected positions `x_hat` with the band variant of `ctx`: the first solve of
@@ -617,6 +620,7 @@ pub fn correct_band<const D: usize>(
     let t0 = Instant::now();
     let (choice, augmentations, fallback) = first_solve(p, ctx.variant, alpha, solver);
     let solve_time = t0.elapsed();
+    let first_cost = p.assignment.objective(&choice);
     let (n_in, n_out) = flows(p, &choice);
     let mut pos: Vec<Vector<D>> = positions(grid, p, &choice, x_hat);
     let mut rep = BandCorrection::new(ctx.variant, alpha, (n_in, n_out), objective(&pos, x_hat));
@@ -685,6 +689,7 @@ pub fn correct_band<const D: usize>(
         solve_time,
         augmentations,
         fallback,
+        first_cost,
     }
 }
 

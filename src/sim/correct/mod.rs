@@ -75,8 +75,12 @@ impl Default for CorrectionSettings {
 /// What one correction did.
 #[derive(Clone, Debug, Default)]
 pub struct CorrectionReport<const D: usize> {
-    /// `sum sigma_obj` of the final positions.
+    /// The displacement: `sum |x - x_hat|^2` over the particles that end outside
+    /// `C_new_solid`.
     pub objective: f64,
+    /// The solid penalty: `sum sigma_solid_obj` over the particles that end in `C_new_solid`
+    /// (eq. solid_penalty2; 0 without obstacles). With `objective`, what the solver minimised.
+    pub penalty: f64,
     /// Cells holding more than `mu` particles after advection, before the correction.
     pub overfull_before: usize,
     pub solver_time: Duration,
@@ -95,6 +99,13 @@ pub struct CorrectionReport<const D: usize> {
     pub mps: Option<String>,
     /// The band correction, with the band method.
     pub band: Option<BandCorrection<D>>,
+}
+
+impl<const D: usize> CorrectionReport<D> {
+    /// Eq. problem3's objective with `sigma_solid_obj`: the displacement plus the penalty.
+    pub fn total(&self) -> f64 {
+        self.objective + self.penalty
+    }
 }
 
 /// Corrects `pos` (the advected positions `x_hat` on entry, `x` on return) given the previous
@@ -140,19 +151,16 @@ pub fn correct<const D: usize>(
                 penalty,
                 mu,
             };
-            correct_band(&inputs, pos, settings, ctx, &mut rep);
+            let first_cost = correct_band(&inputs, pos, settings, ctx, &mut rep);
             if want_mps {
-                rep.mps = Some(band_mps(&problem, &rep, settings, ctx.variant));
+                rep.mps = Some(band_mps(&problem, &rep, first_cost, settings, ctx.variant));
             }
         }
         None => {
-            let choice = solve(&problem, settings, &mut rep);
+            let choice = solve(&problem, settings, penalty, &mut rep);
             if want_mps {
-                let comment = format!(
-                    "optimal objective {:.17e} ({} solver)",
-                    rep.objective,
-                    settings.solver.name()
-                );
+                let cost = problem.assignment.objective(&choice);
+                let comment = objective_comment(cost, settings.solver, rep.fallback.as_deref());
                 rep.mps = Some(lp::to_mps(
                     &problem.assignment,
                     "cellflip-correction",
@@ -166,11 +174,12 @@ pub fn correct<const D: usize>(
 }
 
 /// Eq. problem3 without the band: the solver's choice of candidate per particle (every
-/// particle's previous cell if the solver fails), its objective, and with `cross_check` the
-/// other solver's answer on the same problem.
+/// particle's previous cell if the solver fails), its objective's two parts, and with
+/// `cross_check` the other solver's answer on the same problem.
 fn solve<const D: usize>(
     problem: &CorrectionProblem<D>,
     settings: &CorrectionSettings,
+    penalty: Option<&[f64]>,
     rep: &mut CorrectionReport<D>,
 ) -> Vec<u32> {
     let t0 = Instant::now();
@@ -193,7 +202,12 @@ fn solve<const D: usize>(
             problem.stay.clone()
         }
     };
-    rep.objective = problem.assignment.objective(&choice);
+    let a = &problem.assignment;
+    let ends = choice.iter().map(|&k| {
+        let k = k as usize;
+        (problem.bin_cell[a.cand_bin[k] as usize], a.cand_cost[k])
+    });
+    (rep.objective, rep.penalty) = objective_parts(ends, penalty);
     if settings.cross_check {
         let other = match settings.solver {
             Solver::Flow => Solver::Simplex,
@@ -205,17 +219,44 @@ fn solve<const D: usize>(
         rep.cross_check = Some(other_result.and_then(|(c, _)| {
             problem.assignment.check(&c)?;
             let o = problem.assignment.objective(&c);
-            Ok((o - rep.objective).abs() / rep.objective.abs().max(1.0))
+            Ok((o - rep.total()).abs() / rep.total().abs().max(1.0))
         }));
     }
     choice
 }
 
+/// Splits eq. problem3's objective by where the particles end: the displacement `sum |x -
+/// x_hat|^2` of those outside `C_new_solid`, and the penalty `sum sigma_solid_obj` (their
+/// cell's) of those in it. `ends` yields each particle's final cell and squared displacement.
+fn objective_parts(
+    ends: impl Iterator<Item = (usize, f64)>,
+    penalty: Option<&[f64]>,
+) -> (f64, f64) {
+    ends.fold((0.0, 0.0), |(d, s), (c, cost)| {
+        match penalty.map(|p| p[c]) {
+            Some(p) if p > 0.0 => (d, s + p),
+            _ => (d + cost, s),
+        }
+    })
+}
+
+/// An exported problem's objective line: eq. problem3's objective (`sigma_solid_obj`
+/// included) at the solver's optimum, or, when the solver failed, at the fallback (every
+/// particle in its previous cell) and why.
+fn objective_comment(cost: f64, solver: Solver, fallback: Option<&str>) -> String {
+    match fallback {
+        None => format!("optimal objective {cost:.17e} ({} solver)", solver.name()),
+        Some(why) => format!("fallback objective {cost:.17e} ({why})"),
+    }
+}
+
 /// The band method's problem as MPS: eq. problem3 with the bounds of eq. band_con_update,
-/// without the band row, and the first solve's optimum where there was one.
+/// without the band row, and `first_cost`, its objective at the first solve: the optimum (not
+/// for `full`, whose solve has the band row) or the fallback's.
 fn band_mps<const D: usize>(
     problem: &CorrectionProblem<D>,
     rep: &CorrectionReport<D>,
+    first_cost: f64,
     settings: &CorrectionSettings,
     variant: BandVariant,
 ) -> String {
@@ -226,12 +267,9 @@ fn band_mps<const D: usize>(
         variant.name(),
         b.alpha
     )];
-    if variant != BandVariant::Full && rep.fallback.is_none() {
-        comment.push(format!(
-            "optimal objective {:.17e} ({} solver)",
-            b.first_objective,
-            settings.solver.name()
-        ));
+    if variant != BandVariant::Full || rep.fallback.is_some() {
+        let fallback = rep.fallback.as_deref();
+        comment.push(objective_comment(first_cost, settings.solver, fallback));
     }
     lp::to_mps(&problem.assignment, "cellflip-correction", &comment)
 }
@@ -248,14 +286,15 @@ struct BandInputs<'a, const D: usize> {
 }
 
 /// The band method's correction: the variant of `ctx`, and with cross-checking every other
-/// variant on the same problem, for their objectives.
+/// variant on the same problem, for their objectives. Returns eq. problem3's objective at the
+/// first solve, for the exported problem.
 fn correct_band<const D: usize>(
     inp: &BandInputs<'_, D>,
     pos: &mut [Vector<D>],
     settings: &CorrectionSettings,
     ctx: BandContext,
     rep: &mut CorrectionReport<D>,
-) {
+) -> f64 {
     let x_hat = pos.to_vec();
     let run = |variant| {
         let ctx = BandContext { variant, ..ctx };
@@ -288,15 +327,18 @@ fn correct_band<const D: usize>(
     rep.solver_time = out.solve_time;
     rep.augmentations = out.augmentations;
     rep.fallback = out.fallback;
-    rep.objective = report.objective;
     rep.band = Some(report);
     let grid = inp.grid;
+    let ends = pos.iter().zip(&x_hat);
+    let ends = ends.map(|(x, h)| (grid.cell_index_of(x), (x - h).norm_squared()));
+    (rep.objective, rep.penalty) = objective_parts(ends, inp.penalty);
     rep.moves = x_hat
         .iter()
         .zip(pos.iter())
         .filter(|(h, x)| grid.cell_index_of(h) != grid.cell_index_of(x))
         .map(|(h, x)| (*h, *x))
         .collect();
+    out.first_cost
 }
 
 fn overfull_cells<const D: usize>(grid: &Grid<D>, pos: &[Vector<D>], mu: u32) -> usize {
