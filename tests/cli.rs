@@ -433,7 +433,7 @@ fn exported_problems_are_named_after_the_run_beside_the_recording_or_in_recordin
         "run",
         "dam-2d",
         "--res",
-        "20",
+        "24",
         "--steps",
         "1",
         "--export-lp",
@@ -441,7 +441,7 @@ fn exported_problems_are_named_after_the_run_beside_the_recording_or_in_recordin
     ];
     let o = cellflip_in(&dir, &[&args[..], &["--no-record", "-q"]].concat());
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let mps = std::fs::read_to_string(dir.join("recordings/dam-2d-ccp-20x20-step1.mps"));
+    let mps = std::fs::read_to_string(dir.join("recordings/dam-2d-ccp-24x24-step1.mps"));
     assert!(mps.unwrap().starts_with("* optimal objective "));
 }
 
@@ -454,7 +454,7 @@ fn export_lp_for_a_step_the_run_never_reaches_is_refused() {
             "run",
             "dam-2d",
             "--res",
-            "12",
+            "24",
             "--out",
             out.to_str().unwrap(),
         ];
