@@ -1,4 +1,4 @@
-//! `cellflip run`: a scene through the runner, with its progress bar, recording, Ctrl-C
+//! `cellflip run`: a scene through the runner, with its progress bar, recording, signal
 //! handling and the summary at the end.
 
 use crate::cli::RunArgs;
@@ -209,7 +209,7 @@ fn check_export_step(export: Option<u64>, limit: Limit) -> Result<()> {
     }
 }
 
-/// A run limited by time (or stopped by Ctrl-C) may end before the step `--export-lp` asked
+/// A run limited by time (or stopped by a signal) may end before the step `--export-lp` asked
 /// for; then no problem was written, and the run fails saying so (its recording is finished).
 fn check_export_written(export: Option<u64>, steps: u64) -> Result<()> {
     match export {

@@ -625,7 +625,7 @@ fn emitter(ch: &Checker, key: &str, e: &EmitterFile, max_speed: f64) -> Checked<
     ch.len(&format!("{key}.velocity"), &e.velocity)?;
     let speed = e.velocity.iter().fold(0.0f64, |a, v| a.hypot(*v));
     if speed > max_speed {
-        let why = format!("{speed} m/s is faster than simulation.max_speed ({max_speed} m/s)");
+        let why = format!("{speed:.3e} m/s is faster than simulation.max_speed ({max_speed} m/s)");
         return ch.err(&format!("{key}.velocity"), ErrorKind::Range, why);
     }
     if !(e.start.is_finite() && e.start >= 0.0) {
