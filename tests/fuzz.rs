@@ -72,17 +72,14 @@ const KEYS: &[(&str, &str)] = &[
     ("[emitter]", "until_fill"),
 ];
 
-const VALUES: &[&str] = &[
+/// Values out of range, of the wrong type, or hostile (paths, huge integers, non-finite).
+const HOSTILE: &[&str] = &[
     "0",
-    "1",
     "2",
     "3",
-    "4",
-    "8",
     "9",
     "27",
     "-1",
-    "0.5",
     "1e-300",
     "1e300",
     "-1e300",
@@ -92,19 +89,10 @@ const VALUES: &[&str] = &[
     "4294967296",
     "\"\"",
     "\"../x\"",
-    "\"box\"",
     "\"ball\"",
-    "\"ccp\"",
-    "\"flip\"",
-    "\"idp\"",
-    "\"nbflip\"",
-    "\"powerpic\"",
-    "\"paths\"",
     "\"full\"",
-    "\"one-way\"",
     "\"moore\"",
     "[]",
-    "[0.0, 0.0]",
     "[0.1, 0.9]",
     "[0.5, 0.5, 0.5]",
     "[1.0, 1.0, 1.0]",
@@ -157,7 +145,8 @@ fn render(scene: &BTreeMap<(String, String), String>) -> String {
 
 /// Runs a scene a few steps, unless it is too large for a test.
 fn run_briefly(scene: &Scene) -> anyhow::Result<()> {
-    if scene.memory_estimate().cells > 40_000 || scene.memory_estimate().particles > 2e5 {
+    let size = scene.memory_estimate();
+    if size.cells > 40_000 || size.particles > 2e5 {
         return Ok(());
     }
     let limit = Limit::Steps(3);
@@ -176,7 +165,7 @@ fn generated_scenes_are_refused_naming_a_key_or_run_keeping_their_invariants() {
         for _ in 0..rng.random_range(1..=2) {
             let (t, k) = *KEYS.choose(&mut rng).unwrap();
             let pool = if rng.random::<f64>() < 0.3 {
-                VALUES
+                HOSTILE
             } else {
                 PLAUSIBLE
             };

@@ -756,20 +756,21 @@ fn obstacles_start_clear<const D: usize>(ch: &Checker, scene: &Scene) -> Checked
 fn regions_cover_cells<const D: usize>(ch: &Checker, scene: &Scene) -> Checked<()> {
     let config = scene.config::<D>();
     let grid = Grid::new(config.dims);
-    let fluid = config.fluid.iter().map(|r| ("fluid", r));
-    let emitters = config.emitters.iter().map(|e| ("emitter", &e.region));
-    let mut index = std::collections::HashMap::new();
-    for (section, region) in fluid.chain(emitters) {
-        let i = index.entry(section).or_insert(0);
+    let fluid = config
+        .fluid
+        .iter()
+        .enumerate()
+        .map(|(i, r)| (format!("fluid[{i}]"), r, "seed"));
+    let emitters = (config.emitters.iter().enumerate())
+        .map(|(i, e)| (format!("emitter[{i}]"), &e.region, "emit"));
+    for (key, region, verb) in fluid.chain(emitters) {
         if region.cells(&grid).next().is_none() {
             let why = format!(
-                "holds no cell centre at this resolution (cells of {} m), so it would {} nothing",
-                ch.h,
-                if section == "fluid" { "seed" } else { "emit" }
+                "holds no cell centre at this resolution (cells of {} m), so it would {verb} nothing",
+                ch.h
             );
-            return ch.err(&format!("{section}[{i}]"), ErrorKind::Geometry, why);
+            return ch.err(&key, ErrorKind::Geometry, why);
         }
-        *i += 1;
     }
     Ok(())
 }

@@ -35,15 +35,10 @@ impl Scene {
         let cells = grid.num_cells();
         let mu = self.file.simulation.ppc as f64;
         let seeded: usize = config.fluid.iter().map(|r| r.cells(&grid).count()).sum();
-        let emitted = match config.emitters.len() {
-            0 => 0.0,
-            _ => self
-                .file
-                .emitter
-                .iter()
-                .map(|e| e.until_fill.unwrap_or(1.0))
-                .fold(0.0, f64::max),
-        };
+        // The largest fill any emitter may reach (0 without emitters).
+        let emitted = (self.file.emitter.iter())
+            .map(|e| e.until_fill.unwrap_or(1.0))
+            .fold(0.0, f64::max);
         let particles = mu * (seeded as f64 + emitted * cells as f64);
         let bytes = BYTES_PER_CELL * cells as f64 + BYTES_PER_PARTICLE * particles;
         MemoryEstimate {
