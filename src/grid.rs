@@ -7,6 +7,7 @@
 //! axes. Linear indices run with axis 0 fastest.
 
 use nalgebra::SVector;
+use rayon::prelude::*;
 
 /// A point or vector in grid units (cells).
 pub type Vector<const D: usize> = SVector<f64, D>;
@@ -95,6 +96,47 @@ impl<const D: usize> Grid<D> {
         f
     }
 
+    /// The coordinates of the faces of component `axis` from index `start` on, in index order:
+    /// one division at the start, then an odometer (grid-wide face loops are hot).
+    pub fn face_coords_from(&self, axis: usize, start: usize) -> impl Iterator<Item = Cell<D>> {
+        let dims = self.face_dims[axis];
+        let mut f = self.face_coords(axis, start);
+        std::iter::from_fn(move || {
+            let here = f;
+            for k in 0..D {
+                f[k] += 1;
+                if f[k] < dims[k] {
+                    break;
+                }
+                f[k] = 0;
+            }
+            Some(here)
+        })
+    }
+
+    /// Calls `f(face_index, face_coords, value)` for every face of component `axis` with its
+    /// entry of `values` (one per face), in parallel over layers of the last axis.
+    pub fn par_for_each_face<T: Send>(
+        &self,
+        axis: usize,
+        values: &mut [T],
+        f: impl Fn(usize, Cell<D>, &mut T) + Sync,
+    ) {
+        assert_eq!(values.len(), self.num_faces(axis));
+        let layer = self.face_strides[axis][D - 1];
+        values
+            .par_chunks_mut(layer)
+            .with_min_len(crate::PAR_GRAIN.div_ceil(layer))
+            .enumerate()
+            .for_each(|(l, chunk)| {
+                let start = l * layer;
+                let coords = self.face_coords_from(axis, start);
+                for ((j, v), c) in chunk.iter_mut().enumerate().zip(coords) {
+                    f(start + j, c, v);
+                }
+            });
+    }
+
     /// Whether `x` lies inside the domain `[0, dims)`.
     pub fn contains(&self, x: &Vector<D>) -> bool {
         (0..D).all(|k| x[k] >= 0.0 && x[k] < self.dims[k] as f64)
@@ -102,8 +144,9 @@ impl<const D: usize> Grid<D> {
 
     /// The cell containing `x`, or `None` outside the domain (or for a non-finite point).
     pub fn cell_of(&self, x: &Vector<D>) -> Option<Cell<D>> {
+        // Inside the domain `x_k >= 0`, so truncation is the floor.
         self.contains(x)
-            .then(|| std::array::from_fn(|k| (x[k].floor() as usize).min(self.dims[k] - 1)))
+            .then(|| std::array::from_fn(|k| (x[k] as usize).min(self.dims[k] - 1)))
     }
 
     /// The linear index of the cell containing `x`; panics outside the domain (a bug).
@@ -215,55 +258,88 @@ impl<const D: usize> MacField<D> {
     }
 
     /// Multilinear interpolation of the field at `x` (grid units).
+    #[inline]
     pub fn interpolate(&self, grid: &Grid<D>, x: &Vector<D>) -> Vector<D> {
         Vector::<D>::from_fn(|a, _| self.interpolate_component(grid, a, x))
     }
 
     /// Multilinear interpolation of component `a` at `x`.
+    #[inline]
     pub fn interpolate_component(&self, grid: &Grid<D>, a: usize, x: &Vector<D>) -> f64 {
-        let mut v = 0.0;
-        for_each_face_weight(grid, a, x, |idx, w| v += w * self.comp[a][idx]);
-        v
+        FaceStencil::new(grid, a, x).apply(&self.comp[a])
     }
 }
 
-/// Calls `f(face_index, weight)` for the `2^D` faces of component `axis` around `x`, with the
-/// multilinear ("tent") weights of paper sec. 3 (P2G and G2P). Weights sum to 1; points near the
-/// domain walls are clamped onto the outermost faces.
-#[inline]
-pub fn for_each_face_weight<const D: usize>(
-    grid: &Grid<D>,
-    axis: usize,
-    x: &Vector<D>,
-    mut f: impl FnMut(usize, f64),
-) {
-    let fd = grid.face_dims(axis);
-    let mut base = [0usize; D];
-    let mut frac = [0.0f64; D];
-    for k in 0..D {
-        // Face positions along k: integers on the face axis, half-integers on the others.
-        let s = if k == axis { x[k] } else { x[k] - 0.5 };
-        let hi = (fd[k] - 1) as f64;
-        let s = s.clamp(0.0, hi);
-        let i = (s.floor() as usize).min(fd[k].saturating_sub(2));
-        base[k] = i;
-        frac[k] = if fd[k] >= 2 { s - i as f64 } else { 0.0 };
-    }
-    for corner in 0..1usize << D {
-        let mut w = 1.0;
-        let mut idx = 0;
+/// The `2^D` faces of velocity component `axis` around a point, with the multilinear ("tent")
+/// weights of paper sec. 3 (P2G and G2P). Weights sum to 1; points near the domain walls are
+/// clamped onto the outermost faces. Built once per particle and component, it serves every
+/// field read or written there (G2P reads the new and the old field with one stencil).
+#[derive(Clone, Copy, Debug)]
+pub struct FaceStencil<const D: usize> {
+    idx: [usize; 8],
+    w: [f64; 8],
+}
+
+impl<const D: usize> FaceStencil<D> {
+    /// `2^D`; the arrays hold up to 3 dimensions.
+    const CORNERS: usize = {
+        assert!(D <= 3, "face stencils are for 1 to 3 dimensions");
+        1 << D
+    };
+
+    /// Corner `c` (bit `k` set: the upper face along axis `k`) has the weight
+    /// `prod_k (frac_k or 1 - frac_k)`, multiplied in axis order.
+    #[inline]
+    pub fn new(grid: &Grid<D>, axis: usize, x: &Vector<D>) -> Self {
+        let (fd, strides) = (&grid.face_dims[axis], &grid.face_strides[axis]);
+        let mut base = 0;
+        // Per axis: the weights of the lower and the upper face, and the upper face's offset.
+        let (mut lo, mut hi, mut up) = ([1.0f64; 3], [0.0f64; 3], [0usize; 3]);
         for k in 0..D {
-            let up = (corner >> k) & 1;
-            if fd[k] < 2 && up == 1 {
-                w = 0.0;
-                break;
+            // Face positions along k: integers on the face axis, half-integers on the others.
+            let s = if k == axis { x[k] } else { x[k] - 0.5 };
+            let top = fd[k] - 1;
+            let s = s.clamp(0.0, top as f64);
+            // `0 <= s < 2^31` (cells per axis are bounded), so truncation is the floor; through
+            // i32, whose conversion is one instruction where usize's takes a dozen.
+            let i = (s as i32 as usize).min(top.saturating_sub(1));
+            base += i * strides[k];
+            // A single layer of faces along k keeps weight 1 on it (and offset 0 above it).
+            if top > 0 {
+                hi[k] = s - i as f64;
+                lo[k] = 1.0 - hi[k];
+                up[k] = strides[k];
             }
-            w *= if up == 1 { frac[k] } else { 1.0 - frac[k] };
-            idx += (base[k] + up) * grid.face_stride(axis, k);
         }
-        if w != 0.0 {
-            f(idx, w);
+        let (mut idx, mut w) = ([0usize; 8], [0.0f64; 8]);
+        for c in 0..Self::CORNERS {
+            let (mut i, mut wc) = (base, 1.0);
+            for k in 0..D {
+                if (c >> k) & 1 == 1 {
+                    i += up[k];
+                    wc *= hi[k];
+                } else {
+                    wc *= lo[k];
+                }
+            }
+            (idx[c], w[c]) = (i, wc);
         }
+        Self { idx, w }
+    }
+
+    /// The faces and their weights.
+    pub fn weights(&self) -> impl Iterator<Item = (usize, f64)> + '_ {
+        (0..Self::CORNERS).map(|c| (self.idx[c], self.w[c]))
+    }
+
+    /// `sum_c w_c values[face_c]`, in corner order.
+    #[inline]
+    pub fn apply(&self, values: &[f64]) -> f64 {
+        let mut v = 0.0;
+        for c in 0..Self::CORNERS {
+            v += self.w[c] * values[self.idx[c]];
+        }
+        v
     }
 }
 
@@ -319,6 +395,25 @@ mod tests {
             }
         }
         assert_eq!(g3.num_faces(0), 4 * 4 * 5);
+        for a in 0..3 {
+            let from_7: Vec<_> = g3
+                .face_coords_from(a, 7)
+                .take(g3.num_faces(a) - 7)
+                .collect();
+            assert!(from_7
+                .iter()
+                .enumerate()
+                .all(|(j, f)| *f == g3.face_coords(a, 7 + j)));
+            let mut seen = vec![[0; 3]; g3.num_faces(a)];
+            g3.par_for_each_face(a, &mut seen, |i, f, v| {
+                assert_eq!(f, g3.face_coords(a, i));
+                *v = f;
+            });
+            assert_eq!(
+                seen[g3.num_faces(a) - 1],
+                g3.face_coords(a, g3.num_faces(a) - 1)
+            );
+        }
     }
 
     #[test]
@@ -369,9 +464,26 @@ mod tests {
         ] {
             let x = Vector::<3>::from(x);
             for a in 0..3 {
-                let mut s = 0.0;
-                for_each_face_weight(&g, a, &x, |_, w| s += w);
+                let s: f64 = FaceStencil::new(&g, a, &x).weights().map(|(_, w)| w).sum();
                 assert!((s - 1.0).abs() < 1e-12, "axis {a} at {x:?}: {s}");
+            }
+        }
+    }
+
+    #[test]
+    fn face_stencil_has_the_tent_weights_and_stays_inside_thin_grids() {
+        let g = Grid::new([4, 3]);
+        let st = FaceStencil::new(&g, 0, &Vector::<2>::new(1.25, 1.75));
+        // Faces of axis 0 at x = 1, 2 and y = 1.5, 2.5 (face dims [5, 3]).
+        let want = [(6, 0.5625), (7, 0.1875), (11, 0.1875), (12, 0.0625)];
+        assert_eq!(st.weights().collect::<Vec<_>>(), want);
+        // One cell thick along y (and z): the faces repeat with weight 0, all indices valid.
+        for g in [Grid::new([3, 1, 1]), Grid::new([1, 1, 1])] {
+            for a in 0..3 {
+                let st = FaceStencil::new(&g, a, &Vector::<3>::new(0.9, 0.3, 0.7));
+                assert!(st.weights().all(|(i, _)| i < g.num_faces(a)));
+                let total: f64 = st.weights().map(|(_, w)| w).sum();
+                assert!((total - 1.0).abs() < 1e-15);
             }
         }
     }

@@ -21,7 +21,7 @@
 //! Adding a method: one file in this folder with a type implementing [`MethodType`] and
 //! [`FluidMethod`], and one line in the [`methods!`] list below.
 
-use crate::grid::MacField;
+use crate::grid::{MacField, Vector};
 use crate::metrics::InvariantViolation;
 use crate::record::Log;
 use crate::sim::correct::band::BandMode;
@@ -220,11 +220,18 @@ pub trait FluidMethod<const D: usize>: Send {
     fn after_projection(&mut self, _s: &mut State<D>, _u: &mut MacField<D>) {}
 
     /// Alg. flip line 4: the grid velocity back to the particles (`u_old` is the field before
-    /// forces and projection).
-    fn grid_to_particles(&mut self, s: &mut State<D>, u: &MacField<D>, u_old: &MacField<D>) {
+    /// forces and projection). Returns `u(x_p)` per particle when the particles have not moved,
+    /// for the advection (line 5) to use instead of interpolating `u` again at the same points.
+    fn grid_to_particles(
+        &mut self,
+        s: &mut State<D>,
+        u: &MacField<D>,
+        u_old: &MacField<D>,
+    ) -> Option<Vec<Vector<D>>> {
         let flip_ratio = s.config.flip_ratio;
         let p = &mut s.particles;
-        transfer::grid_to_particles(&s.grid, u, u_old, flip_ratio, &p.pos, &mut p.vel);
+        let at = transfer::grid_to_particles(&s.grid, u, u_old, flip_ratio, &p.pos, &mut p.vel);
+        Some(at)
     }
 
     /// Just before the particles are advected (their positions are `x_bar`).

@@ -267,7 +267,12 @@ impl<const D: usize> FluidMethod<D> for PowerPicSim<D> {
     }
 
     /// Step 4: velocities from the kernels (FLIP/PIC blend), positions to their barycentres.
-    fn grid_to_particles(&mut self, s: &mut State<D>, u: &MacField<D>, u_old: &MacField<D>) {
+    fn grid_to_particles(
+        &mut self,
+        s: &mut State<D>,
+        u: &MacField<D>,
+        u_old: &MacField<D>,
+    ) -> Option<Vec<Vector<D>>> {
         let plan = self.plan();
         let (tg, g) = (&self.tg, &s.grid);
         let mut slot = vec![u32::MAX; tg.capacity.len()];
@@ -310,6 +315,8 @@ impl<const D: usize> FluidMethod<D> for PowerPicSim<D> {
             s.particles.vel[p] = v;
             self.row_error = self.row_error.max(e);
         }
+        // The particles moved to their barycentres: advection interpolates there.
+        None
     }
 
     /// The plan's marginals, recounted from the cells' sums: every particle's row holds its

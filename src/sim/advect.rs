@@ -12,16 +12,23 @@ use rayon::prelude::*;
 /// The margin epsilon of eq. best_cell_pos, in cells.
 pub const CELL_MARGIN: f64 = 0.01;
 
-/// Moves every particle with the grid velocity ([`displace`] by `dt u(x)`).
+/// Moves every particle with the grid velocity ([`displace`] by `dt u(x)`); `at` is `u(x)` per
+/// particle when the transfer back to the particles already has it.
 pub fn advect_particles<const D: usize>(
     grid: &Grid<D>,
     u: &MacField<D>,
+    at: Option<&[Vector<D>]>,
     solid: &[bool],
     dt: f64,
     pos: &mut [Vector<D>],
 ) {
-    pos.par_iter_mut()
-        .for_each(|x| *x = displace(grid, solid, x, dt * u.interpolate(grid, x)));
+    let pos = pos.par_iter_mut().with_min_len(crate::PAR_GRAIN_PARTICLES);
+    match at {
+        Some(at) => pos
+            .zip(at)
+            .for_each(|(x, v)| *x = displace(grid, solid, x, dt * v)),
+        None => pos.for_each(|x| *x = displace(grid, solid, x, dt * u.interpolate(grid, x))),
+    }
 }
 
 /// Where a particle at `x` ends when moved by `d`: clamped into the domain, `CELL_MARGIN` from
@@ -110,7 +117,11 @@ mod tests {
             Vector::<3>::new(7.8, 1.5, 1.5),
             Vector::<3>::new(4.6, 2.5, 2.5),
         ];
-        advect_particles(&g, &u, &solid, 0.25, &mut pos);
+        let at: Vec<_> = pos.iter().map(|x| u.interpolate(&g, x)).collect();
+        let mut pos2 = pos.clone();
+        advect_particles(&g, &u, Some(&at), &solid, 0.25, &mut pos2);
+        advect_particles(&g, &u, None, &solid, 0.25, &mut pos);
+        assert_eq!(pos, pos2);
         assert!((pos[0] - Vector::<3>::new(2.0, 1.5, 1.5)).norm() < 1e-12);
         assert_eq!(pos[1][0], 8.0 - CELL_MARGIN);
         assert_eq!(pos[2], Vector::<3>::new(5.0 - CELL_MARGIN, 2.5, 2.5));

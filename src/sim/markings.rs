@@ -3,6 +3,7 @@
 //! sec. band_method (deep, band interface, band, surface).
 
 use crate::grid::{Cell, Grid, Vector};
+use rayon::prelude::*;
 use std::collections::VecDeque;
 
 /// What occupies a cell.
@@ -139,6 +140,8 @@ impl Markings {
             count[grid.cell_index_of(x)] += 1;
         }
         let kind: Vec<CellKind> = (0..n)
+            .into_par_iter()
+            .with_min_len(crate::PAR_GRAIN)
             .map(|c| {
                 if solid[c] {
                     CellKind::Solid
@@ -150,6 +153,8 @@ impl Markings {
             })
             .collect();
         let surface: Vec<bool> = (0..n)
+            .into_par_iter()
+            .with_min_len(crate::PAR_GRAIN)
             .map(|c| {
                 kind[c] == CellKind::Fluid
                     && grid.moore_neighbors(grid.cell_coords(c)).any(|m| {

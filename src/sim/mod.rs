@@ -230,14 +230,17 @@ impl<const D: usize> Simulation<D> {
         rep.max_speed = timestep::finite_speed(&u, &rep.pcg)?;
         (dt, rep.dt_shortened) = timestep::shortened(dt, rep.max_speed, s.config.cfl);
         // Line 4: grid to particles.
-        rep.times.time(Stage::GridToParticles, || {
-            m.grid_to_particles(s, &u, &u_old);
+        let u_at_particles = rep.times.time(Stage::GridToParticles, || {
+            let at = m.grid_to_particles(s, &u, &u_old);
             transfer::limit_speeds(&mut s.particles.vel, s.config.max_speed);
+            at
         });
         // Line 5: advection (and, with the band, of the grid velocity).
         m.before_advection(s);
         rep.times.time(Stage::Advect, || {
-            advect::advect_particles(&s.grid, &u, &s.solids.solid, dt, &mut s.particles.pos);
+            let (grid, pos) = (&s.grid, &mut s.particles.pos);
+            let at = u_at_particles.as_deref();
+            advect::advect_particles(grid, &u, at, &s.solids.solid, dt, pos);
             s.velocity = m.next_grid_velocity(s, u, dt);
         });
         // Line 6: the correction, with the cells obstacles want this step (sec. 7).

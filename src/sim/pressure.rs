@@ -66,13 +66,12 @@ pub fn apply_solid_boundary<const D: usize>(
     solid_vel: &[Vector<D>],
     u: &mut MacField<D>,
 ) {
-    for a in 0..D {
-        for (i, v) in u.comp[a].iter_mut().enumerate() {
-            if let FaceKind::Solid(s) = face_kind(grid, a, grid.face_coords(a, i), solid, solid_vel)
-            {
+    for (a, comp) in u.comp.iter_mut().enumerate() {
+        grid.par_for_each_face(a, comp, |_, f, v| {
+            if let FaceKind::Solid(s) = face_kind(grid, a, f, solid, solid_vel) {
                 *v = s;
             }
-        }
+        });
     }
 }
 
@@ -103,15 +102,14 @@ pub fn project<const D: usize>(
     let system = Poisson::new(grid, |c| kind[c] == CellKind::Fluid, solid);
     let rhs = system.cells().map(|c| -divergence(grid, u, c)).collect();
     let (p, stats) = system.solve(rhs, settings);
-    for ax in 0..D {
-        for (i, v) in u.comp[ax].iter_mut().enumerate() {
-            let f = grid.face_coords(ax, i);
+    for (ax, comp) in u.comp.iter_mut().enumerate() {
+        grid.par_for_each_face(ax, comp, |_, f, v| {
             if let FaceKind::Open { left, right } = face_kind(grid, ax, f, solid, solid_vel) {
                 if system.has(left) || system.has(right) {
                     *v -= p[right] - p[left];
                 }
             }
-        }
+        });
     }
     stats
 }
@@ -244,20 +242,18 @@ pub fn known_after_projection<const D: usize>(
     solid: &[bool],
 ) -> [Vec<bool>; D] {
     std::array::from_fn(|a| {
-        (0..grid.num_faces(a))
-            .map(|i| {
-                let f = grid.face_coords(a, i);
-                if f[a] == 0 || f[a] == grid.dims[a] {
-                    return true;
-                }
+        let mut known = vec![true; grid.num_faces(a)];
+        grid.par_for_each_face(a, &mut known, |_, f, k| {
+            if f[a] > 0 && f[a] < grid.dims[a] {
                 let right = grid.cell_index(f);
                 let left = right - grid.cell_stride(a);
-                solid[left]
+                *k = solid[left]
                     || solid[right]
                     || kind[left] == CellKind::Fluid
-                    || kind[right] == CellKind::Fluid
-            })
-            .collect()
+                    || kind[right] == CellKind::Fluid;
+            }
+        });
+        known
     })
 }
 

@@ -3,7 +3,8 @@
 //! without fluid, and grid-to-particle with a FLIP/PIC blend. The band method's velocity
 //! combination is in [`crate::sim::band`].
 
-use crate::grid::{for_each_face_weight, Grid, MacField, Vector};
+use crate::grid::{Cell, FaceStencil, Grid, MacField, Vector};
+use crate::{PAR_GRAIN, PAR_GRAIN_PARTICLES};
 use rayon::prelude::*;
 
 /// Transfers particle velocities to faces: `u_f = sum_p w_fp v_p / sum_p w_fp` with the
@@ -28,54 +29,119 @@ pub fn weighted_to_grid<const D: usize>(
     splat(grid, pos, vel, Some(mass))
 }
 
+/// Cell layers per slab of the particles-to-grid pass (along the last axis).
+const SLAB: usize = 2;
+
+/// Splats without atomics or per-thread copies of the grid. The domain is cut into slabs of
+/// [`SLAB`] cell layers along the last axis; a particle's faces lie within one face layer of
+/// its slab, so slabs two apart write disjoint faces. The even slabs run in parallel, then
+/// the odd ones, each slab's particles in index order: every face sums its particles in one
+/// fixed order, whatever the thread count.
 fn splat<const D: usize>(
     grid: &Grid<D>,
     pos: &[Vector<D>],
     vel: &[Vector<D>],
     mass: Option<&[f64]>,
 ) -> (MacField<D>, [Vec<bool>; D]) {
-    // A fixed number of contiguous chunks, each with its own accumulator, summed in chunk
-    // order: a few grid-sized buffers, and bit-identical results whatever the thread count.
-    const CHUNKS: usize = 4;
-    let chunk = pos.len().div_ceil(CHUNKS).max(1);
-    let partials: Vec<[(Vec<f64>, Vec<f64>); D]> = pos
-        .par_chunks(chunk)
-        .zip(vel.par_chunks(chunk))
-        .enumerate()
-        .map(|(k, (xs, vs))| {
-            let mut acc: [(Vec<f64>, Vec<f64>); D] = std::array::from_fn(|a| {
-                (vec![0.0; grid.num_faces(a)], vec![0.0; grid.num_faces(a)])
-            });
-            for (i, (x, v)) in xs.iter().zip(vs).enumerate() {
-                let m = mass.map_or(1.0, |m| m[k * chunk + i]);
-                for (a, (sum, wsum)) in acc.iter_mut().enumerate() {
-                    for_each_face_weight(grid, a, x, |i, w| {
-                        sum[i] += m * w * v[a];
-                        wsum[i] += m * w;
-                    });
-                }
-            }
-            acc
-        })
-        .collect();
-    let mut field = MacField::zeros(grid);
-    let mut known: [Vec<bool>; D] = std::array::from_fn(|a| vec![false; grid.num_faces(a)]);
-    for a in 0..D {
-        field.comp[a]
-            .par_iter_mut()
-            .zip(known[a].par_iter_mut())
-            .enumerate()
-            .for_each(|(i, (u, k))| {
-                let (s, w) = partials
-                    .iter()
-                    .fold((0.0, 0.0), |(s, w), p| (s + p[a].0[i], w + p[a].1[i]));
-                if w > 1e-12 {
-                    *u = s / w;
-                    *k = true;
+    let (starts, order) = slab_order(grid, pos);
+    // Per face: (sum of m w v, sum of m w).
+    let mut acc: [Vec<[f64; 2]>; D] = std::array::from_fn(|a| vec![[0.0; 2]; grid.num_faces(a)]);
+    for parity in 0..2 {
+        let mut windows: Vec<_> = (acc.iter_mut().enumerate())
+            .map(|(a, faces)| slab_windows(grid, a, faces, parity).into_iter())
+            .collect();
+        let jobs: Vec<(usize, [Window; D])> = (parity..starts.len() - 1)
+            .step_by(2)
+            .map(|slab| (slab, std::array::from_fn(|a| windows[a].next().unwrap())))
+            .collect();
+        // About PAR_GRAIN_PARTICLES particles per task (each pass holds about half of them).
+        let per_task = (2 * PAR_GRAIN_PARTICLES * jobs.len()).div_ceil(pos.len().max(1));
+        jobs.into_par_iter()
+            .with_min_len(per_task)
+            .for_each(|(slab, mut win)| {
+                for &p in &order[starts[slab]..starts[slab + 1]] {
+                    let (x, v) = (&pos[p], &vel[p]);
+                    let m = mass.map_or(1.0, |m| m[p]);
+                    for (a, (offset, faces)) in win.iter_mut().enumerate() {
+                        for (i, w) in FaceStencil::new(grid, a, x).weights() {
+                            let face = &mut faces[i - *offset];
+                            face[0] += m * w * v[a];
+                            face[1] += m * w;
+                        }
+                    }
                 }
             });
     }
+    let mut field = MacField::zeros(grid);
+    let known = std::array::from_fn(|a| {
+        field.comp[a]
+            .par_iter_mut()
+            .with_min_len(PAR_GRAIN)
+            .zip(&acc[a])
+            .map(|(u, &[s, w])| {
+                let k = w > 1e-12;
+                if k {
+                    *u = s / w;
+                }
+                k
+            })
+            .collect()
+    });
     (field, known)
+}
+
+/// A slab's faces of one component: the index of its first face and the faces.
+type Window<'a> = (usize, &'a mut [[f64; 2]]);
+
+/// The particles' indices grouped by slab, each group in index order: slab `s` holds
+/// `order[starts[s]..starts[s + 1]]` (a counting sort).
+fn slab_order<const D: usize>(grid: &Grid<D>, pos: &[Vector<D>]) -> (Vec<usize>, Vec<usize>) {
+    let n = grid.dims[D - 1];
+    // Particles are inside the domain; the clamp only keeps a stray point's index valid.
+    let slab = |x: &Vector<D>| (x[D - 1].max(0.0) as usize).min(n - 1) / SLAB;
+    let mut starts = vec![0; n.div_ceil(SLAB) + 1];
+    pos.iter().for_each(|x| starts[slab(x) + 1] += 1);
+    for s in 1..starts.len() {
+        starts[s] += starts[s - 1];
+    }
+    let mut next = starts.clone();
+    let mut order = vec![0; pos.len()];
+    for (p, x) in pos.iter().enumerate() {
+        let s = slab(x);
+        order[next[s]] = p;
+        next[s] += 1;
+    }
+    (starts, order)
+}
+
+/// The faces of component `axis` that the slabs of one parity write, one window per slab:
+/// slab `s` covers cell layers `[s SLAB, (s + 1) SLAB)` along the last axis and writes face
+/// layers `s SLAB - 1 ..= (s + 1) SLAB` (a particle in cell layer `z` reaches face layers
+/// `z - 1 ..= z + 1`), clipped to the grid. Slabs of one parity are `2 SLAB` layers apart,
+/// so their windows tile the component without overlap.
+fn slab_windows<'a, const D: usize>(
+    grid: &Grid<D>,
+    axis: usize,
+    faces: &'a mut [[f64; 2]],
+    parity: usize,
+) -> Vec<Window<'a>> {
+    let layers = grid.face_dims(axis)[D - 1];
+    let layer = faces.len() / layers;
+    let slabs = grid.dims[D - 1].div_ceil(SLAB);
+    let mut windows = vec![];
+    let mut rest = faces;
+    // The first face layer of `rest`.
+    let mut first = 0;
+    for s in (parity..slabs).step_by(2) {
+        let lo = (s * SLAB).saturating_sub(1);
+        let hi = ((s + 1) * SLAB + 1).min(layers);
+        let (_, tail) = std::mem::take(&mut rest).split_at_mut((lo - first) * layer);
+        let (window, tail) = tail.split_at_mut((hi - lo) * layer);
+        windows.push((lo * layer, window));
+        rest = tail;
+        first = hi;
+    }
+    windows
 }
 
 /// Extrapolates face values into unknown faces, `layers` rings deep: each ring takes the
@@ -87,42 +153,36 @@ pub fn extrapolate<const D: usize>(
     known: &mut [Vec<bool>; D],
     layers: usize,
 ) {
-    for (a, (u, k)) in field.comp.iter_mut().zip(known.iter_mut()).enumerate() {
-        let fd = grid.face_dims(a);
-        // Calls `f` with the index of each axis neighbour of face `i`.
-        let neighbors = |i: usize, f: &mut dyn FnMut(usize)| {
-            let c = grid.face_coords(a, i);
-            for ax in 0..D {
-                let st = grid.face_stride(a, ax);
-                if c[ax] > 0 {
-                    f(i - st);
-                }
-                if c[ax] + 1 < fd[ax] {
-                    f(i + st);
-                }
-            }
-        };
-        let mut frontier: Vec<usize> = (0..u.len()).filter(|&i| k[i]).collect();
+    let comps: Vec<_> = field.comp.iter_mut().zip(known.iter_mut()).collect();
+    let per_task = if grid.num_cells() < PAR_GRAIN { D } else { 1 };
+    let comps = comps.into_par_iter().with_min_len(per_task);
+    comps.enumerate().for_each(|(a, (u, k))| {
+        let near =
+            |i, c, f: &mut dyn FnMut(usize, Cell<D>)| for_each_axis_neighbor(grid, a, i, c, f);
+        let mut frontier: Vec<(usize, Cell<D>)> = (grid.face_coords_from(a, 0).enumerate())
+            .take(u.len())
+            .filter(|&(i, _)| k[i])
+            .collect();
         let mut queued = vec![false; u.len()];
         for _ in 0..layers {
             let mut ring = vec![];
-            for &i in &frontier {
-                neighbors(i, &mut |n| {
+            for &(i, c) in &frontier {
+                near(i, c, &mut |n, nc| {
                     if !k[n] && !queued[n] {
                         queued[n] = true;
-                        ring.push(n);
+                        ring.push((n, nc));
                     }
                 });
             }
             if ring.is_empty() {
                 break;
             }
-            ring.sort_unstable();
+            ring.sort_unstable_by_key(|&(i, _)| i);
             let values: Vec<f64> = ring
                 .iter()
-                .map(|&i| {
+                .map(|&(i, c)| {
                     let (mut s, mut n) = (0.0, 0);
-                    neighbors(i, &mut |j| {
+                    near(i, c, &mut |j, _| {
                         if k[j] {
                             s += u[j];
                             n += 1;
@@ -131,16 +191,41 @@ pub fn extrapolate<const D: usize>(
                     s / n as f64
                 })
                 .collect();
-            for (&i, v) in ring.iter().zip(values) {
+            for (&(i, _), v) in ring.iter().zip(values) {
                 u[i] = v;
                 k[i] = true;
             }
             frontier = ring;
         }
+    });
+}
+
+/// Calls `f(index, coords)` for each axis neighbour of face `i` (coordinates `c`) of
+/// component `a`, in axis order, the lower before the upper.
+fn for_each_axis_neighbor<const D: usize>(
+    grid: &Grid<D>,
+    a: usize,
+    i: usize,
+    c: Cell<D>,
+    f: &mut dyn FnMut(usize, Cell<D>),
+) {
+    let fd = grid.face_dims(a);
+    for ax in 0..D {
+        let st = grid.face_stride(a, ax);
+        let mut n = c;
+        if c[ax] > 0 {
+            n[ax] = c[ax] - 1;
+            f(i - st, n);
+        }
+        if c[ax] + 1 < fd[ax] {
+            n[ax] = c[ax] + 1;
+            f(i + st, n);
+        }
     }
 }
 
-/// FLIP/PIC blend: `v_p <- flip (v_p + u(x_p) - u_old(x_p)) + (1 - flip) u(x_p)`.
+/// FLIP/PIC blend: `v_p <- flip (v_p + u(x_p) - u_old(x_p)) + (1 - flip) u(x_p)`. Returns
+/// `u(x_p)` per particle.
 pub fn grid_to_particles<const D: usize>(
     grid: &Grid<D>,
     new: &MacField<D>,
@@ -148,12 +233,18 @@ pub fn grid_to_particles<const D: usize>(
     flip_ratio: f64,
     pos: &[Vector<D>],
     vel: &mut [Vector<D>],
-) {
-    vel.par_iter_mut().zip(pos).for_each(|(v, x)| {
-        let un = new.interpolate(grid, x);
-        let uo = old.interpolate(grid, x);
-        *v = flip_ratio * (*v + un - uo) + (1.0 - flip_ratio) * un;
-    });
+) -> Vec<Vector<D>> {
+    let vel = vel.par_iter_mut().with_min_len(PAR_GRAIN_PARTICLES);
+    vel.zip(pos)
+        .map(|(v, x)| {
+            Vector::<D>::from_fn(|a, _| {
+                let st = FaceStencil::new(grid, a, x);
+                let (un, uo) = (st.apply(&new.comp[a]), st.apply(&old.comp[a]));
+                v[a] = flip_ratio * (v[a] + un - uo) + (1.0 - flip_ratio) * un;
+                un
+            })
+        })
+        .collect()
 }
 
 /// Bounds every particle's speed by `max_speed` (cells per second), keeping its direction.
@@ -186,11 +277,70 @@ mod tests {
             }
             // G2P of an unchanged field leaves the particle velocity as it was.
             let mut vel2 = vel.clone();
-            grid_to_particles(&g, &u, &u, 0.9, &pos, &mut vel2);
+            let at = grid_to_particles(&g, &u, &u, 0.9, &pos, &mut vel2);
+            assert_eq!(at, vel);
             assert_eq!(vel, vel2);
         }
         check([5, 4]);
         check([3, 4, 5]);
+    }
+
+    /// The weighted average of eq. P2G summed face by face, the plain way.
+    fn reference_p2g<const D: usize>(
+        g: &Grid<D>,
+        pos: &[Vector<D>],
+        vel: &[Vector<D>],
+        mass: &[f64],
+    ) -> [Vec<(f64, f64)>; D] {
+        std::array::from_fn(|a| {
+            let mut acc = vec![(0.0, 0.0); g.num_faces(a)];
+            for ((x, v), m) in pos.iter().zip(vel).zip(mass) {
+                for (i, w) in FaceStencil::new(g, a, x).weights() {
+                    acc[i].0 += m * w * v[a];
+                    acc[i].1 += m * w;
+                }
+            }
+            acc
+        })
+    }
+
+    #[test]
+    fn slab_splat_matches_the_plain_sum_and_ignores_the_thread_count() {
+        use rand::{Rng, SeedableRng};
+        fn check<const D: usize>(dims: [usize; D]) {
+            let g = Grid::new(dims);
+            let mut rng = rand::rngs::StdRng::seed_from_u64(7);
+            let n = 40 * g.num_cells();
+            let point = |rng: &mut rand::rngs::StdRng| {
+                Vector::<D>::from_fn(|k, _| rng.random_range(0.0..dims[k] as f64))
+            };
+            let pos: Vec<_> = (0..n).map(|_| point(&mut rng)).collect();
+            let vel: Vec<_> = (0..n).map(|_| point(&mut rng)).collect();
+            let mass: Vec<f64> = (0..n).map(|_| rng.random_range(0.5..2.0)).collect();
+            let want = reference_p2g(&g, &pos, &vel, &mass);
+            let run = |threads| {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                pool.install(|| weighted_to_grid(&g, &pos, &vel, &mass))
+            };
+            let (u, known) = run(1);
+            for a in 0..D {
+                for (i, &(s, w)) in want[a].iter().enumerate() {
+                    assert_eq!(known[a][i], w > 1e-12, "axis {a} face {i}");
+                    if known[a][i] {
+                        assert!((u.comp[a][i] - s / w).abs() < 1e-12 * (1.0 + (s / w).abs()));
+                    }
+                }
+            }
+            assert_eq!(run(3), (u, known));
+        }
+        // Odd layer counts, a single layer, and a grid with fewer layers than a slab.
+        check([6, 7]);
+        check([3, 1]);
+        check([4, 3, 5]);
+        check([2, 3, 1]);
     }
 
     #[test]

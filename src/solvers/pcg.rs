@@ -7,6 +7,7 @@
 //! sec. 5.3, Fig. 5.7), written once for any dimension: the factor of row `r` needs only the
 //! rows that precede it along each axis.
 
+use crate::PAR_GRAIN;
 use rayon::prelude::*;
 
 /// Marker for "no neighbour".
@@ -48,20 +49,23 @@ impl<const D: usize> StencilMatrix<D> {
 
     /// `out = A x`.
     pub fn apply(&self, x: &[f64], out: &mut [f64]) {
-        out.par_iter_mut().enumerate().for_each(|(r, o)| {
-            let mut s = self.diag[r] * x[r];
-            for a in 0..D {
-                let p = self.plus[r][a];
-                if p != NONE {
-                    s += self.off_plus[r][a] * x[p as usize];
+        out.par_iter_mut()
+            .with_min_len(PAR_GRAIN)
+            .enumerate()
+            .for_each(|(r, o)| {
+                let mut s = self.diag[r] * x[r];
+                for a in 0..D {
+                    let p = self.plus[r][a];
+                    if p != NONE {
+                        s += self.off_plus[r][a] * x[p as usize];
+                    }
+                    let m = self.minus[r][a];
+                    if m != NONE {
+                        s += self.off_minus(r, a) * x[m as usize];
+                    }
                 }
-                let m = self.minus[r][a];
-                if m != NONE {
-                    s += self.off_minus(r, a) * x[m as usize];
-                }
-            }
-            *o = s;
-        });
+                *o = s;
+            });
     }
 }
 
@@ -157,6 +161,7 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
     let partial: Vec<f64> = a
         .par_chunks(BLOCK)
         .zip(b.par_chunks(BLOCK))
+        .with_min_len(PAR_GRAIN / BLOCK)
         .map(|(x, y)| x.iter().zip(y).map(|(p, q)| p * q).sum())
         .collect();
     partial.iter().sum()
@@ -172,7 +177,9 @@ fn max_abs(a: &[f64]) -> f64 {
             m.max(v)
         }
     };
-    a.par_iter().map(|v| v.abs()).reduce(|| 0.0, nan_max)
+    (a.par_iter().with_min_len(PAR_GRAIN))
+        .map(|v| v.abs())
+        .reduce(|| 0.0, nan_max)
 }
 
 /// Solves `A x = b` starting from `x = 0`; `x` receives the solution.
@@ -223,9 +230,11 @@ pub fn solve<const D: usize>(
         }
         let alpha = sigma / denom;
         x.par_iter_mut()
+            .with_min_len(PAR_GRAIN)
             .zip(&s)
             .for_each(|(xi, si)| *xi += alpha * si);
         r.par_iter_mut()
+            .with_min_len(PAR_GRAIN)
             .zip(&az)
             .for_each(|(ri, ai)| *ri -= alpha * ai);
         res = max_abs(&r);
@@ -241,6 +250,7 @@ pub fn solve<const D: usize>(
         let beta = sigma_new / sigma;
         sigma = sigma_new;
         s.par_iter_mut()
+            .with_min_len(PAR_GRAIN)
             .zip(&z)
             .for_each(|(si, zi)| *si = zi + beta * *si);
     }
