@@ -35,6 +35,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         true => vec![None],
         false => args.band.iter().map(|b| Some(*b)).collect(),
     };
+    let mut scaling = vec![];
     for &res in &args.res {
         let mut results: Vec<(&str, Measured)> = vec![];
         for band in &bands {
@@ -62,7 +63,9 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
             results.push((scene.method.band.name(), m));
         }
         print_band_ratios(res, &results);
+        scaling.extend(results.into_iter().next().map(|(_, m)| (res, m)));
     }
+    print_scaling(&scaling);
     Ok(())
 }
 
@@ -70,8 +73,11 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
 struct Measured {
     /// Median step time.
     step: Duration,
+    /// Median time of each stage, in [`Stage::ALL`] order.
+    stages: Vec<Duration>,
     /// Particles held at the end (band particles with the band).
     particles: usize,
+    fluid_cells: usize,
 }
 
 fn bench_dim<const D: usize>(scene: &Scene, args: &BenchArgs) -> Result<Measured> {
@@ -127,7 +133,9 @@ fn bench_dim<const D: usize>(scene: &Scene, args: &BenchArgs) -> Result<Measured
     }
     Ok(Measured {
         step,
+        stages: Stage::ALL.iter().map(|&st| s.stage_median(st)).collect(),
         particles: sim.particles.len(),
+        fluid_cells: sim.markings.fluid_cells(),
     })
 }
 
@@ -147,5 +155,82 @@ fn print_band_ratios(res: usize, results: &[(&str, Measured)]) {
             base.particles,
             100.0 * m.particles as f64 / base.particles.max(1) as f64
         );
+    }
+}
+
+/// Whether a stage's work grows with the particles or with the fluid cells: the grid stages
+/// are quoted per fluid cell, the others per particle.
+fn per_fluid_cell(st: Stage) -> bool {
+    matches!(st, Stage::Forces | Stage::Pressure)
+}
+
+/// Each stage's time per particle or per fluid cell at every resolution, and the log-log slope
+/// of the step time against the particle count (1 = linear), between neighbouring resolutions
+/// and fitted over all of them.
+fn print_scaling(runs: &[(usize, Measured)]) {
+    if runs.len() < 2 {
+        return;
+    }
+    crate::outln!("\n  scaling: ns per particle (per fluid cell for stages marked /cell)");
+    let mut head = format!("  {:>5} {:>10} {:>10}", "res", "particles", "fluid");
+    for st in Stage::ALL {
+        let unit = if per_fluid_cell(st) { "/cell" } else { "" };
+        head += &format!(" {:>14}", format!("{}{unit}", st.name()));
+    }
+    crate::outln!("{head} {:>10}", "step");
+    for (res, m) in runs {
+        let mut row = format!("  {res:>5} {:>10} {:>10}", m.particles, m.fluid_cells);
+        for (st, t) in Stage::ALL.iter().zip(&m.stages) {
+            let n = if per_fluid_cell(*st) {
+                m.fluid_cells
+            } else {
+                m.particles
+            };
+            row += &format!(" {:>14.1}", t.as_secs_f64() * 1e9 / n.max(1) as f64);
+        }
+        crate::outln!(
+            "{row} {:>10.1}",
+            m.step.as_secs_f64() * 1e9 / m.particles.max(1) as f64
+        );
+    }
+    let points: Vec<(f64, f64)> = runs
+        .iter()
+        .map(|(_, m)| ((m.particles.max(1) as f64).ln(), m.step.as_secs_f64().ln()))
+        .collect();
+    for (w, r) in points.windows(2).zip(runs.windows(2)) {
+        let slope = (w[1].1 - w[0].1) / (w[1].0 - w[0].0);
+        let (from, to) = (r[0].0, r[1].0);
+        crate::outln!(
+            "  log-log slope of the step time against particles, {from} -> {to}: {slope:.2}"
+        );
+    }
+    if let Some(fit) = least_squares_slope(&points).filter(|_| points.len() > 2) {
+        crate::outln!("  fitted over all resolutions: {fit:.2}");
+    }
+}
+
+/// The slope of the least-squares line through `points`; `None` when every x is the same.
+fn least_squares_slope(points: &[(f64, f64)]) -> Option<f64> {
+    let n = points.len() as f64;
+    let (mx, my) = points
+        .iter()
+        .fold((0.0, 0.0), |(a, b), (x, y)| (a + x / n, b + y / n));
+    let sxx: f64 = points.iter().map(|(x, _)| (x - mx).powi(2)).sum();
+    let sxy: f64 = points.iter().map(|(x, y)| (x - mx) * (y - my)).sum();
+    (sxx > 0.0).then(|| sxy / sxx)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_fitted_slope_of_a_power_law_is_its_exponent() {
+        let points: Vec<(f64, f64)> = [1e3, 1e4, 1e5]
+            .iter()
+            .map(|n: &f64| (n.ln(), (2e-7 * n.powf(1.25)).ln()))
+            .collect();
+        assert!((least_squares_slope(&points).unwrap() - 1.25).abs() < 1e-12);
+        assert_eq!(least_squares_slope(&[(1.0, 2.0), (1.0, 3.0)]), None);
     }
 }
