@@ -143,7 +143,9 @@ pub struct BenchArgs {
     /// Scene to measure.
     #[arg(long, default_value = "dam-3d")]
     pub scene: String,
-    /// Resolutions (cells along the longest axis), comma-separated.
+    /// Resolutions (cells along the longest axis), comma-separated; with two or more, a table
+    /// of each stage's time per particle (or fluid cell) and the log-log slope of the step time
+    /// against the particle count follow.
     #[arg(long, value_delimiter = ',', default_values_t = [64usize, 100])]
     pub res: Vec<usize>,
     /// Steps measured per resolution.

@@ -310,7 +310,8 @@ mod tests {
         fn check<const D: usize>(dims: [usize; D]) {
             let g = Grid::new(dims);
             let mut rng = rand::rngs::StdRng::seed_from_u64(7);
-            let n = 40 * g.num_cells();
+            // Enough particles that slabs run as separate tasks (see PAR_GRAIN_PARTICLES).
+            let n = (40 * g.num_cells()).max(8 * PAR_GRAIN_PARTICLES);
             let point = |rng: &mut rand::rngs::StdRng| {
                 Vector::<D>::from_fn(|k, _| rng.random_range(0.0..dims[k] as f64))
             };
