@@ -317,7 +317,9 @@ impl<const D: usize> MethodReport<D> for CcpReport<D> {
     fn record(&self, s: &State<D>, log: &mut dyn Log<D>, full: bool) {
         let c = &self.correction;
         log.scalar("metrics/correction/objective", c.objective);
-        log.scalar("metrics/correction/penalty", c.penalty);
+        if !s.solids.obstacles.is_empty() {
+            log.scalar("metrics/correction/penalty", c.penalty);
+        }
         log.scalar("metrics/correction/moved", c.moves.len() as f64);
         log.scalar("metrics/correction/overfull_before", c.overfull_before as f64);
         log.scalar("metrics/correction/solver_ms", c.solver_time.as_secs_f64() * 1e3);

@@ -16,6 +16,7 @@
 
 use super::Plane;
 use crate::methods::MethodInfo;
+use rerun::external::re_log_types::external::re_tuid::Tuid;
 use rerun::external::re_log_types::{BlueprintActivationCommand, LogMsg, RecordingId};
 use rerun::external::re_sdk_types::blueprint::{archetypes as bp, components as bpc};
 use rerun::external::re_sdk_types::datatypes::Uuid;
@@ -392,8 +393,7 @@ pub fn send(rec: &RecordingStream, root: &Pane) -> RecordingStreamResult<()> {
         .blueprint()
         .memory()?;
     bp_rec.set_time_sequence("blueprint", 0);
-    let mut next_id = 0;
-    let root_id = write_pane(&bp_rec, root, &mut next_id)?;
+    let root_id = write_pane(&bp_rec, root)?;
     let viewport = bp::ViewportBlueprint::new()
         .with_root_container(bpc::RootContainer(root_id))
         .with_auto_layout(false)
@@ -419,20 +419,20 @@ pub fn send(rec: &RecordingStream, root: &Pane) -> RecordingStreamResult<()> {
     Ok(())
 }
 
-/// A blueprint id (a UUID) from a counter, with its text: ids only need to be unique within
-/// the blueprint.
-fn new_id(next: &mut u128) -> (Uuid, String) {
-    *next += 1;
+/// A new blueprint id (a UUID) with its text. Ids must differ between recordings: the viewer
+/// keeps a view's state by its id across the recordings it has open, and fails to draw a view
+/// whose id another recording gave to a view of another kind.
+fn new_id() -> (Uuid, String) {
     let id = Uuid {
-        bytes: next.to_be_bytes(),
+        bytes: Tuid::new().as_u128().to_be_bytes(),
     };
     (id, uuid_text(id))
 }
 
 /// Logs a pane and everything in it; returns its id.
-fn write_pane(rec: &RecordingStream, pane: &Pane, next: &mut u128) -> RecordingStreamResult<Uuid> {
+fn write_pane(rec: &RecordingStream, pane: &Pane) -> RecordingStreamResult<Uuid> {
     let (kind, parts): (bpc::ContainerKind, Vec<(f32, &Pane)>) = match pane {
-        Pane::View(v) => return write_view(rec, v, next),
+        Pane::View(v) => return write_view(rec, v),
         Pane::Row(p) => (
             bpc::ContainerKind::Horizontal,
             p.iter().map(|(s, p)| (*s, p)).collect(),
@@ -448,7 +448,7 @@ fn write_pane(rec: &RecordingStream, pane: &Pane, next: &mut u128) -> RecordingS
     };
     let mut children = vec![];
     for (_, p) in &parts {
-        let id = write_pane(rec, p, next)?;
+        let id = write_pane(rec, p)?;
         let prefix = if matches!(p, Pane::View(_)) {
             "view"
         } else {
@@ -459,7 +459,7 @@ fn write_pane(rec: &RecordingStream, pane: &Pane, next: &mut u128) -> RecordingS
             uuid_text(id)
         )));
     }
-    let (id, text) = new_id(next);
+    let (id, text) = new_id();
     let shares = parts.iter().map(|(s, _)| *s);
     let mut c = bp::ContainerBlueprint::new(kind).with_contents(children);
     c = match pane {
@@ -484,8 +484,8 @@ fn uuid_text(id: Uuid) -> String {
 }
 
 /// Logs a view, its contents, its properties and its hidden entities.
-fn write_view(rec: &RecordingStream, v: &View, next: &mut u128) -> RecordingStreamResult<Uuid> {
-    let (id, text) = new_id(next);
+fn write_view(rec: &RecordingStream, v: &View) -> RecordingStreamResult<Uuid> {
+    let (id, text) = new_id();
     let path = format!("view/{text}");
     let contents = bp::ViewContents::new(v.contents.iter().map(|q| q.as_str()));
     rec.log(format!("{path}/ViewContents"), &contents)?;

@@ -194,7 +194,7 @@ mod tests {
         for (_, label, _) in marking_classes().iter().skip(1) {
             assert!(md.contains(&format!("| {label} |")), "{label} in\n{md}");
         }
-        assert!(md.contains("| interface |") && md.contains("2.00 m/s"));
+        assert!(md.contains("| band interface |") && md.contains("2.00 m/s"));
         assert!(!markdown(2.0, false).contains("| deep |"));
     }
 }
