@@ -46,8 +46,13 @@ pub struct CcpSim<const D: usize> {
 /// The correction's and the band's panels: counts, objectives, penalties and times apart.
 const PANELS: &[Panel] = &[
     Panel {
-        title: "correction: moved particles, over-full cells",
-        series: &["metrics/correction/moved", "metrics/correction/overfull_before"],
+        title: "correction: particles moved",
+        series: &["metrics/correction/moved"],
+        needs: Needs::Always,
+    },
+    Panel {
+        title: "correction: over-full cells before",
+        series: &["metrics/correction/overfull_before"],
         needs: Needs::Always,
     },
     Panel {

@@ -248,8 +248,8 @@ pub fn layout(f: &RunFacts<'_>) -> Pane {
         series: &["metrics/volume_percent"],
         needs: Needs::Always,
     };
-    let mut method = series(f.method.panels);
-    method.extend(series(OBSTACLE_PANELS));
+    let mut method = series(OBSTACLE_PANELS);
+    method.extend(series(f.method.panels));
     let mut right = vec![
         (1.0, Pane::View(View::series(&volume, &[]))),
         (1.4, Pane::Tabs(series(COMMON_PANELS))),
