@@ -499,6 +499,17 @@ fn write_view(rec: &RecordingStream, v: &View) -> RecordingStreamResult<Uuid> {
             .with_corner(bpc::Corner2D::LeftTop);
         rec.log(format!("{path}/PlotLegend"), &legend)?;
     }
+    if v.kind == Kind::TextLog {
+        // Debug lines (every shortened time step) only when asked for.
+        let levels = [
+            rerun::TextLogLevel::CRITICAL,
+            rerun::TextLogLevel::ERROR,
+            rerun::TextLogLevel::WARN,
+            rerun::TextLogLevel::INFO,
+        ];
+        let rows = bp::TextLogRows::new().with_filter_by_log_level(levels);
+        rec.log(format!("{path}/TextLogRows"), &rows)?;
+    }
     if let Some((position, target)) = v.eye {
         let eye = bp::EyeControls3D::new()
             .with_kind(bpc::Eye3DKind::Orbital)
