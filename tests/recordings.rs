@@ -122,17 +122,44 @@ fn the_world_view_comes_first_the_side_panels_start_collapsed_and_3d_has_a_slice
 }
 
 #[test]
-fn band_levels_have_their_own_view_and_leave_the_world_view() {
+fn band_levels_have_their_own_view_and_leave_the_world_view_but_not_the_paths() {
+    let q = |s: &str| s.to_string();
     let rrd = record("layers", "dam-2d", "3", &["--band", "paths", "--res", "24"]);
     let (views, _) = common::blueprint(&rrd);
     let world = views.iter().find(|v| v.name == "world").unwrap();
     assert!(
-        world.queries.contains(&"- world/grid/depth".to_string()),
+        world.queries.contains(&q("- world/grid/depth")),
+        "{world:?}"
+    );
+    assert!(
+        !world.queries.iter().any(|l| l.contains("paths")),
         "{world:?}"
     );
     let levels = views.iter().find(|v| v.name == "band levels").unwrap();
     assert!(
-        levels.queries.contains(&"+ world/grid/depth".to_string()),
+        levels.queries.contains(&q("+ world/grid/depth")),
+        "{levels:?}"
+    );
+    assert!(
+        levels.queries.contains(&q("+ world/corrector/paths")),
+        "{levels:?}"
+    );
+    // In 3D both are views of the slice: the slice leaves out the band levels, not the paths.
+    let rrd = record("layers", "drop-3d", "2", &["--res", "12"]);
+    let (views, _) = common::blueprint(&rrd);
+    let slice = views.iter().find(|v| v.name == "slice").unwrap();
+    assert!(
+        slice.queries.contains(&q("- slice/grid/depth")),
+        "{slice:?}"
+    );
+    assert!(
+        !slice.queries.iter().any(|l| l.contains("paths")),
+        "{slice:?}"
+    );
+    let levels = views.iter().find(|v| v.name == "band levels").unwrap();
+    assert_eq!(levels.origin, "slice");
+    assert!(
+        levels.queries.contains(&q("+ slice/corrector/paths")),
         "{levels:?}"
     );
 }

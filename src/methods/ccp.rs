@@ -144,7 +144,8 @@ impl MethodType for Ccp {
         layer_views: &[LayerView {
             title: "band levels",
             origin: "world",
-            entities: &["world/grid/depth", "world/corrector/paths"],
+            layers: &["world/grid/depth"],
+            marks: &["world/corrector/paths"],
             needs: Needs::Band,
         }],
         figures: &["ccp_augmentations", "ccp_moved", "ccp_solver_ms"],

@@ -138,7 +138,8 @@ impl MethodType for Idp {
         layer_views: &[LayerView {
             title: "density error",
             origin: "world",
-            entities: &["world/idp/density_error"],
+            layers: &["world/idp/density_error"],
+            marks: &["world/idp/displacement"],
             needs: Needs::Always,
         }],
         figures: &["idp_iterations", "idp_max_displacement"],

@@ -90,7 +90,8 @@ impl MethodType for Nbflip {
         layer_views: &[LayerView {
             title: "band levels",
             origin: "world",
-            entities: &["world/grid/depth"],
+            layers: &["world/grid/depth"],
+            marks: &[],
             needs: Needs::Always,
         }],
         figures: &["nbflip_seeded", "nbflip_deleted"],

@@ -141,7 +141,8 @@ impl MethodType for Powerpic {
         layer_views: &[LayerView {
             title: "transport grid: fluid fraction",
             origin: "powerpic",
-            entities: &["powerpic/fluid_fraction"],
+            layers: &["powerpic/fluid_fraction"],
+            marks: &[],
             needs: Needs::Always,
         }],
         figures: &[

@@ -43,13 +43,15 @@ pub struct Panel {
     pub needs: Needs,
 }
 
-/// A spatial view of layers the world view leaves out (they would hide or blend with the
-/// particles): its title, origin and entities.
+/// A spatial view of cell layers the world view leaves out (they would hide or blend with the
+/// particles): its title, origin, the layers, and the marks drawn over them here as in the
+/// world view.
 #[derive(Debug)]
 pub struct LayerView {
     pub title: &'static str,
     pub origin: &'static str,
-    pub entities: &'static [&'static str],
+    pub layers: &'static [&'static str],
+    pub marks: &'static [&'static str],
     pub needs: Needs,
 }
 
@@ -69,7 +71,7 @@ impl RunFacts<'_> {
     /// Whether one of the method's layer views this run has shows `entity`.
     pub fn shows(&self, entity: &str) -> bool {
         let mut views = self.method.layer_views.iter().filter(|l| self.has(l.needs));
-        views.any(|l| l.entities.contains(&entity))
+        views.any(|l| l.layers.contains(&entity))
     }
 
     fn has(&self, needs: Needs) -> bool {
@@ -195,15 +197,6 @@ pub enum Pane {
 }
 
 impl Pane {
-    /// Every view, depth first.
-    pub fn views(&self) -> Vec<&View> {
-        match self {
-            Pane::Row(p) | Pane::Column(p) => p.iter().flat_map(|(_, p)| p.views()).collect(),
-            Pane::Tabs(p) => p.iter().flat_map(Pane::views).collect(),
-            Pane::View(v) => vec![v],
-        }
-    }
-
     /// Tabs, or the one pane when there is one.
     fn tabs(mut panes: Vec<Pane>) -> Pane {
         if panes.len() == 1 {
@@ -279,97 +272,66 @@ pub fn layout(f: &RunFacts<'_>) -> Pane {
     Pane::Row(vec![(2.4, world_column(f)), (1.0, Pane::Column(right))])
 }
 
-/// The world view, largest, with the layer views beside it in tabs. In 3D the world view
-/// shows the particles, moves, paths and obstacles (the cell layers and the moved-particle
-/// highlight are hidden until switched on), and every layer view is a view of the slice.
+/// The world view, largest, with the layer views beside it in tabs. The world view leaves
+/// the layer views' cell layers out (2D) or hidden until switched on (3D, with the markings
+/// and the moved-particle highlight); in 3D every layer view shows the slice.
 fn world_column(f: &RunFacts<'_>) -> Pane {
     let three_d = f.dims.len() == 3;
-    let layers: Vec<&LayerView> = f
-        .method
-        .layer_views
-        .iter()
-        .filter(|l| f.has(l.needs))
-        .collect();
-    let in_world = |l: &&&LayerView| l.origin == "world";
-    let mut world = View::new(
-        if three_d {
-            Kind::Spatial3D
-        } else {
-            Kind::Spatial2D
-        },
-        "world",
-        "world",
-        vec!["+ world/**".into()],
-    );
-    let layer_entities = layers
-        .iter()
-        .filter(in_world)
-        .flat_map(|l| l.entities.iter());
-    if three_d {
-        world
-            .hidden
-            .extend(["world/grid/markings", "world/corrector/moved"].map(String::from));
-        world.hidden.extend(
-            layer_entities
-                .filter(|e| e.starts_with("world/grid") || e.starts_with("world/idp"))
-                .map(|e| e.to_string()),
-        );
-        world.eye = Some(eye(&f.dims));
-    } else {
-        world
-            .contents
-            .extend(layer_entities.map(|e| format!("- {e}")));
-    }
-    let plane = match three_d {
-        true => Plane::slice(&f.dims, f.slice_axis, 0),
-        false => Plane::world_2d(&f.dims),
+    let layer_views = f.method.layer_views.iter().filter(|l| f.has(l.needs));
+    let (in_world, apart): (Vec<&LayerView>, Vec<&LayerView>) =
+        layer_views.partition(|l| l.origin == "world");
+    let cell_layers = in_world.iter().flat_map(|l| l.layers.iter());
+    let (kind, plane) = match three_d {
+        true => (Kind::Spatial3D, Plane::slice(&f.dims, f.slice_axis, 0)),
+        false => (Kind::Spatial2D, Plane::world_2d(&f.dims)),
     };
     let bounds = Some([0.0, plane.cols as f32, 0.0, plane.rows as f32]);
-    world.bounds = bounds.filter(|_| !three_d);
-    let slice_of = |e: &str| {
-        if three_d {
-            e.replacen("world/", "slice/", 1)
-        } else {
-            e.to_string()
-        }
+    let mut world = View::new(kind, "world", "world", vec!["+ world/**".into()]);
+    if three_d {
+        world.hidden = ["world/grid/markings", "world/corrector/moved"]
+            .map(String::from)
+            .into();
+        world.hidden.extend(cell_layers.map(|e| e.to_string()));
+        world.eye = Some(eye(&f.dims));
+    } else {
+        world.contents.extend(cell_layers.map(|e| format!("- {e}")));
+        world.bounds = bounds;
+    }
+    // Where the layer views draw: the world plane in 2D, the slice in 3D.
+    let (origin, on_plane): (&str, fn(&str) -> String) = match three_d {
+        true => ("slice", |e| e.replacen("world/", "slice/", 1)),
+        false => ("world", |e| e.to_string()),
     };
-    let plane_origin = if three_d { "slice" } else { "world" };
     let mut slice = View::new(Kind::Spatial2D, "slice", "slice", vec!["+ slice/**".into()]);
     slice.bounds = bounds;
-    let mut others: Vec<Pane> = vec![];
-    for l in &layers {
-        let mut v = if l.origin == "world" {
-            let mut contents: Vec<String> = l
-                .entities
-                .iter()
-                .map(|e| format!("+ {}", slice_of(e)))
-                .collect();
-            if !three_d {
-                contents.push("+ world/domain".into());
-            }
-            slice
-                .contents
-                .extend(l.entities.iter().map(|e| format!("- {}", slice_of(e))));
-            View::new(Kind::Spatial2D, l.title, plane_origin, contents)
-        } else {
-            View::new(
-                Kind::Spatial2D,
-                l.title,
-                l.origin,
-                l.entities.iter().map(|e| format!("+ {e}")).collect(),
-            )
-        };
-        v.bounds = bounds.filter(|_| l.origin == "world");
-        others.push(Pane::View(v));
+    let mut tabs: Vec<Pane> = vec![];
+    for l in &in_world {
+        let shown = l.layers.iter().chain(l.marks);
+        let mut contents: Vec<String> = shown.map(|e| format!("+ {}", on_plane(e))).collect();
+        if !three_d {
+            contents.push("+ world/domain".into());
+        }
+        let layers = l.layers.iter().map(|e| format!("- {}", on_plane(e)));
+        slice.contents.extend(layers);
+        let mut v = View::new(Kind::Spatial2D, l.title, origin, contents);
+        v.bounds = bounds;
+        tabs.push(Pane::View(v));
+    }
+    for l in &apart {
+        let contents = l.layers.iter().chain(l.marks).map(|e| format!("+ {e}"));
+        tabs.push(Pane::View(View::new(
+            Kind::Spatial2D,
+            l.title,
+            l.origin,
+            contents.collect(),
+        )));
     }
     if three_d {
-        others.insert(0, Pane::View(slice));
-        Pane::Row(vec![(1.0, Pane::View(world)), (1.0, Pane::tabs(others))])
-    } else if others.is_empty() {
-        Pane::View(world)
+        tabs.insert(0, Pane::View(slice));
+        Pane::Row(vec![(1.0, Pane::View(world)), (1.0, Pane::tabs(tabs))])
     } else {
-        others.insert(0, Pane::View(world));
-        Pane::Tabs(others)
+        tabs.insert(0, Pane::View(world));
+        Pane::tabs(tabs)
     }
 }
 
