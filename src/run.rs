@@ -4,12 +4,12 @@
 use crate::cli::RunArgs;
 use crate::interrupt::{self, Watchdog};
 use crate::methods::MethodOption;
-use crate::record::Recorder;
+use crate::record::{Drawing, Recorder};
 use crate::runner::{Limit, Runner};
 use crate::scene::{Overrides, Scene};
 use crate::sim::correct::band::BandMode;
 use crate::sim::Simulation;
-use anyhow::{bail, Context, Result};
+use anyhow::{anyhow, bail, Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -60,6 +60,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
         None => Limit::SimSeconds(scene.duration_secs()),
     };
     check_export_step(args.export_lp, limit)?;
+    parse_slice(args.slice.as_deref(), scene.dim())?;
     let out = if args.no_record {
         None
     } else if let Some(p) = &args.out {
@@ -84,7 +85,13 @@ fn run_dim<const D: usize>(
     out: Option<&Path>,
     args: &RunArgs,
 ) -> Result<()> {
-    let recorder = out.map(|p| Recorder::create(p, scene)).transpose()?;
+    let drawing = Drawing {
+        moves: args.moves,
+        slice: parse_slice(args.slice.as_deref(), D)?,
+    };
+    let recorder = out
+        .map(|p| Recorder::create(p, scene, args.cross_check, drawing))
+        .transpose()?;
     match simulate::<D>(scene, limit, recorder.as_ref(), out, args) {
         Ok((runner, result)) => finish(scene, runner, result, recorder, out, args),
         Err(e) => {
@@ -129,11 +136,15 @@ fn simulate<const D: usize>(
     let t0 = Instant::now();
     let watchdog = Watchdog::start(recorder.map(|r| Box::new(r.finisher()) as _));
     let interrupted = || interrupt::signal().is_some();
+    let cadence = Cadence::of(args.record_every, D);
+    let mut last_time_secs = 0.0;
     let result = runner.run(limit, interrupted, |sim, rep| {
         if let Some(r) = recorder {
-            let full = sim.state.steps.is_multiple_of(args.record_every);
+            let s = &sim.state;
+            let full = cadence.records(s.steps, last_time_secs, s.time_secs);
             r.log_step(sim, Some(rep), full)?;
         }
+        last_time_secs = sim.state.time_secs;
         show_progress(
             &bar,
             sim,
@@ -187,13 +198,79 @@ fn finish<const D: usize>(
         if let Some(p) = out.filter(|p| p.exists()) {
             let mb = std::fs::metadata(p).map_or(0.0, |m| m.len() as f64 / 1e6);
             crate::outln!(
-                "recording: {}, {mb:.1} MB  (open with: rerun {})",
+                "recording: {}, {mb:.1} MB, particles and cells {}  (open with: rerun {})",
                 p.display(),
+                Cadence::of(args.record_every, D).describe(),
                 p.display()
             );
         }
     }
     result.and_then(|()| check_export_written(args.export_lp, runner.sim.state.steps))
+}
+
+/// When a step's particles, cells and moves are recorded (its metrics always are).
+#[derive(Clone, Copy, Debug)]
+enum Cadence {
+    Steps(u64),
+    SimSeconds(f64),
+}
+
+/// How often 3D runs record their particles and cells without `--record-every`, in simulated
+/// seconds: 25 frames a second. A 50^3 frame takes about 1 MB (issue 15, item 9), so the 3 s
+/// of dam-3d take about 75 frames.
+const FRAME_SECS_3D: f64 = 1.0 / 25.0;
+
+impl Cadence {
+    /// `--record-every N`, or the default of the dimension: 2D every step, 3D by simulated time.
+    fn of(record_every: Option<u64>, dim: usize) -> Self {
+        match (record_every, dim) {
+            (Some(n), _) => Cadence::Steps(n),
+            (None, 2) => Cadence::Steps(1),
+            (None, _) => Cadence::SimSeconds(FRAME_SECS_3D),
+        }
+    }
+
+    /// Whether step `steps`, which took the clock from `before` to `after` seconds, is recorded.
+    fn records(self, steps: u64, before: f64, after: f64) -> bool {
+        match self {
+            Cadence::Steps(n) => steps.is_multiple_of(n),
+            Cadence::SimSeconds(f) => (after / f).floor() > (before / f).floor(),
+        }
+    }
+
+    fn describe(self) -> String {
+        match self {
+            Cadence::Steps(1) => "every step".into(),
+            Cadence::Steps(n) => format!("every {n} steps"),
+            Cadence::SimSeconds(f) => format!("every {f} s simulated"),
+        }
+    }
+}
+
+/// `--slice AXIS[=FRACTION]` as `(axis, fraction)`, `z=0.5` when not given; refused for 2D
+/// scenes.
+fn parse_slice(arg: Option<&str>, dim: usize) -> Result<(usize, f64)> {
+    let Some(s) = arg else {
+        return Ok((2, 0.5));
+    };
+    if dim != 3 {
+        bail!("--slice {s}: the scene is 2D; slices are drawn for 3D scenes only");
+    }
+    let (axis, at) = s.split_once('=').unwrap_or((s, "0.5"));
+    let axis = match axis {
+        "x" => 0,
+        "y" => 1,
+        "z" => 2,
+        _ => bail!("--slice {s}: the axis must be x, y or z"),
+    };
+    let at = at
+        .parse::<f64>()
+        .ok()
+        .filter(|f| (0.0..=1.0).contains(f))
+        .ok_or_else(|| {
+            anyhow!("--slice {s}: the position must be a fraction of the tank, 0 to 1")
+        })?;
+    Ok((axis, at))
 }
 
 /// `--export-lp N` must name a step the run can reach: steps count from 1 and, with

@@ -308,8 +308,8 @@ fn record(dir: &Path, scene: &str, steps: &str, extra: &[&str]) -> BTreeSet<Stri
 #[test]
 fn recordings_log_exactly_the_documented_entities() {
     // Between them these runs log everything: flip in 2D, ccp with the solver cross-check and
-    // an exported problem, the band in 2D (all variants' objectives) and 3D, obstacles, idp,
-    // nbflip and powerpic in 3D.
+    // an exported problem, the band in 2D (all variants' objectives) and 3D (with its slice),
+    // obstacles, idp in 2D and 3D (its slice), nbflip and powerpic in 3D.
     let dir = scratch_dir("record");
     let mut logged = BTreeSet::new();
     logged.extend(record(&dir, "hydrostatic-2d", "3", &[]));
@@ -335,6 +335,13 @@ fn recordings_log_exactly_the_documented_entities() {
     logged.extend(record(&dir, "drop-3d", "30", &["--res", "12"]));
     logged.extend(record(&dir, "compress-2d", "20", &[]));
     logged.extend(record(&dir, "dam-2d", "5", &["--method", "idp"]));
+    let every_step = ["--record-every", "1", "--res", "12"];
+    logged.extend(record(
+        &dir,
+        "dam-3d",
+        "2",
+        &[&every_step[..], &["--method", "idp"]].concat(),
+    ));
     logged.extend(record(
         &dir,
         "dam-3d",
@@ -345,7 +352,7 @@ fn recordings_log_exactly_the_documented_entities() {
         &dir,
         "dam-3d",
         "2",
-        &["--method", "powerpic", "--res", "12"],
+        &[&every_step[..], &["--method", "powerpic"]].concat(),
     ));
     let documented = common::documented_entities();
     assert!(documented.len() > 30, "the README's table: {documented:?}");

@@ -10,6 +10,7 @@
 use super::{FluidMethod, Known, MethodInfo, MethodOption, MethodReport, MethodSettings, MethodType};
 use crate::grid::{MacField, Vector};
 use crate::metrics::{self, median, InvariantViolation};
+use crate::record::layout::{LayerView, Needs, Panel};
 use crate::record::{depth_level_classes, Layer, Log, Style};
 use crate::sim::band::Band;
 use crate::sim::correct::band::{BandContext, BandCorrection, BandVariant};
@@ -42,6 +43,90 @@ pub struct CcpSim<const D: usize> {
     totals: Totals,
 }
 
+/// The correction's and the band's panels: counts, objectives, penalties and times apart.
+const PANELS: &[Panel] = &[
+    Panel {
+        title: "correction: particles moved",
+        series: &["metrics/correction/moved"],
+        needs: Needs::Always,
+    },
+    Panel {
+        title: "correction: over-full cells before",
+        series: &["metrics/correction/overfull_before"],
+        needs: Needs::Always,
+    },
+    Panel {
+        title: "correction: objective (cells²)",
+        series: &["metrics/correction/objective"],
+        needs: Needs::Always,
+    },
+    Panel {
+        title: "correction: solid penalty",
+        series: &["metrics/correction/penalty"],
+        needs: Needs::Obstacles,
+    },
+    Panel {
+        title: "correction: augmenting paths",
+        series: &["metrics/correction/augmentations"],
+        needs: Needs::Always,
+    },
+    Panel {
+        title: "correction: solver time (ms)",
+        series: &["metrics/correction/solver_ms"],
+        needs: Needs::Always,
+    },
+    Panel {
+        title: "correction: cross-check difference",
+        series: &["metrics/correction/cross_check"],
+        needs: Needs::CrossCheck,
+    },
+    Panel {
+        title: "band: particles held",
+        series: &["metrics/band/band_particles"],
+        needs: Needs::Band,
+    },
+    Panel {
+        title: "band: deep's imaginary particles",
+        series: &["metrics/band/n_deep"],
+        needs: Needs::Band,
+    },
+    Panel {
+        title: "band: exchange with the deep",
+        series: &["metrics/band/removed", "metrics/band/added"],
+        needs: Needs::Band,
+    },
+    Panel {
+        title: "band: moves across the interface",
+        series: &[
+            "metrics/band/n_in",
+            "metrics/band/n_out",
+            "metrics/band/n_move",
+            "metrics/band/paths",
+        ],
+        needs: Needs::Band,
+    },
+    Panel {
+        title: "band: spaces s_in, s_out",
+        series: &["metrics/band/s_in", "metrics/band/s_out"],
+        needs: Needs::Band,
+    },
+    Panel {
+        title: "band: objective",
+        series: &["metrics/band/objective/**"],
+        needs: Needs::Band,
+    },
+    Panel {
+        title: "band: alg. find calls",
+        series: &["metrics/band/find_calls"],
+        needs: Needs::Band,
+    },
+    Panel {
+        title: "band: path step time (ms)",
+        series: &["metrics/band/path_ms"],
+        needs: Needs::Band,
+    },
+];
+
 impl MethodType for Ccp {
     const INFO: MethodInfo = MethodInfo {
         name: "ccp",
@@ -55,8 +140,14 @@ impl MethodType for Ccp {
             MethodOption::ExportLp,
         ],
         obstacle_modes: &[ObstacleMode::Couple],
-        panels: &[("correction", "metrics/correction"), ("band", "metrics/band")],
-        images: &[],
+        panels: PANELS,
+        layer_views: &[LayerView {
+            title: "band levels",
+            origin: "world",
+            layers: &["world/grid/depth"],
+            marks: &["world/corrector/paths"],
+            needs: Needs::Band,
+        }],
         figures: &["ccp_augmentations", "ccp_moved", "ccp_solver_ms"],
     };
 
@@ -201,6 +292,11 @@ impl<const D: usize> FluidMethod<D> for CcpSim<D> {
         }
     }
 
+    fn is_deep(&self, s: &State<D>, c: usize) -> bool {
+        self.band
+            .is_some_and(|(b, _)| b.level(&s.markings, c) == DepthLevel::Deep)
+    }
+
     fn reset_summary(&mut self) {
         self.totals = Totals::default();
     }
@@ -227,7 +323,9 @@ impl<const D: usize> MethodReport<D> for CcpReport<D> {
     fn record(&self, s: &State<D>, log: &mut dyn Log<D>, full: bool) {
         let c = &self.correction;
         log.scalar("metrics/correction/objective", c.objective);
-        log.scalar("metrics/correction/penalty", c.penalty);
+        if !s.solids.obstacles.is_empty() {
+            log.scalar("metrics/correction/penalty", c.penalty);
+        }
         log.scalar("metrics/correction/moved", c.moves.len() as f64);
         log.scalar("metrics/correction/overfull_before", c.overfull_before as f64);
         log.scalar("metrics/correction/solver_ms", c.solver_time.as_secs_f64() * 1e3);
@@ -241,12 +339,7 @@ impl<const D: usize> MethodReport<D> for CcpReport<D> {
             log.warn(f);
         }
         if full {
-            let style = Style {
-                color: [255, 80, 200],
-                radius: if D == 2 { 0.04 } else { 0.05 },
-                order: 20.0,
-            };
-            log.arrows("world/corrector/moves", &c.moves, style);
+            log.moves(&c.moves);
         }
         if let Some(b) = &c.band {
             record_band_correction(b, log, full);

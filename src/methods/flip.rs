@@ -15,7 +15,7 @@ impl MethodType for Flip {
         options: &[],
         obstacle_modes: &[ObstacleMode::Naive, ObstacleMode::Ignore],
         panels: &[],
-        images: &[],
+        layer_views: &[],
         figures: &[],
     };
 

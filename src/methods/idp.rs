@@ -60,6 +60,7 @@
 use super::{FluidMethod, MethodInfo, MethodReport, MethodSettings, MethodType};
 use crate::grid::{for_each_cell_weight, Grid, MacField, Vector};
 use crate::metrics::median;
+use crate::record::layout::{LayerView, Needs, Panel};
 use crate::record::{Layer, Log, Style};
 use crate::sim::advect::{displace, CELL_MARGIN};
 use crate::sim::pressure::Poisson;
@@ -103,8 +104,44 @@ impl MethodType for Idp {
         about: "FLIP plus implicit density projection: a second Poisson solve moves particles out of over-dense cells (Kugelstadt et al. 2021)",
         options: &[],
         obstacle_modes: &[ObstacleMode::Naive, ObstacleMode::Ignore],
-        panels: &[("idp: density projection", "metrics/idp")],
-        images: &[],
+        panels: &[
+            Panel {
+                title: "idp: PCG iterations",
+                series: &["metrics/idp/iterations"],
+                needs: Needs::Always,
+            },
+            Panel {
+                title: "idp: PCG residual",
+                series: &["metrics/idp/residual"],
+                needs: Needs::Always,
+            },
+            Panel {
+                title: "idp: largest move (cells)",
+                series: &["metrics/idp/max_displacement"],
+                needs: Needs::Always,
+            },
+            Panel {
+                title: "idp: cells",
+                series: &[
+                    "metrics/idp/overdense_cells",
+                    "metrics/idp/clamped_cells",
+                    "metrics/idp/resampled",
+                ],
+                needs: Needs::Always,
+            },
+            Panel {
+                title: "idp: particles pushed out of solids",
+                series: &["metrics/idp/pushed"],
+                needs: Needs::Always,
+            },
+        ],
+        layer_views: &[LayerView {
+            title: "density error",
+            origin: "world",
+            layers: &["world/idp/density_error"],
+            marks: &["world/idp/displacement"],
+            needs: Needs::Always,
+        }],
         figures: &["idp_iterations", "idp_max_displacement"],
     };
 

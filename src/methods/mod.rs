@@ -23,6 +23,7 @@
 
 use crate::grid::{MacField, Vector};
 use crate::metrics::InvariantViolation;
+use crate::record::layout::{LayerView, Panel};
 use crate::record::Log;
 use crate::sim::correct::band::BandMode;
 use crate::sim::correct::problem::Directions;
@@ -121,10 +122,11 @@ pub struct MethodInfo {
     pub options: &'static [MethodOption],
     /// The obstacle modes it supports; the first is its default.
     pub obstacle_modes: &'static [ObstacleMode],
-    /// Time-series panels of its metrics in the recording's layout: `(title, entity path)`.
-    pub panels: &'static [(&'static str, &'static str)],
-    /// Images of its own `(title, entity path)`, each in a 2D view below the world view.
-    pub images: &'static [(&'static str, &'static str)],
+    /// Time-series panels of its metrics in the recording's layout, one quantity family each.
+    pub panels: &'static [Panel],
+    /// Its layers that would hide or blend with the particles in the world view, each in a
+    /// view of its own beside it.
+    pub layer_views: &'static [LayerView],
     /// The names of the per-step figures its reports give ([`MethodReport::figures`]), which
     /// `cellflip report` summarises (median over the steps) in columns `<name>_median`.
     pub figures: &'static [&'static str],
@@ -276,6 +278,12 @@ pub trait FluidMethod<const D: usize>: Send {
 
     /// Static recording data (class colours of its layers).
     fn record_setup(&self, _log: &mut dyn Log<D>) {}
+
+    /// Whether cell `c` is in the method's deep: fluid below its band, whose particles it does
+    /// not hold. Recordings draw it as its own class in the markings rather than as a bubble.
+    fn is_deep(&self, _s: &State<D>, _c: usize) -> bool {
+        false
+    }
 
     /// Lines for the run's summary, from everything the method did since the start or the
     /// last [`FluidMethod::reset_summary`].

@@ -30,6 +30,7 @@ use super::{FluidMethod, Known, MethodInfo, MethodOption, MethodReport, MethodSe
 use crate::grid::{Grid, MacField, Vector};
 use crate::particles::Particles;
 use crate::metrics::{median, InvariantViolation};
+use crate::record::layout::{LayerView, Needs, Panel};
 use crate::record::{depth_level_classes, Layer, Log};
 use crate::sim::band::{combine_velocities, counts_with_full_deep, Band};
 use crate::sim::levelset::{particle_radius, LevelSet, Side};
@@ -74,8 +75,25 @@ impl MethodType for Nbflip {
         about: "narrow-band FLIP: particles only in a band below a level set surface (Ferstl et al. 2016)",
         options: &[MethodOption::BandR],
         obstacle_modes: &[ObstacleMode::Naive, ObstacleMode::Ignore],
-        panels: &[("narrow band", "metrics/nbflip")],
-        images: &[],
+        panels: &[
+            Panel {
+                title: "narrow band: particles held",
+                series: &["metrics/nbflip/particles"],
+                needs: Needs::Always,
+            },
+            Panel {
+                title: "narrow band: resampling",
+                series: &["metrics/nbflip/seeded", "metrics/nbflip/deleted"],
+                needs: Needs::Always,
+            },
+        ],
+        layer_views: &[LayerView {
+            title: "band levels",
+            origin: "world",
+            layers: &["world/grid/depth"],
+            marks: &[],
+            needs: Needs::Always,
+        }],
         figures: &["nbflip_seeded", "nbflip_deleted"],
     };
 
@@ -250,6 +268,13 @@ impl<const D: usize> FluidMethod<D> for NbflipSim<D> {
 
     fn record_setup(&self, log: &mut dyn Log<D>) {
         log.classes("world/grid/depth", &depth_level_classes());
+    }
+
+    fn is_deep(&self, s: &State<D>, c: usize) -> bool {
+        let (phi, solid) = (&self.phi, &s.solids.solid);
+        !phi.phi.is_empty()
+            && s.markings.is_fluid(c)
+            && level::<D>(phi, solid, self.r(), c) == DepthLevel::Deep
     }
 
     fn reset_summary(&mut self) {

@@ -45,6 +45,7 @@
 use super::{FluidMethod, Known, MethodInfo, MethodReport, MethodSettings, MethodType};
 use crate::grid::{Grid, MacField, Vector};
 use crate::metrics::InvariantViolation;
+use crate::record::layout::{LayerView, Needs, Panel};
 use crate::record::Log;
 use crate::sim::advect::displace;
 use crate::sim::solids::ObstacleMode;
@@ -121,11 +122,29 @@ impl MethodType for Powerpic {
         options: &[],
         obstacle_modes: &[ObstacleMode::Naive, ObstacleMode::Ignore],
         panels: &[
-            ("powerpic: Sinkhorn iterations", "metrics/powerpic/iterations"),
-            ("powerpic: marginal error", "metrics/powerpic/marginal_error"),
-            ("powerpic: air in liquid cells", "metrics/powerpic/air_volume"),
+            Panel {
+                title: "powerpic: Sinkhorn iterations",
+                series: &["metrics/powerpic/iterations"],
+                needs: Needs::Always,
+            },
+            Panel {
+                title: "powerpic: marginal error",
+                series: &["metrics/powerpic/marginal_error"],
+                needs: Needs::Always,
+            },
+            Panel {
+                title: "powerpic: air in liquid cells",
+                series: &["metrics/powerpic/air_volume"],
+                needs: Needs::Always,
+            },
         ],
-        images: &[("transport grid: fluid fraction", "powerpic/fluid_fraction")],
+        layer_views: &[LayerView {
+            title: "transport grid: fluid fraction",
+            origin: "powerpic",
+            layers: &["powerpic/fluid_fraction"],
+            marks: &[],
+            needs: Needs::Always,
+        }],
         figures: &[
             "powerpic_iterations",
             "powerpic_marginal_error",

@@ -1,30 +1,32 @@
 //! Rerun recordings: the only module that imports `rerun`.
 //!
-//! World units are cells. In 2D the world is drawn as an image (x right, rows down), so
-//! positions are logged as `(x, ny - y)`: gravity points down the screen and each particle lies
-//! over its cell of the `world/grid/markings` image. That conversion happens in one place,
-//! [`Canvas::world`]; every drawing goes through the canvas's point, box, arrow, strip and
-//! class-layer helpers, which pick the 2D or 3D archetype. In 3D, y is up
-//! (`RIGHT_HAND_Y_UP`). Entity paths are listed in the README.
+//! [`Recorder`] writes a run: its identity (application `cellflip`, a recording name and
+//! properties), its default layout ([`layout`]), its legend ([`legend`]) and, step by step, what
+//! the [`Canvas`] draws. Entity paths are listed in the README.
 //!
 //! Methods log their own reports through the [`Log`] trait, which names no rerun type.
 
+mod canvas;
 mod file;
+pub mod layout;
+pub mod legend;
 
+pub use canvas::{Canvas, Plane};
 pub use file::RrdFile;
+pub use legend::depth_level_classes;
 
 use crate::grid::Vector;
-use crate::methods::MethodInfo;
 use crate::metrics::Stage;
 use crate::particles::Region;
 use crate::scene::Scene;
-use crate::sim::markings::{DepthLevel, MarkingClass};
+use crate::sim::correct::band::BandMode;
+use crate::sim::markings::MarkingClass;
 use crate::sim::{Simulation, StepReport};
 use anyhow::{anyhow, Result};
-use rerun::blueprint::{
-    Blueprint, Horizontal, Spatial2DView, Spatial3DView, Tabs, TextDocumentView, TextLogView,
-    TimeSeriesView, Vertical,
-};
+use canvas::PointLook;
+use layout::RunFacts;
+use legend::{speed_color, NEW_SOLID_COLOR, OBSTACLE_COLOR};
+use rerun::blueprint::{Blueprint, Tabs, TimeSeriesView, Vertical};
 use rerun::RecordingStream;
 use std::cell::{Cell, RefCell};
 use std::path::Path;
@@ -39,7 +41,7 @@ pub trait Log<const D: usize> {
     /// Class ids with their labels and colours (RGBA) for `path` and below, logged once.
     fn classes(&mut self, path: &str, classes: &[(u16, &'static str, [u8; 4])]);
     /// One class id per cell: in 2D an image over the grid, in 3D points at the centres of the
-    /// cells whose class is not in `hidden_3d`.
+    /// cells whose class is not in `hidden_3d` (and the image of the slice).
     fn cell_classes(
         &mut self,
         path: &str,
@@ -48,7 +50,7 @@ pub trait Log<const D: usize> {
         layer: Layer,
     );
     /// A `[width, height]` image of values in `range`, row 0 at the bottom (grid order), drawn
-    /// with a colour map in its own 2D view ([`crate::methods::MethodInfo::images`]).
+    /// with a colour map in its own 2D view ([`crate::methods::MethodInfo::layer_views`]).
     fn image(&mut self, path: &str, size: [usize; 2], values: &[f32], range: [f32; 2]);
     /// Arrows from the first point to the second of each pair (an empty batch clears).
     fn arrows(&mut self, path: &str, from_to: &[(Vector<D>, Vector<D>)], style: Style);
@@ -61,6 +63,10 @@ pub trait Log<const D: usize> {
         labels: Vec<String>,
         style: Style,
     );
+    /// The correction's moves `(x_hat, x)`: one arrow each under `world/corrector/moves`
+    /// (from `x_hat` to `x`, or with `--moves hops` from the centre of `x_hat`'s cell to the
+    /// centre of `x`'s), and the moved particles highlighted under `world/corrector/moved`.
+    fn moves(&mut self, from_to: &[(Vector<D>, Vector<D>)]);
 }
 
 /// How a drawing looks: its colour, radius (cells) and, in 2D, its draw order.
@@ -78,88 +84,24 @@ pub struct Layer {
     pub radius_3d: f32,
 }
 
-/// The band levels (sec. band_method) as classes: label and colour of each [`DepthLevel`].
-pub fn depth_level_classes() -> Vec<(u16, &'static str, [u8; 4])> {
-    DepthLevel::ALL
-        .iter()
-        .map(|l| {
-            let rgba = match l {
-                DepthLevel::NotFluid => [0, 0, 0, 0],
-                DepthLevel::Surface => [60, 180, 75, 120],
-                DepthLevel::Band => [120, 190, 240, 110],
-                DepthLevel::Interface => [240, 200, 40, 170],
-                DepthLevel::Deep => [20, 40, 120, 140],
-            };
-            (*l as u16, l.label(), rgba)
-        })
-        .collect()
+/// How the correction's moves are drawn (`--moves`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum Moves {
+    /// From `x_hat` (after advection) to `x` (after the correction): the exact displacement,
+    /// often a small fraction of a cell (the moved particles are highlighted).
+    #[default]
+    Arrows,
+    /// From the centre of the cell the particle was advected into to the centre of the cell
+    /// the correction put it in: every move at least one cell long.
+    Hops,
 }
 
-fn class_color(c: MarkingClass) -> [u8; 4] {
-    match c {
-        MarkingClass::Empty => [0, 0, 0, 0],
-        MarkingClass::Surface => [60, 180, 75, 140],
-        MarkingClass::Inner => [30, 70, 160, 110],
-        MarkingClass::Bubble => [230, 50, 50, 160],
-        MarkingClass::Solid => [128, 128, 128, 255],
-    }
-}
-
-/// Colour ramp for speeds: dark blue at rest, through cyan, to white at the speed bound.
-fn speed_color(speed: f64, max: f64) -> [u8; 3] {
-    let s = (speed / max).clamp(0.0, 1.0);
-    let lerp = |a: f64, b: f64, t: f64| (a + (b - a) * t) as u8;
-    if s < 0.5 {
-        let t = s * 2.0;
-        [
-            lerp(20.0, 40.0, t),
-            lerp(60.0, 200.0, t),
-            lerp(160.0, 255.0, t),
-        ]
-    } else {
-        let t = (s - 0.5) * 2.0;
-        [lerp(40.0, 255.0, t), lerp(200.0, 255.0, t), 255]
-    }
-}
-
-fn rgba(c: [u8; 4]) -> rerun::Rgba32 {
-    rerun::Rgba32::from_unmultiplied_rgba(c[0], c[1], c[2], c[3])
-}
-
-/// The world view on the left; on the right the volume, stage times, the pressure solve, the
-/// method's own panels, the log and the scene.
-fn blueprint(dim: usize, info: &MethodInfo) -> Blueprint {
-    let mut world: rerun::blueprint::ContainerLike = if dim == 2 {
-        Spatial2DView::new("world").with_origin("world").into()
-    } else {
-        Spatial3DView::new("world").with_origin("world").into()
-    };
-    if !info.images.is_empty() {
-        let mut left = vec![world];
-        left.extend(info.images.iter().map(|&(name, origin)| {
-            rerun::blueprint::ContainerLike::from(Spatial2DView::new(name).with_origin(origin))
-        }));
-        let mut shares = vec![2.0];
-        shares.extend(info.images.iter().map(|_| 1.0));
-        world = Vertical::new(left).with_row_shares(shares).into();
-    }
-    let method_panels = info.panels;
-    let series = |name: &str, origin: &str| TimeSeriesView::new(name).with_origin(origin).into();
-    let mut right: Vec<rerun::blueprint::ContainerLike> = vec![
-        series("volume %", "metrics/volume_percent"),
-        series("stage times (ms)", "metrics/time"),
-        series("pressure solve", "metrics/pcg"),
-    ];
-    right.extend(
-        method_panels
-            .iter()
-            .map(|(name, origin)| series(name, origin)),
-    );
-    right.push(TextLogView::new("log").with_origin("log").into());
-    right.push(TextDocumentView::new("scene").with_origin("scene").into());
-    Blueprint::new(
-        Horizontal::new([world, Vertical::new(right).into()]).with_column_shares([2.0, 1.0]),
-    )
+/// How the command line asks a recording to draw.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Drawing {
+    pub moves: Moves,
+    /// 3D: the slice's axis (0, 1, 2) and position as a fraction of the tank along it.
+    pub slice: (usize, f64),
 }
 
 /// Writes one run to an `.rrd` file.
@@ -168,41 +110,51 @@ pub struct Recorder {
     file: RrdFile,
     dims: Vec<usize>,
     max_speed: f64,
+    drawing: Drawing,
     last_flush: Cell<Instant>,
     /// Every obstacle's centres so far (world coordinates), for its trail.
     trails: RefCell<Vec<Vec<[f32; 3]>>>,
 }
 
 impl Recorder {
-    /// Opens `path` for writing ([`RrdFile`]); fails (naming the path) before anything is
-    /// simulated.
-    pub fn create(path: &Path, scene: &Scene) -> Result<Self> {
+    /// Opens `path` for writing ([`RrdFile`]) with the run's identity, layout and scene; fails
+    /// (naming the path) before anything is simulated. `cross_check` is `--cross-check`.
+    pub fn create(path: &Path, scene: &Scene, cross_check: bool, drawing: Drawing) -> Result<Self> {
         let file = RrdFile::create(path)?;
         let sink: Box<dyn rerun::sink::LogSink> = Box::new(file.clone());
+        let cannot = |e| anyhow!("cannot write recording '{}': {e}", path.display());
         let rec = rerun::RecordingStreamBuilder::new("cellflip")
-            .recording_name(scene.name())
+            .recording_name(recording_name(scene))
             .enabled(true)
-            .send_properties(false)
-            .with_blueprint(blueprint(scene.dim(), scene.method.kind.info()))
             .set_sinks(vec![sink])
-            .map_err(|e| anyhow!("cannot write recording '{}': {e}", path.display()))?;
+            .map_err(cannot)?;
         rec.set_log_time_enabled(false);
-        let header = format!(
-            "# {}\n\n{}\n\n- source: {}\n- method: {}\n- seed: {}\n- program: cellflip {}\n\n```toml\n{}```\n",
-            scene.name(),
-            scene.file.description,
-            scene.source,
-            scene.method.kind.name(),
-            scene.file.simulation.seed,
-            env!("CARGO_PKG_VERSION"),
-            scene.resolved_toml()
-        );
-        rec.log_static("scene", &rerun::TextDocument::from_markdown(header))?;
+        let facts = RunFacts {
+            dims: scene.dims.clone(),
+            method: scene.method.kind.info(),
+            band: scene.method.band != BandMode::None,
+            cross_check,
+            obstacles: scene.file.obstacle.iter().map(|o| o.name.clone()).collect(),
+            slice_axis: drawing.slice.0,
+        };
+        layout::send(&rec, &layout::layout(&facts)).map_err(cannot)?;
+        rec.send_property("run", &run_properties(scene))
+            .map_err(cannot)?;
+        rec.log_static(
+            "scene",
+            &rerun::TextDocument::from_markdown(scene_markdown(scene)),
+        )
+        .map_err(cannot)?;
+        let max_speed = scene.file.simulation.max_speed;
+        let legend = legend::markdown(max_speed, facts.shows("world/grid/depth"));
+        rec.log_static("legend", &rerun::TextDocument::from_markdown(legend))
+            .map_err(cannot)?;
         Ok(Self {
             rec,
             file,
             dims: scene.dims.clone(),
-            max_speed: scene.file.simulation.max_speed / scene.cell_size_m,
+            max_speed: max_speed / scene.cell_size_m,
+            drawing,
             last_flush: Cell::new(Instant::now()),
             trails: RefCell::new(vec![]),
         })
@@ -211,11 +163,17 @@ impl Recorder {
     fn canvas<const D: usize>(&self, sim: &Simulation<D>) -> Canvas<'_, D> {
         self.rec.set_time_sequence("step", sim.state.steps as i64);
         self.rec.set_duration_secs("sim_time", sim.state.time_secs);
+        let (axis, at) = self.drawing.slice;
+        let slice = (D == 3).then(|| {
+            let layer = ((at * self.dims[axis] as f64) as usize).min(self.dims[axis] - 1);
+            Plane::slice(&self.dims, axis, layer)
+        });
         Canvas {
             rec: &self.rec,
-            ny: self.dims[1] as f32,
             dims: std::array::from_fn(|k| self.dims[k]),
             step: sim.state.steps,
+            hops: self.drawing.moves == Moves::Hops,
+            slice,
             result: Ok(()),
         }
     }
@@ -223,11 +181,7 @@ impl Recorder {
     /// Static data: the class colours, the domain, the view coordinates, the method's layers.
     pub fn log_setup<const D: usize>(&self, sim: &Simulation<D>) {
         let mut c = self.canvas(sim);
-        let classes: Vec<(u16, &str, [u8; 4])> = MarkingClass::ALL
-            .iter()
-            .map(|k| (*k as u16, k.label(), class_color(*k)))
-            .collect();
-        c.classes("world", &classes);
+        c.classes("world", &legend::marking_classes());
         if D == 3 {
             let r = self
                 .rec
@@ -258,8 +212,8 @@ impl Recorder {
         self.report(c.result);
     }
 
-    /// The state after a step: particles, markings and obstacles when `full`, metrics when
-    /// `rep` is given.
+    /// The state after a step (or at the start, step 0, without `rep`): particles, markings
+    /// and obstacles when `full`; the metrics (at the start those it has).
     ///
     /// Fails when the file cannot be written (checked every step, flushed every two seconds);
     /// the first step recorded gives the file its name.
@@ -272,33 +226,12 @@ impl Recorder {
         let mut c = self.canvas(sim);
         let s = &sim.state;
         if full {
-            let colors = s
-                .particles
-                .vel
-                .iter()
-                .map(|v| speed_color(v.norm(), self.max_speed))
-                .collect();
-            let look = PointLook {
-                radius: if D == 2 { 0.12 } else { 0.15 },
-                order: 10.0,
-                labels: None,
-            };
-            c.points("world/particles", &s.particles.pos, colors, look);
-            let mu = s.config.mu();
-            let hidden = [MarkingClass::Empty as u8, MarkingClass::Inner as u8];
-            c.cell_classes(
-                "world/grid/markings",
-                &|cell| s.markings.class(cell, mu) as u8,
-                &hidden,
-                Layer {
-                    order: 0.0,
-                    radius_3d: 0.3,
-                },
-            );
+            self.log_particles_and_cells(&mut c, sim);
             self.log_obstacles(&mut c, sim);
         }
+        log_state_metrics(&mut c, sim);
         if let Some(rep) = rep {
-            log_metrics(&mut c, sim, rep);
+            log_step_metrics(&mut c, sim, rep);
             if full && !s.solids.obstacles.is_empty() {
                 log_new_solid(&mut c, sim, &rep.new_solid);
             }
@@ -312,12 +245,45 @@ impl Recorder {
         self.file.check()
     }
 
+    /// The particles coloured by speed and the cell markings (the band methods' deep as its
+    /// own class).
+    fn log_particles_and_cells<const D: usize>(&self, c: &mut Canvas<'_, D>, sim: &Simulation<D>) {
+        let s = &sim.state;
+        let colors = s
+            .particles
+            .vel
+            .iter()
+            .map(|v| speed_color(v.norm(), self.max_speed))
+            .collect();
+        let look = PointLook {
+            radius: if D == 2 { 0.12 } else { 0.15 },
+            order: 10.0,
+            labels: None,
+        };
+        c.points("world/particles", &s.particles.pos, colors, look);
+        let mu = s.config.mu();
+        let class = |cell| match sim.method.is_deep(s, cell) {
+            true => legend::DEEP as u8,
+            false => s.markings.class(cell, mu) as u8,
+        };
+        let hidden = [
+            MarkingClass::Empty as u8,
+            MarkingClass::Inner as u8,
+            legend::DEEP as u8,
+        ];
+        let layer = Layer {
+            order: 0.0,
+            radius_3d: 0.2,
+        };
+        c.cell_classes("world/grid/markings", &class, &hidden, layer);
+    }
+
     /// Each obstacle's shape where it is now, and its trail (its centre over the steps).
     fn log_obstacles<const D: usize>(&self, c: &mut Canvas<'_, D>, sim: &Simulation<D>) {
         let mut trails = self.trails.borrow_mut();
         let obstacles = &sim.state.solids.obstacles;
         trails.resize(obstacles.len(), vec![]);
-        let color = [230u8, 90, 40];
+        let color = OBSTACLE_COLOR;
         for (o, trail) in obstacles.iter().zip(trails.iter_mut()) {
             let path = format!("world/obstacles/{}", o.name);
             let r = o.region_at(&o.offset);
@@ -399,12 +365,34 @@ impl Recorder {
     }
 }
 
-/// The scalars every method has, and each obstacle's.
-fn log_metrics<const D: usize>(c: &mut Canvas<'_, D>, sim: &Simulation<D>, rep: &StepReport<D>) {
+/// The scalars the state gives, also at the start (step 0): the volume, the particles, the
+/// fastest particle before the first step (after it: the fastest face, from the step's
+/// report), and each obstacle's lowest point and speed.
+fn log_state_metrics<const D: usize>(c: &mut Canvas<'_, D>, sim: &Simulation<D>) {
     let s = &sim.state;
     let h = s.config.cell_size_m;
-    c.scalar("metrics/volume_percent", rep.volume_percent);
+    c.scalar("metrics/volume_percent", s.volume_percent());
     c.scalar("metrics/particles", s.particles.len() as f64);
+    if s.steps == 0 {
+        let fastest = s.particles.vel.iter().map(|v| v.norm()).fold(0.0, f64::max);
+        c.scalar("metrics/max_speed", fastest * h);
+    }
+    for o in &s.solids.obstacles {
+        let m = format!("metrics/obstacle/{}", o.name);
+        c.scalar(&format!("{m}/height"), o.bottom() * h);
+        c.scalar(&format!("{m}/speed"), o.velocity.norm() * h);
+    }
+}
+
+/// The scalars of a step's report that every method has: the time step, the fastest face,
+/// the pressure solve, the stage times, each obstacle's blocked flag.
+fn log_step_metrics<const D: usize>(
+    c: &mut Canvas<'_, D>,
+    sim: &Simulation<D>,
+    rep: &StepReport<D>,
+) {
+    let s = &sim.state;
+    let h = s.config.cell_size_m;
     c.scalar("metrics/dt", rep.dt_secs);
     c.scalar("metrics/max_speed", rep.max_speed * h);
     c.scalar("metrics/pcg/iterations", rep.pcg.iterations as f64);
@@ -414,10 +402,8 @@ fn log_metrics<const D: usize>(c: &mut Canvas<'_, D>, sim: &Simulation<D>, rep: 
         c.scalar(&format!("metrics/time/{}", st.name()), ms);
     }
     for (o, &blocked) in s.solids.obstacles.iter().zip(&rep.blocked) {
-        let m = format!("metrics/obstacle/{}", o.name);
-        c.scalar(&format!("{m}/height"), o.bottom() * h);
-        c.scalar(&format!("{m}/speed"), o.velocity.norm() * h);
-        c.scalar(&format!("{m}/blocked"), blocked as u8 as f64);
+        let path = format!("metrics/obstacle/{}/blocked", o.name);
+        c.scalar(&path, blocked as u8 as f64);
     }
     if rep.dt_shortened {
         let msg = format!(
@@ -451,254 +437,54 @@ fn log_new_solid<const D: usize>(
     c.points(
         "world/obstacles/new_solid",
         &centres,
-        vec![[255, 200, 0]],
+        vec![NEW_SOLID_COLOR],
         look,
     );
 }
 
-/// How points look: radius (cells), draw order in 2D, labels.
-struct PointLook {
-    radius: f32,
-    order: f32,
-    labels: Option<Vec<String>>,
+/// The recording's name in the viewer: scene, method (with its band), cells and seed, e.g.
+/// `dam-3d ccp band-paths 50x50x50 seed 1`, so that runs opened side by side differ.
+pub fn recording_name(scene: &Scene) -> String {
+    let mut name = format!("{} {}", scene.name(), scene.method.kind.name());
+    if scene.method.band != BandMode::None {
+        name += &format!(" band-{}", scene.method.band.name());
+    }
+    let cells: Vec<String> = scene.dims.iter().map(usize::to_string).collect();
+    name + &format!(" {} seed {}", cells.join("x"), scene.file.simulation.seed)
 }
 
-/// Draws on the recording at one step, in 2D or 3D; keeps the first error.
-pub struct Canvas<'a, const D: usize> {
-    rec: &'a RecordingStream,
-    dims: [usize; D],
-    ny: f32,
-    step: u64,
-    result: rerun::RecordingStreamResult<()>,
+/// The run's settings as recording properties (`__properties/run`), shown with the
+/// recording in the viewer.
+fn run_properties(scene: &Scene) -> rerun::AnyValues {
+    let cells: Vec<String> = scene.dims.iter().map(usize::to_string).collect();
+    let sim = &scene.file.simulation;
+    [
+        ("scene", scene.name().to_string()),
+        ("method", scene.method.kind.name().to_string()),
+        ("band", scene.method.band.name().to_string()),
+        ("cells", cells.join("x")),
+        ("ppc", sim.ppc.to_string()),
+        ("seed", sim.seed.to_string()),
+        ("version", format!("cellflip {}", env!("CARGO_PKG_VERSION"))),
+    ]
+    .into_iter()
+    .fold(rerun::AnyValues::default(), |v, (key, value)| {
+        v.with_component::<rerun::components::Text>(key, [value])
+    })
 }
 
-impl<const D: usize> Canvas<'_, D> {
-    fn keep(&mut self, r: rerun::RecordingStreamResult<()>) {
-        if self.result.is_ok() {
-            self.result = r;
-        }
-    }
-
-    /// World coordinates of a point in cells: in 2D rows down, `(x, ny - y, 0)`.
-    fn world(&self, x: &Vector<D>) -> [f32; 3] {
-        if D == 2 {
-            [x[0] as f32, self.ny - x[1] as f32, 0.0]
-        } else {
-            [x[0] as f32, x[1] as f32, x[2] as f32]
-        }
-    }
-
-    fn world_all(&self, xs: &[Vector<D>]) -> Vec<[f32; 3]> {
-        xs.iter().map(|x| self.world(x)).collect()
-    }
-
-    fn text(&mut self, msg: &str, level: &'static str) {
-        let r = self
-            .rec
-            .log("log", &rerun::TextLog::new(msg).with_level(level));
-        self.keep(r);
-    }
-
-    /// Points with one colour each (or one for all), one radius, and labels if given.
-    fn points(&mut self, path: &str, xs: &[Vector<D>], colors: Vec<[u8; 3]>, look: PointLook) {
-        let p = self.world_all(xs);
-        let r = if D == 2 {
-            let p2 = p.iter().map(|p| [p[0], p[1]]);
-            let mut pts = rerun::Points2D::new(p2)
-                .with_colors(colors)
-                .with_radii([look.radius])
-                .with_draw_order(look.order);
-            if let Some(l) = look.labels {
-                pts = pts.with_labels(l);
-            }
-            self.rec.log(path, &pts)
-        } else {
-            let mut pts = rerun::Points3D::new(p)
-                .with_colors(colors)
-                .with_radii([look.radius]);
-            if let Some(l) = look.labels {
-                pts = pts.with_labels(l);
-            }
-            self.rec.log(path, &pts)
-        };
-        self.keep(r);
-    }
-
-    /// An axis-aligned box from `lo` to `hi` (cells): the tank (`domain`: static, 3D as a
-    /// wireframe, under everything in 2D) or an obstacle (per step, over the particles).
-    fn boxes(&mut self, path: &str, lo: &Vector<D>, hi: &Vector<D>, color: [u8; 3], domain: bool) {
-        let (a, b) = (self.world(lo), self.world(hi));
-        let centre: [f32; 3] = std::array::from_fn(|k| (a[k] + b[k]) / 2.0);
-        let half: [f32; 3] = std::array::from_fn(|k| (b[k] - a[k]).abs() / 2.0);
-        let r = match (D, domain) {
-            (2, _) => {
-                let b = rerun::Boxes2D::from_centers_and_half_sizes(
-                    [(centre[0], centre[1])],
-                    [(half[0], half[1])],
-                )
-                .with_colors([color]);
-                if domain {
-                    self.rec.log_static(path, &b)
-                } else {
-                    self.rec.log(path, &b.with_draw_order(25.0))
-                }
-            }
-            (_, true) => {
-                let b = rerun::Boxes3D::from_centers_and_half_sizes([centre], [half])
-                    .with_colors([color])
-                    .with_fill_mode(rerun::FillMode::MajorWireframe);
-                self.rec.log_static(path, &b)
-            }
-            _ => {
-                let b = rerun::Boxes3D::from_centers_and_half_sizes([centre], [half]);
-                self.rec.log(path, &b.with_colors([color]))
-            }
-        };
-        self.keep(r);
-    }
-
-    /// One line strip through world points.
-    fn strip_world(&mut self, path: &str, pts: &[[f32; 3]], color: [u8; 3]) {
-        let r = if D == 2 {
-            let strip: Vec<[f32; 2]> = pts.iter().map(|p| [p[0], p[1]]).collect();
-            let s = rerun::LineStrips2D::new([strip]).with_colors([color]);
-            self.rec.log(path, &s.with_draw_order(24.0))
-        } else {
-            let s = rerun::LineStrips3D::new([pts.to_vec()]).with_colors([color]);
-            self.rec.log(path, &s)
-        };
-        self.keep(r);
-    }
-}
-
-impl<const D: usize> Log<D> for Canvas<'_, D> {
-    fn scalar(&mut self, path: &str, value: f64) {
-        let r = self.rec.log(path, &rerun::Scalars::single(value));
-        self.keep(r);
-    }
-
-    fn warn(&mut self, message: &str) {
-        let msg = format!("step {}: {message}", self.step);
-        self.text(&msg, rerun::TextLogLevel::WARN);
-    }
-
-    fn classes(&mut self, path: &str, classes: &[(u16, &'static str, [u8; 4])]) {
-        let c: Vec<(u16, &str, rerun::Rgba32)> = classes
-            .iter()
-            .map(|(id, l, c)| (*id, *l, rgba(*c)))
-            .collect();
-        let r = self.rec.log_static(path, &rerun::AnnotationContext::new(c));
-        self.keep(r);
-    }
-
-    fn cell_classes(
-        &mut self,
-        path: &str,
-        class: &dyn Fn(usize) -> u8,
-        hidden_3d: &[u8],
-        layer: Layer,
-    ) {
-        let n: usize = self.dims.iter().product();
-        let r = if D == 2 {
-            // Cell index c = x + w y (axis 0 fastest); image row 0 is the top.
-            let (w, h) = (self.dims[0], self.dims[1]);
-            let mut img = vec![0u8; n];
-            for c in 0..n {
-                img[(h - 1 - c / w) * w + c % w] = class(c);
-            }
-            let format =
-                rerun::ImageFormat::segmentation([w as u32, h as u32], rerun::ChannelDatatype::U8);
-            let image = rerun::SegmentationImage::new(img, format).with_draw_order(layer.order);
-            self.rec.log(path, &image)
-        } else {
-            let grid = crate::grid::Grid::new(self.dims);
-            let (centres, ids): (Vec<[f32; 3]>, Vec<rerun::components::ClassId>) = (0..n)
-                .map(|c| (c, class(c)))
-                .filter(|(_, k)| !hidden_3d.contains(k))
-                .map(|(c, k)| {
-                    (
-                        self.world(&grid.center(grid.cell_coords(c))),
-                        rerun::components::ClassId::from(k as u16),
-                    )
-                })
-                .unzip();
-            let pts = rerun::Points3D::new(centres).with_class_ids(ids);
-            let pts = pts.with_radii([layer.radius_3d]);
-            self.rec.log(path, &pts)
-        };
-        self.keep(r);
-    }
-
-    fn image(&mut self, path: &str, [w, h]: [usize; 2], values: &[f32], range: [f32; 2]) {
-        // Image row 0 is the top.
-        let mut bytes = Vec::with_capacity(4 * w * h);
-        for row in (0..h).rev() {
-            for v in &values[row * w..(row + 1) * w] {
-                bytes.extend_from_slice(&v.to_le_bytes());
-            }
-        }
-        let format = rerun::ImageFormat::depth([w as u32, h as u32], rerun::ChannelDatatype::F32);
-        let image = rerun::DepthImage::new(bytes, format)
-            .with_colormap(rerun::components::Colormap::Viridis)
-            .with_depth_range([range[0] as f64, range[1] as f64]);
-        let r = self.rec.log(path, &image);
-        self.keep(r);
-    }
-
-    fn arrows(&mut self, path: &str, from_to: &[(Vector<D>, Vector<D>)], style: Style) {
-        let origins: Vec<[f32; 3]> = from_to.iter().map(|(a, _)| self.world(a)).collect();
-        let vectors: Vec<[f32; 3]> = from_to
-            .iter()
-            .zip(&origins)
-            .map(|((_, b), o)| {
-                let w = self.world(b);
-                std::array::from_fn(|k| w[k] - o[k])
-            })
-            .collect();
-        let r = if D == 2 {
-            let two = |v: &[[f32; 3]]| v.iter().map(|p| [p[0], p[1]]).collect::<Vec<_>>();
-            let a = rerun::Arrows2D::from_vectors(two(&vectors)).with_origins(two(&origins));
-            let a = a.with_colors([style.color]).with_radii([style.radius]);
-            self.rec.log(path, &a.with_draw_order(style.order))
-        } else {
-            let a = rerun::Arrows3D::from_vectors(vectors).with_origins(origins);
-            self.rec.log(
-                path,
-                &a.with_colors([style.color]).with_radii([style.radius]),
-            )
-        };
-        self.keep(r);
-    }
-
-    fn strips(
-        &mut self,
-        path: &str,
-        strips: &[Vec<Vector<D>>],
-        colors: &[[u8; 3]],
-        labels: Vec<String>,
-        style: Style,
-    ) {
-        let world: Vec<Vec<[f32; 3]>> = strips.iter().map(|s| self.world_all(s)).collect();
-        let r = if D == 2 {
-            let two: Vec<Vec<[f32; 2]>> = world
-                .iter()
-                .map(|s| s.iter().map(|p| [p[0], p[1]]).collect())
-                .collect();
-            let l = rerun::LineStrips2D::new(two)
-                .with_colors(colors.to_vec())
-                .with_labels(labels);
-            self.rec.log(
-                path,
-                &l.with_radii([style.radius]).with_draw_order(style.order),
-            )
-        } else {
-            let l = rerun::LineStrips3D::new(world)
-                .with_colors(colors.to_vec())
-                .with_labels(labels);
-            self.rec.log(path, &l.with_radii([style.radius]))
-        };
-        self.keep(r);
-    }
+/// The `scene` panel: the scene as run.
+fn scene_markdown(scene: &Scene) -> String {
+    format!(
+        "# {}\n\n{}\n\n- source: {}\n- method: {}\n- seed: {}\n- program: cellflip {}\n\n```toml\n{}```\n",
+        recording_name(scene),
+        scene.file.description,
+        scene.source,
+        scene.method.kind.name(),
+        scene.file.simulation.seed,
+        env!("CARGO_PKG_VERSION"),
+        scene.resolved_toml()
+    )
 }
 
 /// One run's time series for the report's comparison recording.

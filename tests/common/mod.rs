@@ -273,3 +273,103 @@ pub fn matches(documented: &str, logged: &str) -> bool {
             .zip(&l)
             .all(|(a, b)| a == b || (a.starts_with('<') && a.ends_with('>')))
 }
+
+/// The chunks of one kind of store (the recording or its blueprint) in a recording file.
+pub fn chunks(path: &Path, kind: rerun::StoreKind) -> Vec<rerun::log::Chunk> {
+    use rerun::external::re_log_encoding::DecoderApp;
+    use rerun::log::{Chunk, LogMsg};
+    let reader = std::io::BufReader::new(std::fs::File::open(path).unwrap());
+    let mut out = vec![];
+    for msg in DecoderApp::decode_lazy(reader) {
+        if let LogMsg::ArrowMsg(store, arrow) = msg.unwrap() {
+            if store.kind() == kind {
+                out.push(Chunk::from_arrow_msg(&arrow).unwrap());
+            }
+        }
+    }
+    out
+}
+
+/// A view of a recording's blueprint, as read back from the file.
+#[derive(Debug, Default, Clone)]
+pub struct ReadView {
+    /// `2D`, `3D`, `TimeSeries`, `TextLog`, `TextDocument`.
+    pub class: String,
+    pub name: String,
+    pub origin: String,
+    /// Its query lines (`+ path`, `- path`).
+    pub queries: Vec<String>,
+}
+
+/// The views of a recording's blueprint, and the state of each side panel (`blueprint_panel`,
+/// `selection_panel`, `time_panel`) as its `PanelState` number (2 = collapsed).
+pub fn blueprint(path: &Path) -> (Vec<ReadView>, std::collections::BTreeMap<String, u8>) {
+    use rerun::external::re_sdk_types::blueprint::archetypes as bp;
+    let mut views: std::collections::BTreeMap<String, ReadView> = Default::default();
+    let mut panels = std::collections::BTreeMap::new();
+    let text = |c: &rerun::log::Chunk, d: rerun::ComponentDescriptor| -> Vec<String> {
+        c.iter_slices::<String>(d.component)
+            .flatten()
+            .map(|s| s.to_string())
+            .collect()
+    };
+    for c in chunks(path, rerun::StoreKind::Blueprint) {
+        let entity = c.entity_path().to_string();
+        let parts: Vec<&str> = entity.trim_start_matches('/').split('/').collect();
+        match parts.as_slice() {
+            ["view", id] => {
+                let v = views.entry(id.to_string()).or_default();
+                v.class = text(&c, bp::ViewBlueprint::descriptor_class_identifier()).concat();
+                v.name = text(&c, bp::ViewBlueprint::descriptor_display_name()).concat();
+                v.origin = text(&c, bp::ViewBlueprint::descriptor_space_origin()).concat();
+            }
+            ["view", id, "ViewContents"] => {
+                views.entry(id.to_string()).or_default().queries =
+                    text(&c, bp::ViewContents::descriptor_query());
+            }
+            [panel @ ("blueprint_panel" | "selection_panel" | "time_panel")] => {
+                let d = match *panel {
+                    "time_panel" => bp::TimePanelBlueprint::descriptor_state().component,
+                    _ => bp::PanelBlueprint::descriptor_state().component,
+                };
+                let state = c.iter_slices::<u8>(d).flatten().copied().next();
+                panels.insert(panel.to_string(), state.unwrap_or(0));
+            }
+            _ => {}
+        }
+    }
+    (views.into_values().collect(), panels)
+}
+
+/// Per step, how many 2D arrows `entity` holds.
+pub fn arrows_2d_per_step(path: &Path, entity: &str) -> Vec<(i64, usize)> {
+    per_step(path, entity, |c| {
+        let d = "Arrows2D:vectors".into();
+        c.iter_slices::<[f32; 2]>(d).map(|s| s.len()).collect()
+    })
+}
+
+/// Per step, the values of the scalar `entity`.
+pub fn scalars_per_step(path: &Path, entity: &str) -> Vec<(i64, f64)> {
+    per_step(path, entity, |c| {
+        let d = "Scalars:scalars".into();
+        c.iter_slices::<f64>(d).map(|s| s[0]).collect()
+    })
+}
+
+fn per_step<T>(
+    path: &Path,
+    entity: &str,
+    values: impl Fn(&rerun::log::Chunk) -> Vec<T>,
+) -> Vec<(i64, T)> {
+    let mut out = vec![];
+    for c in chunks(path, rerun::StoreKind::Recording) {
+        if c.entity_path().to_string().trim_start_matches('/') != entity {
+            continue;
+        }
+        let steps = c.timelines()[&"step".into()].times_raw().to_vec();
+        out.extend(steps.into_iter().zip(values(&c)));
+    }
+    out.sort_by_key(|(s, _)| *s);
+    out
+}

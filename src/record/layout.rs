@@ -1,0 +1,501 @@
+//! The recording's default layout (its blueprint), built as plain data from what the run has and
+//! then written into a blueprint store (issue 15, items 1, 5 and 7).
+//!
+//! The world view takes most of the window; side panels start collapsed. On the right: the
+//! volume, then tabs of time-series panels with one quantity family each (its own axis, a
+//! legend only when it has several series), then tabs with the legend, the log and the scene.
+//! Panels exist only for what the run logs (band, cross-check, obstacles, the method). Layers
+//! that would hide or blend with the particles get views of their own (band levels, IDP's
+//! density error, Power PIC's image; in 3D the markings are hidden in the 3D view and shown in
+//! the slice).
+//!
+//! The SDK's blueprint builder (rerun 0.36.3) cannot set view properties (legends, the 3D eye,
+//! hidden entities), so the store is written here with the blueprint archetypes, at the paths
+//! the viewer reads: `container/<id>`, `view/<id>`, `view/<id>/ViewContents`,
+//! `view/<id>/<property archetype>`, `view/<id>/ViewContents/overrides/<entity>/visualizers`.
+
+use super::Plane;
+use crate::methods::MethodInfo;
+use rerun::external::re_log_types::external::re_tuid::Tuid;
+use rerun::external::re_log_types::{BlueprintActivationCommand, LogMsg, RecordingId};
+use rerun::external::re_sdk_types::blueprint::{archetypes as bp, components as bpc};
+use rerun::external::re_sdk_types::datatypes::Uuid;
+use rerun::{RecordingStream, RecordingStreamBuilder, RecordingStreamResult};
+
+/// When a panel or view belongs in the layout.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Needs {
+    Always,
+    /// The band method (ccp `--band`).
+    Band,
+    /// `--cross-check`.
+    CrossCheck,
+    /// The scene has obstacles.
+    Obstacles,
+}
+
+/// A time-series panel: one quantity family on one axis.
+#[derive(Debug)]
+pub struct Panel {
+    pub title: &'static str,
+    /// The scalar entities it plots (`/**` for all below).
+    pub series: &'static [&'static str],
+    pub needs: Needs,
+}
+
+/// A spatial view of cell layers the world view leaves out (they would hide or blend with the
+/// particles): its title, origin, the layers, and the marks drawn over them here as in the
+/// world view.
+#[derive(Debug)]
+pub struct LayerView {
+    pub title: &'static str,
+    pub origin: &'static str,
+    pub layers: &'static [&'static str],
+    pub marks: &'static [&'static str],
+    pub needs: Needs,
+}
+
+/// What a run has, which decides the layout.
+#[derive(Debug)]
+pub struct RunFacts<'a> {
+    pub dims: Vec<usize>,
+    pub method: &'a MethodInfo,
+    pub band: bool,
+    pub cross_check: bool,
+    pub obstacles: Vec<String>,
+    /// 3D: the axis the slice cuts across.
+    pub slice_axis: usize,
+}
+
+impl RunFacts<'_> {
+    /// Whether one of the method's layer views this run has shows `entity`.
+    pub fn shows(&self, entity: &str) -> bool {
+        let mut views = self.method.layer_views.iter().filter(|l| self.has(l.needs));
+        views.any(|l| l.layers.contains(&entity))
+    }
+
+    fn has(&self, needs: Needs) -> bool {
+        match needs {
+            Needs::Always => true,
+            Needs::Band => self.band,
+            Needs::CrossCheck => self.cross_check,
+            Needs::Obstacles => !self.obstacles.is_empty(),
+        }
+    }
+}
+
+/// The panels of every run.
+const COMMON_PANELS: &[Panel] = &[
+    Panel {
+        title: "particles",
+        series: &["metrics/particles"],
+        needs: Needs::Always,
+    },
+    Panel {
+        title: "time step dt (s)",
+        series: &["metrics/dt"],
+        needs: Needs::Always,
+    },
+    Panel {
+        title: "max speed (m/s)",
+        series: &["metrics/max_speed"],
+        needs: Needs::Always,
+    },
+    Panel {
+        title: "stage times (ms)",
+        series: &["metrics/time/**"],
+        needs: Needs::Always,
+    },
+    Panel {
+        title: "pressure: PCG iterations",
+        series: &["metrics/pcg/iterations"],
+        needs: Needs::Always,
+    },
+    Panel {
+        title: "pressure: PCG residual",
+        series: &["metrics/pcg/residual"],
+        needs: Needs::Always,
+    },
+];
+
+/// The kinds of view the layout uses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kind {
+    Spatial2D,
+    Spatial3D,
+    TimeSeries,
+    TextLog,
+    TextDocument,
+}
+
+impl Kind {
+    fn class(self) -> &'static str {
+        match self {
+            Kind::Spatial2D => "2D",
+            Kind::Spatial3D => "3D",
+            Kind::TimeSeries => "TimeSeries",
+            Kind::TextLog => "TextLog",
+            Kind::TextDocument => "TextDocument",
+        }
+    }
+}
+
+/// One view: what it shows and how it starts.
+#[derive(Debug)]
+pub struct View {
+    pub kind: Kind,
+    pub name: String,
+    pub origin: String,
+    /// Query lines (`+ path`, `- path`, `/**` for a subtree).
+    pub contents: Vec<String>,
+    /// Entities it draws but hides until the user switches them on.
+    pub hidden: Vec<String>,
+    /// Time series: whether the legend shows (several series).
+    pub legend: bool,
+    /// 3D: where the eye starts and what it looks at (world coordinates).
+    pub eye: Option<([f32; 3], [f32; 3])>,
+    /// 2D: the region it starts showing, `[x0, x1, y0, y1]` (world coordinates).
+    pub bounds: Option<[f32; 4]>,
+}
+
+impl View {
+    fn new(kind: Kind, name: &str, origin: &str, contents: Vec<String>) -> Self {
+        Self {
+            kind,
+            name: name.to_string(),
+            origin: origin.to_string(),
+            contents,
+            hidden: vec![],
+            legend: false,
+            eye: None,
+            bounds: None,
+        }
+    }
+
+    fn series(p: &Panel, obstacles: &[String]) -> Self {
+        let contents: Vec<String> = p
+            .series
+            .iter()
+            .flat_map(|s| match s.split_once("/<name>/") {
+                Some((a, b)) => obstacles.iter().map(|o| format!("+ {a}/{o}/{b}")).collect(),
+                None => vec![format!("+ {s}")],
+            })
+            .collect();
+        let mut v = View::new(Kind::TimeSeries, p.title, "/", contents);
+        v.legend = v.contents.len() > 1 || v.contents.iter().any(|c| c.ends_with("/**"));
+        v
+    }
+}
+
+/// A layout: containers (rows, columns with their shares; tabs) and views.
+#[derive(Debug)]
+pub enum Pane {
+    Row(Vec<(f32, Pane)>),
+    Column(Vec<(f32, Pane)>),
+    Tabs(Vec<Pane>),
+    View(View),
+}
+
+impl Pane {
+    /// Tabs, or the one pane when there is one.
+    fn tabs(mut panes: Vec<Pane>) -> Pane {
+        if panes.len() == 1 {
+            panes.remove(0)
+        } else {
+            Pane::Tabs(panes)
+        }
+    }
+}
+
+/// The obstacles' panels: one per quantity, every obstacle a series.
+const OBSTACLE_PANELS: &[Panel] = &[
+    Panel {
+        title: "obstacles: lowest point (m)",
+        series: &["metrics/obstacle/<name>/height"],
+        needs: Needs::Obstacles,
+    },
+    Panel {
+        title: "obstacles: speed (m/s)",
+        series: &["metrics/obstacle/<name>/speed"],
+        needs: Needs::Obstacles,
+    },
+    Panel {
+        title: "obstacles: blocked (1 = had to stay)",
+        series: &["metrics/obstacle/<name>/blocked"],
+        needs: Needs::Obstacles,
+    },
+];
+
+/// The layout of a run: world (and its layer views) on the left, the series, legend, log and
+/// scene on the right.
+pub fn layout(f: &RunFacts<'_>) -> Pane {
+    let series = |panels: &[Panel]| -> Vec<Pane> {
+        panels
+            .iter()
+            .filter(|p| f.has(p.needs))
+            .map(|p| Pane::View(View::series(p, &f.obstacles)))
+            .collect()
+    };
+    let volume = Panel {
+        title: "volume (% of V*)",
+        series: &["metrics/volume_percent"],
+        needs: Needs::Always,
+    };
+    let mut method = series(OBSTACLE_PANELS);
+    method.extend(series(f.method.panels));
+    let mut right = vec![
+        (1.0, Pane::View(View::series(&volume, &[]))),
+        (1.4, Pane::Tabs(series(COMMON_PANELS))),
+    ];
+    if !method.is_empty() {
+        right.push((1.4, Pane::tabs(method)));
+    }
+    let log = View::new(Kind::TextLog, "log", "log", vec!["+ log".into()]);
+    right.push((
+        1.4,
+        Pane::Tabs(vec![
+            Pane::View(View::new(
+                Kind::TextDocument,
+                "legend",
+                "legend",
+                vec!["+ legend".into()],
+            )),
+            Pane::View(log),
+            Pane::View(View::new(
+                Kind::TextDocument,
+                "scene",
+                "scene",
+                vec!["+ scene".into()],
+            )),
+        ]),
+    ));
+    Pane::Row(vec![(2.4, world_column(f)), (1.0, Pane::Column(right))])
+}
+
+/// The world view, largest, with the layer views beside it in tabs. The world view leaves
+/// the layer views' cell layers out (2D) or hidden until switched on (3D, with the markings
+/// and the moved-particle highlight); in 3D every layer view shows the slice.
+fn world_column(f: &RunFacts<'_>) -> Pane {
+    let three_d = f.dims.len() == 3;
+    let layer_views = f.method.layer_views.iter().filter(|l| f.has(l.needs));
+    let (in_world, apart): (Vec<&LayerView>, Vec<&LayerView>) =
+        layer_views.partition(|l| l.origin == "world");
+    let cell_layers = in_world.iter().flat_map(|l| l.layers.iter());
+    let (kind, plane) = match three_d {
+        true => (Kind::Spatial3D, Plane::slice(&f.dims, f.slice_axis, 0)),
+        false => (Kind::Spatial2D, Plane::world_2d(&f.dims)),
+    };
+    let bounds = Some([0.0, plane.cols as f32, 0.0, plane.rows as f32]);
+    let mut world = View::new(kind, "world", "world", vec!["+ world/**".into()]);
+    if three_d {
+        world.hidden = ["world/grid/markings", "world/corrector/moved"]
+            .map(String::from)
+            .into();
+        world.hidden.extend(cell_layers.map(|e| e.to_string()));
+        world.eye = Some(eye(&f.dims));
+    } else {
+        world.contents.extend(cell_layers.map(|e| format!("- {e}")));
+        world.bounds = bounds;
+    }
+    // Where the layer views draw: the world plane in 2D, the slice in 3D.
+    let (origin, on_plane): (&str, fn(&str) -> String) = match three_d {
+        true => ("slice", |e| e.replacen("world/", "slice/", 1)),
+        false => ("world", |e| e.to_string()),
+    };
+    let mut slice = View::new(Kind::Spatial2D, "slice", "slice", vec!["+ slice/**".into()]);
+    slice.bounds = bounds;
+    let mut tabs: Vec<Pane> = vec![];
+    for l in &in_world {
+        let shown = l.layers.iter().chain(l.marks);
+        let mut contents: Vec<String> = shown.map(|e| format!("+ {}", on_plane(e))).collect();
+        if !three_d {
+            contents.push("+ world/domain".into());
+        }
+        let layers = l.layers.iter().map(|e| format!("- {}", on_plane(e)));
+        slice.contents.extend(layers);
+        let mut v = View::new(Kind::Spatial2D, l.title, origin, contents);
+        v.bounds = bounds;
+        tabs.push(Pane::View(v));
+    }
+    for l in &apart {
+        let contents = l.layers.iter().chain(l.marks).map(|e| format!("+ {e}"));
+        tabs.push(Pane::View(View::new(
+            Kind::Spatial2D,
+            l.title,
+            l.origin,
+            contents.collect(),
+        )));
+    }
+    if three_d {
+        tabs.insert(0, Pane::View(slice));
+        Pane::Row(vec![(1.0, Pane::View(world)), (1.0, Pane::tabs(tabs))])
+    } else {
+        tabs.insert(0, Pane::View(world));
+        Pane::tabs(tabs)
+    }
+}
+
+/// A 3D eye that frames the tank: in front of it (+z), a little above and to the right, far
+/// enough to see it whole, looking at its centre.
+fn eye(dims: &[usize]) -> ([f32; 3], [f32; 3]) {
+    let centre: [f32; 3] = std::array::from_fn(|k| dims[k] as f32 / 2.0);
+    let size = dims.iter().copied().max().unwrap_or(1) as f32;
+    let position = [
+        centre[0] + 0.6 * size,
+        centre[1] + 0.5 * size,
+        centre[2] + 2.2 * size,
+    ];
+    (position, centre)
+}
+
+/// Writes `root` as the recording's blueprint, made active and default.
+pub fn send(rec: &RecordingStream, root: &Pane) -> RecordingStreamResult<()> {
+    let (bp_rec, storage) = RecordingStreamBuilder::new("cellflip")
+        .recording_id(RecordingId::random())
+        .blueprint()
+        .memory()?;
+    bp_rec.set_time_sequence("blueprint", 0);
+    let root_id = write_pane(&bp_rec, root)?;
+    let viewport = bp::ViewportBlueprint::new()
+        .with_root_container(bpc::RootContainer(root_id))
+        .with_auto_layout(false)
+        .with_auto_views(false);
+    bp_rec.log("viewport", &viewport)?;
+    let collapsed = bp::PanelBlueprint::new().with_state(bpc::PanelState::Collapsed);
+    bp_rec.log("blueprint_panel", &collapsed)?;
+    bp_rec.log("selection_panel", &collapsed)?;
+    let time = bp::TimePanelBlueprint::new()
+        .with_state(bpc::PanelState::Collapsed)
+        .with_timeline("step");
+    bp_rec.log("time_panel", &time)?;
+    let msgs = storage.take();
+    let Some(LogMsg::SetStoreInfo(info)) = msgs.first() else {
+        unreachable!("a blueprint stream starts with its store info")
+    };
+    let cmd = BlueprintActivationCommand {
+        blueprint_id: info.info.store_id.clone(),
+        make_active: true,
+        make_default: true,
+    };
+    rec.send_blueprint(msgs, cmd);
+    Ok(())
+}
+
+/// A new blueprint id (a UUID) with its text. Ids must differ between recordings: the viewer
+/// keeps a view's state by its id across the recordings it has open, and fails to draw a view
+/// whose id another recording gave to a view of another kind.
+fn new_id() -> (Uuid, String) {
+    let id = Uuid {
+        bytes: Tuid::new().as_u128().to_be_bytes(),
+    };
+    (id, uuid_text(id))
+}
+
+/// Logs a pane and everything in it; returns its id.
+fn write_pane(rec: &RecordingStream, pane: &Pane) -> RecordingStreamResult<Uuid> {
+    let (kind, parts): (bpc::ContainerKind, Vec<(f32, &Pane)>) = match pane {
+        Pane::View(v) => return write_view(rec, v),
+        Pane::Row(p) => (
+            bpc::ContainerKind::Horizontal,
+            p.iter().map(|(s, p)| (*s, p)).collect(),
+        ),
+        Pane::Column(p) => (
+            bpc::ContainerKind::Vertical,
+            p.iter().map(|(s, p)| (*s, p)).collect(),
+        ),
+        Pane::Tabs(p) => (
+            bpc::ContainerKind::Tabs,
+            p.iter().map(|p| (1.0, p)).collect(),
+        ),
+    };
+    let mut children = vec![];
+    for (_, p) in &parts {
+        let id = write_pane(rec, p)?;
+        let prefix = if matches!(p, Pane::View(_)) {
+            "view"
+        } else {
+            "container"
+        };
+        children.push(bpc::IncludedContent::from(format!(
+            "{prefix}/{}",
+            uuid_text(id)
+        )));
+    }
+    let (id, text) = new_id();
+    let shares = parts.iter().map(|(s, _)| *s);
+    let mut c = bp::ContainerBlueprint::new(kind).with_contents(children);
+    c = match pane {
+        Pane::Row(_) => c.with_col_shares(shares.map(bpc::ColumnShare::from)),
+        Pane::Column(_) => c.with_row_shares(shares.map(bpc::RowShare::from)),
+        _ => c,
+    };
+    rec.log(format!("container/{text}"), &c)?;
+    Ok(id)
+}
+
+fn uuid_text(id: Uuid) -> String {
+    let hex: String = id.bytes.iter().map(|x| format!("{x:02x}")).collect();
+    format!(
+        "{}-{}-{}-{}-{}",
+        &hex[..8],
+        &hex[8..12],
+        &hex[12..16],
+        &hex[16..20],
+        &hex[20..]
+    )
+}
+
+/// Logs a view, its contents, its properties and its hidden entities.
+fn write_view(rec: &RecordingStream, v: &View) -> RecordingStreamResult<Uuid> {
+    let (id, text) = new_id();
+    let path = format!("view/{text}");
+    let contents = bp::ViewContents::new(v.contents.iter().map(|q| q.as_str()));
+    rec.log(format!("{path}/ViewContents"), &contents)?;
+    let arch = bp::ViewBlueprint::new(v.kind.class())
+        .with_display_name(v.name.as_str())
+        .with_space_origin(v.origin.as_str());
+    rec.log(path.as_str(), &arch)?;
+    if v.kind == Kind::TimeSeries {
+        let legend = bp::PlotLegend::new()
+            .with_visible(v.legend)
+            .with_corner(bpc::Corner2D::LeftTop);
+        rec.log(format!("{path}/PlotLegend"), &legend)?;
+    }
+    if v.kind == Kind::TextLog {
+        // Debug lines (every shortened time step) only when asked for.
+        let levels = [
+            rerun::TextLogLevel::CRITICAL,
+            rerun::TextLogLevel::ERROR,
+            rerun::TextLogLevel::WARN,
+            rerun::TextLogLevel::INFO,
+        ];
+        let rows = bp::TextLogRows::new().with_filter_by_log_level(levels);
+        rec.log(format!("{path}/TextLogRows"), &rows)?;
+    }
+    if let Some((position, target)) = v.eye {
+        let eye = bp::EyeControls3D::new()
+            .with_kind(bpc::Eye3DKind::Orbital)
+            .with_position(position)
+            .with_look_target(target)
+            .with_eye_up([0.0, 1.0, 0.0]);
+        rec.log(format!("{path}/EyeControls3D"), &eye)?;
+    }
+    if let Some([x0, x1, y0, y1]) = v.bounds {
+        let range = rerun::external::re_sdk_types::datatypes::Range2D {
+            x_range: [x0 as f64, x1 as f64].into(),
+            y_range: [y0 as f64, y1 as f64].into(),
+        };
+        rec.log(
+            format!("{path}/VisualBounds2D"),
+            &bp::VisualBounds2D::new(range),
+        )?;
+    }
+    for e in &v.hidden {
+        let hide = bp::EntityBehavior::new().with_visible(false);
+        rec.log(
+            format!("{path}/ViewContents/overrides/{e}/visualizers"),
+            &hide,
+        )?;
+    }
+    Ok(id)
+}
