@@ -173,7 +173,11 @@ impl<const D: usize> Grid<D> {
 
     /// The cells on the two sides of face `i` of axis `a` (one on the domain boundary).
     pub fn face_cells(&self, a: usize, i: usize) -> impl Iterator<Item = usize> {
-        let f = self.face_coords(a, i);
+        self.face_cells_at(a, self.face_coords(a, i))
+    }
+
+    /// As [`Self::face_cells`] for the face at coordinates `f` (no division).
+    pub fn face_cells_at(&self, a: usize, f: Cell<D>) -> impl Iterator<Item = usize> {
         let right = (f[a] < self.dims[a]).then(|| self.cell_index(f));
         let left = (f[a] > 0).then(|| {
             let mut c = f;

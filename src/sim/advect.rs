@@ -62,12 +62,11 @@ pub fn advect_velocity<const D: usize>(
     needed: &[bool],
 ) -> MacField<D> {
     let mut out = u.clone();
-    for a in 0..D {
-        out.comp[a].par_iter_mut().enumerate().for_each(|(i, v)| {
-            if !grid.face_cells(a, i).any(|c| needed[c]) {
+    for (a, comp) in out.comp.iter_mut().enumerate() {
+        grid.par_for_each_face(a, comp, |_, f, v| {
+            if !grid.face_cells_at(a, f).any(|c| needed[c]) {
                 return;
             }
-            let f = grid.face_coords(a, i);
             let x = Vector::<D>::from_fn(|k, _| f[k] as f64 + if k == a { 0.0 } else { 0.5 });
             let mut back = x - dt * u.interpolate(grid, &x);
             for k in 0..D {
