@@ -31,6 +31,22 @@ pub enum Command {
     /// Speed against error: every method on a matrix of scenes, resolutions and seeds, with
     /// tables (report.md, report.csv), plots (PNG, SVG) and a comparison recording.
     Report(ReportArgs),
+    /// Time the correction's solvers on exported problems (`run --export-lp`), the same files
+    /// a peer solver (HiGHS, LEMON) reads, and check their optimum.
+    Solve(SolveArgs),
+}
+
+#[derive(Args, Debug, Clone)]
+pub struct SolveArgs {
+    /// MPS files written by `run --export-lp`.
+    #[arg(required = true)]
+    pub files: Vec<PathBuf>,
+    /// Solvers, comma-separated.
+    #[arg(long, value_enum, value_delimiter = ',', default_values_t = [Solver::Flow])]
+    pub solver: Vec<Solver>,
+    /// Solves per file and solver; the median time is printed.
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u64).range(1..))]
+    pub repeat: u64,
 }
 
 #[derive(Args, Debug, Clone)]

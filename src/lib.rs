@@ -26,5 +26,6 @@ pub mod run;
 pub mod runner;
 pub mod scene;
 pub mod sim;
+pub mod solve;
 pub mod solvers;
 pub mod validation;

@@ -2,7 +2,7 @@
 
 use anyhow::Result;
 use cellflip::cli::{Cli, Command, ValidateArgs};
-use cellflip::{bench, interrupt, report, run, scene, validation};
+use cellflip::{bench, interrupt, report, run, scene, solve, validation};
 use clap::Parser;
 use std::io::Write;
 
@@ -43,6 +43,7 @@ fn dispatch(cli: Cli) -> Result<()> {
         Command::Bench(args) => bench::bench(&args),
         Command::Validate(args) => validate(&args),
         Command::Report(args) => report::report(&args),
+        Command::Solve(args) => solve::solve(&args),
     }
 }
 

@@ -448,8 +448,34 @@ fn exported_problems_are_named_after_the_run_beside_the_recording_or_in_recordin
     ];
     let o = cellflip_in(&dir, &[&args[..], &["--no-record", "-q"]].concat());
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let mps = std::fs::read_to_string(dir.join("recordings/dam-2d-ccp-24x24-step1.mps"));
+    let file = dir.join("recordings/dam-2d-ccp-24x24-step1.mps");
+    let mps = std::fs::read_to_string(&file);
     assert!(mps.unwrap().starts_with("* optimal objective "));
+    // `cellflip solve` reads it back and finds the recorded optimum with both solvers.
+    let args = ["solve", file.to_str().unwrap(), "--solver", "flow,simplex"];
+    let o = cellflip(&[&args[..], &["--repeat", "1"]].concat());
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let gaps: Vec<f64> = text
+        .lines()
+        .filter_map(|l| {
+            l.split(" from the recorded optimum")
+                .next()?
+                .rsplit(", ")
+                .next()
+        })
+        .filter_map(|g| g.parse().ok())
+        .collect();
+    assert!(gaps.len() == 2 && gaps.iter().all(|&g| g <= 1e-9), "{text}");
+    // A file it cannot read is named with the line and the reason.
+    let bad = dir.join("bad.mps");
+    std::fs::write(&bad, "NAME t\nROWS\n G bin0\n").unwrap();
+    let o = cellflip(&["solve", bad.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("bad.mps: line 3"),
+        "{err}"
+    );
 }
 
 #[test]

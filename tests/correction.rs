@@ -12,7 +12,7 @@ use cellflip::sim::correct::band::BandMode;
 use cellflip::sim::correct::problem::{self, Directions};
 use cellflip::sim::correct::{self, CorrectionSettings};
 use cellflip::sim::markings::Markings;
-use cellflip::solvers::{lp, min_cost_flow};
+use cellflip::solvers::{lp, min_cost_flow, mps};
 use common::{ccp, load, run_config};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
@@ -100,7 +100,7 @@ fn flow_and_simplex_agree_on_500_random_3d_instances() {
     agree_on_random_instances::<3>(500, 12);
 }
 
-/// Reads back the free-format MPS that `lp::to_mps` writes (N, E, L and G rows, RANGES, UP
+/// Reads back the free-format MPS that `mps::write` writes (N, E, L and G rows, RANGES, UP
 /// bounds) with the standard's meaning of each row type and range, and returns the optimum of
 /// its LP relaxation by microlp: what any LP solver finds for an exported file.
 fn solve_mps(text: &str) -> f64 {
@@ -193,7 +193,7 @@ fn exported_problems_read_back<const D: usize>(count: usize, seed: u64) -> usize
         let p = problem::build(&g, &x_bar, &x_hat, &prev, &solid, mu, dirs, None, None).unwrap();
         let a = &p.assignment;
         let (flow, _) = min_cost_flow::solve(a).unwrap_or_else(|e| panic!("instance {n}: {e}"));
-        let mps = lp::to_mps(a, "t", &[]);
+        let mps = mps::write(a, "t", &[]);
         equal_rows += mps.lines().filter(|l| l.starts_with(" E bin")).count();
         let (of, om) = (a.objective(&flow), solve_mps(&mps));
         assert!(

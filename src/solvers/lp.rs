@@ -1,6 +1,5 @@
 //! The reference solver: the LP relaxation of a bounded assignment problem, solved by the
-//! pure-Rust simplex of `microlp` (the maintained fork of `minilp`), and its export as
-//! free-format MPS so that any LP solver can check it.
+//! pure-Rust simplex of `microlp` (the maintained fork of `minilp`).
 //!
 //! The constraint matrix is totally unimodular (paper prop. LPrelax), so the LP optimum is an
 //! assignment; this module checks that it really is integral and reports it if not.
@@ -11,7 +10,6 @@
 
 use crate::solvers::min_cost_flow::BoundedAssignment;
 use microlp::{ComparisonOp, OptimizationDirection, Problem};
-use std::fmt::Write as _;
 
 /// A simplex run longer than this gives up; the caller falls back to a feasible assignment.
 pub const TIME_LIMIT: std::time::Duration = std::time::Duration::from_secs(120);
@@ -40,17 +38,6 @@ impl std::fmt::Display for LpError {
 }
 
 impl std::error::Error for LpError {}
-
-/// Bins whose bounds can bind: a lower bound, or more candidates than room.
-fn binding_bins(p: &BoundedAssignment) -> Vec<bool> {
-    let mut arcs = vec![0u32; p.bins()];
-    for &b in &p.cand_bin {
-        arcs[b as usize] += 1;
-    }
-    (0..p.bins())
-        .map(|b| p.lower[b] > 0 || arcs[b] > p.upper[b])
-        .collect()
-}
 
 /// A linear constraint `min <= sum coef * b_k <= max` over candidate variables `b_k`.
 #[derive(Clone, Debug, PartialEq)]
@@ -94,7 +81,7 @@ pub fn solve_with(p: &BoundedAssignment, side: &[SideConstraint]) -> Result<Vec<
         let row: Vec<_> = p.candidates(i).map(|k| (vars[k], 1.0)).collect();
         lp.add_constraint(row.as_slice(), ComparisonOp::Eq, 1.0);
     }
-    let binding = binding_bins(p);
+    let binding = p.binding_bins();
     let mut rows: Vec<Vec<(microlp::Variable, f64)>> = vec![vec![]; p.bins()];
     for (k, &b) in p.cand_bin.iter().enumerate() {
         if binding[b as usize] {
@@ -139,63 +126,6 @@ pub fn solve_with(p: &BoundedAssignment, side: &[SideConstraint]) -> Result<Vec<
         .collect()
 }
 
-/// The MPS row type of a binding bin: `E` when its bounds meet (an inner cell that must keep
-/// exactly its count), else `L` on the upper bound with the lower bound as a range.
-fn bin_row_type(p: &BoundedAssignment, b: usize) -> char {
-    if p.lower[b] == p.upper[b] {
-        'E'
-    } else {
-        'L'
-    }
-}
-
-/// The problem in free-format MPS (rows `item<i>` and `bin<b>`, columns `x<k>`), with
-/// `comment` lines (e.g. the optimal objective) as `*` comments at the top. A bin row is `E`
-/// when its bounds are equal, else `L` with a `RANGES` entry when it has a lower bound.
-pub fn to_mps(p: &BoundedAssignment, name: &str, comment: &[String]) -> String {
-    let mut s = String::new();
-    for c in comment {
-        let _ = writeln!(s, "* {c}");
-    }
-    let _ = writeln!(s, "NAME {name}\nROWS\n N cost");
-    for i in 0..p.items() {
-        let _ = writeln!(s, " E item{i}");
-    }
-    let binding = binding_bins(p);
-    for b in (0..p.bins()).filter(|&b| binding[b]) {
-        let _ = writeln!(s, " {} bin{b}", bin_row_type(p, b));
-    }
-    let _ = writeln!(s, "COLUMNS");
-    for i in 0..p.items() {
-        for k in p.candidates(i) {
-            let b = p.cand_bin[k] as usize;
-            let _ = write!(s, " x{k} cost {:e} item{i} 1", p.cand_cost[k]);
-            if binding[b] {
-                let _ = write!(s, "\n x{k} bin{b} 1");
-            }
-            s.push('\n');
-        }
-    }
-    let _ = writeln!(s, "RHS");
-    for i in 0..p.items() {
-        let _ = writeln!(s, " rhs item{i} 1");
-    }
-    for b in (0..p.bins()).filter(|&b| binding[b]) {
-        let _ = writeln!(s, " rhs bin{b} {}", p.upper[b]);
-    }
-    let _ = writeln!(s, "RANGES");
-    let ranged = |b: usize| binding[b] && p.lower[b] > 0 && bin_row_type(p, b) == 'L';
-    for b in (0..p.bins()).filter(|&b| ranged(b)) {
-        let _ = writeln!(s, " rng bin{b} {}", p.upper[b] - p.lower[b]);
-    }
-    let _ = writeln!(s, "BOUNDS");
-    for k in 0..p.cand_bin.len() {
-        let _ = writeln!(s, " UP bnd x{k} 1");
-    }
-    s.push_str("ENDATA\n");
-    s
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -213,66 +143,5 @@ mod tests {
         let choice = solve(&p).unwrap();
         p.check(&choice).unwrap();
         assert_eq!(p.objective(&choice), 1.0);
-        let mps = to_mps(&p, "t", &["optimal objective 1".into()]);
-        assert!(mps.starts_with("* optimal objective 1\nNAME t\nROWS\n N cost\n E item0"));
-        assert!(mps.contains(" L bin0") && !mps.contains(" L bin1") && mps.ends_with("ENDATA\n"));
-    }
-
-    #[test]
-    fn mps_writes_equal_bounds_as_e_rows_and_lower_bounds_as_ranges() {
-        // bin0 must hold exactly 1 (E), bin1 1..2 (L, range 1), bin2 at most 1 with two
-        // candidates (L), bin3 cannot bind (no row).
-        let p = BoundedAssignment {
-            item_start: vec![0, 2, 5, 7],
-            cand_bin: vec![0, 1, 0, 1, 2, 2, 3],
-            cand_cost: vec![0.0, 0.5, 0.25, 0.0, 1.0, 0.0, 2.0],
-            lower: vec![1, 1, 0, 0],
-            upper: vec![1, 2, 1, 1],
-        };
-        let want = "\
-* c
-NAME t
-ROWS
- N cost
- E item0
- E item1
- E item2
- E bin0
- L bin1
- L bin2
-COLUMNS
- x0 cost 0e0 item0 1
- x0 bin0 1
- x1 cost 5e-1 item0 1
- x1 bin1 1
- x2 cost 2.5e-1 item1 1
- x2 bin0 1
- x3 cost 0e0 item1 1
- x3 bin1 1
- x4 cost 1e0 item1 1
- x4 bin2 1
- x5 cost 0e0 item2 1
- x5 bin2 1
- x6 cost 2e0 item2 1
-RHS
- rhs item0 1
- rhs item1 1
- rhs item2 1
- rhs bin0 1
- rhs bin1 2
- rhs bin2 1
-RANGES
- rng bin1 1
-BOUNDS
- UP bnd x0 1
- UP bnd x1 1
- UP bnd x2 1
- UP bnd x3 1
- UP bnd x4 1
- UP bnd x5 1
- UP bnd x6 1
-ENDATA
-";
-        assert_eq!(to_mps(&p, "t", &["c".into()]), want);
     }
 }

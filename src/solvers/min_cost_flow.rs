@@ -73,6 +73,17 @@ impl BoundedAssignment {
         (out, original)
     }
 
+    /// Bins whose bounds can bind: a lower bound, or more candidates than room.
+    pub fn binding_bins(&self) -> Vec<bool> {
+        let mut arcs = vec![0u32; self.bins()];
+        for &b in &self.cand_bin {
+            arcs[b as usize] += 1;
+        }
+        (0..self.bins())
+            .map(|b| self.lower[b] > 0 || arcs[b] > self.upper[b])
+            .collect()
+    }
+
     /// Total cost of a choice (one global candidate index per item).
     pub fn objective(&self, choice: &[u32]) -> f64 {
         choice.iter().map(|&k| self.cand_cost[k as usize]).sum()

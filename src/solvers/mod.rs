@@ -2,5 +2,6 @@
 
 pub mod lp;
 pub mod min_cost_flow;
+pub mod mps;
 pub mod pcg;
 pub mod sinkhorn;

@@ -12,7 +12,7 @@ pub mod problem;
 
 use crate::grid::{Grid, Vector};
 use crate::sim::markings::Markings;
-use crate::solvers::{lp, min_cost_flow};
+use crate::solvers::{lp, min_cost_flow, mps};
 use band::{BandContext, BandCorrection, BandVariant};
 use problem::{BuildError, CorrectionProblem, Directions};
 use rayon::prelude::*;
@@ -161,7 +161,7 @@ pub fn correct<const D: usize>(
             if want_mps {
                 let cost = problem.assignment.objective(&choice);
                 let comment = objective_comment(cost, settings.solver, rep.fallback.as_deref());
-                rep.mps = Some(lp::to_mps(
+                rep.mps = Some(mps::write(
                     &problem.assignment,
                     "cellflip-correction",
                     &[comment],
@@ -271,7 +271,7 @@ fn band_mps<const D: usize>(
         let fallback = rep.fallback.as_deref();
         comment.push(objective_comment(first_cost, settings.solver, fallback));
     }
-    lp::to_mps(&problem.assignment, "cellflip-correction", &comment)
+    mps::write(&problem.assignment, "cellflip-correction", &comment)
 }
 
 /// What every band variant reads.

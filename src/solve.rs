@@ -1,0 +1,57 @@
+//! `cellflip solve`: the correction's solvers timed on exported problems (`run --export-lp`),
+//! so that they can be compared with any peer that reads the same MPS file, and their optimum
+//! checked against the one the file records.
+
+use crate::cli::SolveArgs;
+use crate::metrics::median;
+use crate::outln;
+use crate::solvers::mps;
+use anyhow::{Context, Result};
+use std::time::Instant;
+
+pub fn solve(args: &SolveArgs) -> Result<()> {
+    for path in &args.files {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("{}: cannot read", path.display()))?;
+        let file = mps::read(&text).with_context(|| format!("{}", path.display()))?;
+        let p = &file.problem;
+        outln!(
+            "{}: {} items, {} candidates, {} bins",
+            path.display(),
+            p.items(),
+            p.cand_bin.len(),
+            p.bins()
+        );
+        for &solver in &args.solver {
+            let mut times = vec![];
+            let mut last = None;
+            for _ in 0..args.repeat {
+                let t0 = Instant::now();
+                let result = solver.solve(p);
+                times.push(t0.elapsed().as_secs_f64() * 1e3);
+                last = Some(result);
+            }
+            let ms = median(&times).expect("at least one solve");
+            match last.expect("at least one solve") {
+                Ok((choice, augmentations)) => {
+                    p.check(&choice)
+                        .map_err(anyhow::Error::msg)
+                        .with_context(|| format!("{}: {} solver", path.display(), solver.name()))?;
+                    let objective = p.objective(&choice);
+                    let versus = file.recorded_optimum.map_or(String::new(), |o| {
+                        let rel = (objective - o).abs() / o.abs().max(1.0);
+                        format!(", {rel:.1e} from the recorded optimum")
+                    });
+                    outln!(
+                        "  {:<8} {ms:>10.2} ms (median of {})  objective {objective:.12e}{versus}  \
+                         {augmentations} augmentations",
+                        solver.name(),
+                        args.repeat
+                    );
+                }
+                Err(e) => outln!("  {:<8} {ms:>10.2} ms  failed: {e}", solver.name()),
+            }
+        }
+    }
+    Ok(())
+}
