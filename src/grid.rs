@@ -220,16 +220,20 @@ impl<const D: usize> Grid<D> {
     /// even within `margin` of a wall; one outside it (`|v_k| >= 0.5` with `v = q - centre`) goes to
     /// the near wall, `margin` inside.
     pub fn closest_in_cell(&self, q: &Vector<D>, c: Cell<D>, margin: f64) -> Vector<D> {
-        Vector::<D>::from_fn(|k, _| {
-            let (lo, hi) = (c[k] as f64, (c[k] + 1) as f64);
-            if q[k] >= hi {
-                hi - margin
-            } else if q[k] <= lo {
-                lo + margin
-            } else {
-                q[k]
-            }
-        })
+        Vector::<D>::from_fn(|k, _| closest_along(q[k], c[k], margin))
+    }
+}
+
+/// One component of [`Grid::closest_in_cell`]: the point of `[c, c + 1]` closest to `q`,
+/// `margin` inside when `q` is outside.
+pub fn closest_along(q: f64, c: usize, margin: f64) -> f64 {
+    let (lo, hi) = (c as f64, (c + 1) as f64);
+    if q >= hi {
+        hi - margin
+    } else if q <= lo {
+        lo + margin
+    } else {
+        q
     }
 }
 

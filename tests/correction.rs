@@ -90,6 +90,57 @@ fn agree_on_random_instances<const D: usize>(count: usize, seed: u64) {
     );
 }
 
+/// The collapsing column, where the flow solver is slowest: a column `mu` particles per cell
+/// everywhere (its inner cells must keep them), advected down by most of a cell so that its
+/// bottom cells overflow. The excess can only leave through the sides at the floor or rise
+/// through the full column to its top, one chain of moves per unit.
+fn collapsing_column<const D: usize>(width: usize, height: usize, mu: u32) {
+    let dims: [usize; D] = std::array::from_fn(|k| if k == D - 1 { height + 2 } else { width + 2 });
+    let g = Grid::new(dims);
+    let solid = vec![false; g.num_cells()];
+    let mut rng = StdRng::seed_from_u64(21);
+    let mut x_bar = vec![];
+    for c in 0..g.num_cells() {
+        let cell = g.cell_coords(c);
+        if (0..D).all(|k| cell[k] < if k == D - 1 { height } else { width }) {
+            for _ in 0..mu {
+                let x = Vector::<D>::from_fn(|k, _| cell[k] as f64 + rng.random_range(0.05..0.95));
+                x_bar.push(x);
+            }
+        }
+    }
+    let x_hat: Vec<_> = x_bar
+        .iter()
+        .map(|x| {
+            let mut y = *x;
+            y[D - 1] = (y[D - 1] - rng.random_range(0.3..0.9)).max(0.01);
+            y
+        })
+        .collect();
+    let prev = Markings::compute(&g, &x_bar, &solid);
+    let dirs = Directions::VonNeumann;
+    let p = problem::build(&g, &x_bar, &x_hat, &prev, &solid, mu, dirs, None, None).unwrap();
+    let a = &p.assignment;
+    let (flow, stats) = min_cost_flow::solve(a).unwrap();
+    let simplex = lp::solve(a).unwrap();
+    a.check(&flow).unwrap();
+    let (of, os) = (a.objective(&flow), a.objective(&simplex));
+    assert!(
+        (of - os).abs() <= 1e-9 * os.abs().max(1.0),
+        "{D}D column: flow {of} vs simplex {os}"
+    );
+    // Many units, travelling far: more nodes settled than units times the column's height.
+    let units = stats.augmentations;
+    assert!(units >= width.pow(D as u32 - 1), "{stats:?}");
+    assert!(stats.nodes_settled > units * height, "{stats:?}");
+}
+
+#[test]
+fn flow_is_exact_on_a_collapsing_column_2d_and_3d() {
+    collapsing_column::<2>(6, 14, 4);
+    collapsing_column::<3>(4, 8, 3);
+}
+
 #[test]
 fn flow_and_simplex_agree_on_600_random_2d_instances() {
     agree_on_random_instances::<2>(600, 11);

@@ -172,6 +172,28 @@ impl PartialOrd for Entry {
 
 const NONE: u32 = u32::MAX;
 
+/// A node's state in the current search, together so that one cache line holds it.
+#[derive(Clone, Copy, Debug, Default)]
+struct Label {
+    dist: f64,
+    stamp: u32,
+    /// Forward search: the node this one was reached from. Reverse search: the node it leads to.
+    link_node: u32,
+    /// The candidate moved along that link (`NONE` for an arc to or from `t`).
+    link_cand: u32,
+    settled: bool,
+}
+
+/// The cheapest way to move one item from a bin to bin `to`: the item's candidate `cand` in
+/// `to`, at `delta` = its cost there minus its cost now. Potentials are per bin, so this item
+/// also has the least reduced cost among the bin's items: a search needs only this arc.
+#[derive(Clone, Copy, Debug)]
+struct OutArc {
+    to: u32,
+    cand: u32,
+    delta: f64,
+}
+
 /// Solver state: the current assignment, the sink flows and the node potentials.
 struct Network<'a> {
     p: &'a BoundedAssignment,
@@ -185,19 +207,16 @@ struct Network<'a> {
     /// Items currently in each bin, and each item's place in its bin's list.
     bin_items: Vec<Vec<u32>>,
     slot: Vec<u32>,
+    /// Per bin, its cheapest move to each other bin (see [`OutArc`]); rebuilt when `stale`.
+    out_arcs: Vec<Vec<OutArc>>,
+    stale: Vec<bool>,
     /// Flow on the arc bin -> t, kept within `[lower, upper]`.
     sink_flow: Vec<u32>,
     /// Node potentials; node `bins()` is the sink `t`.
     potential: Vec<f64>,
-    // Search scratch, valid where `stamp == search`.
+    /// Search scratch per node, valid where `stamp == search`.
     search: u32,
-    stamp: Vec<u32>,
-    settled: Vec<bool>,
-    dist: Vec<f64>,
-    /// Forward search: the node a node was reached from. Reverse search: the node it leads to.
-    link_node: Vec<u32>,
-    /// The candidate moved along that link (`NONE` for an arc to or from `t`).
-    link_cand: Vec<u32>,
+    label: Vec<Label>,
     heap: BinaryHeap<Entry>,
     visited: Vec<u32>,
     /// Smallest tentative distance of a target in the current search: nothing farther can lead
@@ -256,14 +275,12 @@ impl<'a> Network<'a> {
             load,
             bin_items,
             slot,
+            out_arcs: vec![vec![]; bins],
+            stale: vec![true; bins],
             sink_flow,
             potential: vec![0.0; nodes],
             search: 0,
-            stamp: vec![0; nodes],
-            settled: vec![false; nodes],
-            dist: vec![0.0; nodes],
-            link_node: vec![NONE; nodes],
-            link_cand: vec![NONE; nodes],
+            label: vec![Label::default(); nodes],
             heap: BinaryHeap::new(),
             visited: vec![],
             bound: f64::INFINITY,
@@ -293,15 +310,14 @@ impl<'a> Network<'a> {
             self.bound = d;
         }
         let i = v as usize;
-        if self.stamp[i] != self.search {
-            self.stamp[i] = self.search;
-            self.settled[i] = false;
-        } else if self.settled[i] || self.dist[i] <= d {
+        let l = &mut self.label[i];
+        if l.stamp != self.search {
+            l.stamp = self.search;
+            l.settled = false;
+        } else if l.settled || l.dist <= d {
             return;
         }
-        self.dist[i] = d;
-        self.link_node[i] = node;
-        self.link_cand[i] = cand;
+        (l.dist, l.link_node, l.link_cand) = (d, node, cand);
         self.heap.push(Entry(d, v));
     }
 
@@ -309,10 +325,10 @@ impl<'a> Network<'a> {
     fn pop(&mut self) -> Option<(f64, u32)> {
         while let Some(Entry(d, v)) = self.heap.pop() {
             let i = v as usize;
-            if self.settled[i] || d > self.dist[i] {
+            if self.label[i].settled || d > self.label[i].dist {
                 continue;
             }
-            self.settled[i] = true;
+            self.label[i].settled = true;
             self.visited.push(v);
             self.stats.nodes_settled += 1;
             return Some((d, v));
@@ -332,7 +348,7 @@ impl<'a> Network<'a> {
     fn lift_after_forward(&mut self, reach: f64) {
         for &v in &self.visited {
             let v = v as usize;
-            self.potential[v] += reach - self.dist[v];
+            self.potential[v] += reach - self.label[v].dist;
         }
     }
 
@@ -340,7 +356,7 @@ impl<'a> Network<'a> {
     fn lift_after_reverse(&mut self, reach: f64) {
         for &v in &self.visited {
             let v = v as usize;
-            self.potential[v] -= reach - self.dist[v];
+            self.potential[v] -= reach - self.label[v].dist;
         }
     }
 
@@ -357,18 +373,13 @@ impl<'a> Network<'a> {
             if v == t || (v != s && self.load[vi] < self.p.lower[vi]) {
                 break (d, v);
             }
-            // Items now in `v` moving to another of their candidates.
-            for idx in 0..self.bin_items[vi].len() {
-                let item = self.bin_items[vi][idx] as usize;
-                let k = self.choice[item] as usize;
-                for k2 in self.p.candidates(item) {
-                    if k2 != k {
-                        let rc = self.reduced(k, k2);
-                        let b = self.p.cand_bin[k2];
-                        let target = b != s && self.load[b as usize] < self.p.lower[b as usize];
-                        self.touch(b, d + rc, v, k2 as u32, target);
-                    }
-                }
+            // The cheapest item of `v` moving to each other bin.
+            self.refresh_out_arcs(vi);
+            for j in 0..self.out_arcs[vi].len() {
+                let OutArc { to, cand, delta } = self.out_arcs[vi][j];
+                let rc = (delta - self.potential[vi] + self.potential[to as usize]).max(0.0);
+                let target = to != s && self.load[to as usize] < self.p.lower[to as usize];
+                self.touch(to, d + rc, v, cand, target);
             }
             if self.sink_flow[vi] < self.p.upper[vi] {
                 let rc = (self.potential[t as usize] - self.potential[vi]).max(0.0);
@@ -379,13 +390,13 @@ impl<'a> Network<'a> {
         // Walk back from the target, moving one item per link.
         let mut x = target.1;
         if x == t {
-            let c = self.link_node[t as usize];
+            let c = self.label[t as usize].link_node;
             self.sink_flow[c as usize] += 1;
             x = c;
         }
         while x != s {
-            let k2 = self.link_cand[x as usize] as usize;
-            let w = self.link_node[x as usize];
+            let k2 = self.label[x as usize].link_cand as usize;
+            let w = self.label[x as usize].link_node;
             self.move_item(k2, w, x);
             x = w;
         }
@@ -423,11 +434,11 @@ impl<'a> Network<'a> {
         };
         self.lift_after_reverse(reach);
         // Walk forward from the sink: t -> c, then one item per link until `s`.
-        let mut x = self.link_node[t as usize];
+        let mut x = self.label[t as usize].link_node;
         self.sink_flow[x as usize] -= 1;
         while x != s {
-            let k2 = self.link_cand[x as usize] as usize;
-            let next = self.link_node[x as usize];
+            let k2 = self.label[x as usize].link_cand as usize;
+            let next = self.label[x as usize].link_node;
             self.move_item(k2, x, next);
             x = next;
         }
@@ -435,7 +446,36 @@ impl<'a> Network<'a> {
         Ok(())
     }
 
+    /// Rebuilds the cheapest move of bin `v`'s items to each other bin if they changed.
+    fn refresh_out_arcs(&mut self, v: usize) {
+        if !self.stale[v] {
+            return;
+        }
+        self.stale[v] = false;
+        let p = self.p;
+        let arcs = &mut self.out_arcs[v];
+        arcs.clear();
+        for &item in &self.bin_items[v] {
+            let k = self.choice[item as usize] as usize;
+            for k2 in p.candidates(item as usize).filter(|&k2| k2 != k) {
+                let (to, delta) = (p.cand_bin[k2], p.cand_cost[k2] - p.cand_cost[k]);
+                let arc = OutArc {
+                    to,
+                    cand: k2 as u32,
+                    delta,
+                };
+                match arcs.iter_mut().find(|a| a.to == to) {
+                    Some(a) if delta < a.delta => *a = arc,
+                    Some(_) => {}
+                    None => arcs.push(arc),
+                }
+            }
+        }
+    }
+
     fn move_item(&mut self, to_cand: usize, from: u32, to: u32) {
+        self.stale[from as usize] = true;
+        self.stale[to as usize] = true;
         let item = self.cand_item[to_cand] as usize;
         debug_assert_eq!(self.p.cand_bin[self.choice[item] as usize], from);
         debug_assert_eq!(self.p.cand_bin[to_cand], to);

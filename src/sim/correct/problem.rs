@@ -15,11 +15,13 @@
 //! whether it moves a particle into the interface-and-deep region `C_<=-R` or out of it (the sets
 //! `gamma_in` and `gamma_out` of eq. band_con).
 
-use crate::grid::{Cell, Grid, Vector};
+use crate::grid::{closest_along, Cell, Grid, Vector};
 use crate::sim::advect::CELL_MARGIN;
 use crate::sim::markings::{CellKind, DepthLevel, Markings};
 use crate::solvers::min_cost_flow::BoundedAssignment;
+use crate::PAR_GRAIN_PARTICLES;
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// The candidate moves of a particle (sec. grid_move).
 #[derive(
@@ -122,6 +124,56 @@ impl std::fmt::Display for BuildError {
     }
 }
 
+/// A particle's home cell (of `x_bar`) and which moves keep it in the domain and out of
+/// solids: bit `i` for offset `i`.
+#[derive(Clone, Copy)]
+struct Moves<const D: usize> {
+    home: Cell<D>,
+    allowed: u32,
+}
+
+/// Checks particle `j`'s positions and finds its allowed moves; the stay move must be one.
+fn particle_moves<const D: usize>(
+    grid: &Grid<D>,
+    solid: &[bool],
+    offsets: &[[i64; D]],
+    j: usize,
+    (xb, xh): (&Vector<D>, &Vector<D>),
+) -> Result<Moves<D>, BuildError> {
+    let err = |reason: String| BuildError {
+        particle: j,
+        reason,
+    };
+    if !xh.iter().all(|v| v.is_finite()) {
+        let at = xh.as_slice();
+        return Err(err(format!("advected position {at:?} is not finite")));
+    }
+    let Some(home) = grid.cell_of(xb) else {
+        let at = xb.as_slice();
+        return Err(err(format!(
+            "previous position {at:?} is outside the domain"
+        )));
+    };
+    if !grid.contains(xh) {
+        let at = xh.as_slice();
+        return Err(err(format!(
+            "advected position {at:?} is outside the domain"
+        )));
+    }
+    let mut allowed = 0;
+    for (i, o) in offsets.iter().enumerate() {
+        if let Some(c) = offset_cell(grid, home, o) {
+            if !solid[grid.cell_index(c)] {
+                allowed |= 1 << i;
+            }
+        }
+    }
+    if allowed & 1 == 0 {
+        return Err(err(format!("its previous cell {home:?} is solid")));
+    }
+    Ok(Moves { home, allowed })
+}
+
 fn offset_cell<const D: usize>(grid: &Grid<D>, c: Cell<D>, o: &[i64; D]) -> Option<Cell<D>> {
     let mut out = c;
     for k in 0..D {
@@ -134,13 +186,42 @@ fn offset_cell<const D: usize>(grid: &Grid<D>, c: Cell<D>, o: &[i64; D]) -> Opti
     Some(out)
 }
 
-const DROPPED: u32 = u32::MAX;
+/// The allowed offsets of `m`, in order.
+fn allowed<'a, const D: usize>(
+    m: &Moves<D>,
+    offsets: &'a [[i64; D]],
+) -> impl Iterator<Item = &'a [i64; D]> {
+    let bits = m.allowed;
+    offsets
+        .iter()
+        .enumerate()
+        .filter_map(move |(i, o)| (bits >> i & 1 == 1).then_some(o))
+}
+
+/// Items per parallel task when packing candidates.
+const ITEM_BLOCK: usize = 2048;
+
+/// `out` cut into the candidate ranges of consecutive blocks of [`ITEM_BLOCK`] items.
+fn block_pieces<'a, T>(mut out: &'a mut [T], item_start: &[usize]) -> Vec<&'a mut [T]> {
+    let items = item_start.len() - 1;
+    let mut pieces = Vec::with_capacity(items.div_ceil(ITEM_BLOCK));
+    for first in (0..items).step_by(ITEM_BLOCK) {
+        let len = item_start[(first + ITEM_BLOCK).min(items)] - item_start[first];
+        let (piece, rest) = std::mem::take(&mut out).split_at_mut(len);
+        pieces.push(piece);
+        out = rest;
+    }
+    pieces
+}
 
 /// Builds eq. problem3 from the previous positions `x_bar`, the advected positions `x_hat`, the
 /// previous markings (with counts `|gamma_bar_c|`) and the current solid cells, with the band's
 /// bounds and in/out signs when `band_r` is given. With `penalty` (per cell, > 0 on the cells
 /// an obstacle wants, `C_new_solid`) a candidate there costs the penalty instead of its
 /// distance: `sigma_solid_obj` of eq. solid_penalty2. `x_bar` is always feasible.
+///
+/// Every pass but the numbering of the bins runs in parallel, and the result does not depend
+/// on the thread count.
 #[allow(clippy::too_many_arguments)]
 pub fn build<const D: usize>(
     grid: &Grid<D>,
@@ -154,98 +235,127 @@ pub fn build<const D: usize>(
     penalty: Option<&[f64]>,
 ) -> Result<CorrectionProblem<D>, BuildError> {
     let offsets = directions.offsets::<D>();
-    let m = offsets.len();
-    // In parallel: every particle's candidate cells (DROPPED outside the domain or in a solid)
-    // and costs, in slots of `m`; the stay move is slot 0.
-    let mut slot_cell = vec![DROPPED; x_bar.len() * m];
-    let mut slot_cost = vec![0.0; x_bar.len() * m];
-    slot_cell
-        .par_chunks_mut(m)
-        .zip(slot_cost.par_chunks_mut(m))
-        .zip(x_bar.par_iter().zip(x_hat))
+    // A particle with no allowed move is one in error; the first is reported.
+    let moves: Vec<Moves<D>> = (x_bar.par_iter().zip(x_hat).enumerate())
+        .with_min_len(PAR_GRAIN_PARTICLES)
+        .map(|(j, x)| {
+            particle_moves(grid, solid, &offsets, j, x).unwrap_or(Moves {
+                home: [0; D],
+                allowed: 0,
+            })
+        })
+        .collect();
+    if let Some(j) = moves.iter().position(|m| m.allowed == 0) {
+        let x = (&x_bar[j], &x_hat[j]);
+        particle_moves(grid, solid, &offsets, j, x)?;
+    }
+    let (bin_cell, bin_of_cell) = number_bins(grid, &moves, &offsets);
+    let (lower, upper) = bin_cell
+        .par_iter()
+        .map(|&c| cell_bounds(previous, c, mu, band_r))
+        .unzip();
+    let mut item_start = Vec::with_capacity(moves.len() + 1);
+    item_start.push(0);
+    for m in &moves {
+        item_start.push(item_start.last().expect("starts at 0") + m.allowed.count_ones() as usize);
+    }
+    let n = item_start[moves.len()];
+    let (mut cand_bin, mut cand_cost) = (vec![0u32; n], vec![0.0; n]);
+    let mut band_sign = vec![0i8; if band_r.is_some() { n } else { 0 }];
+    let low = |c: usize| band_r.is_some_and(|r| previous.at_or_below_interface(c, r));
+    let sign_pieces: Vec<&mut [i8]> = match band_r {
+        Some(_) => block_pieces(&mut band_sign, &item_start),
+        None => std::iter::repeat_with(Default::default)
+            .take(moves.len().div_ceil(ITEM_BLOCK))
+            .collect(),
+    };
+    let pieces = block_pieces(&mut cand_bin, &item_start).into_par_iter();
+    let pieces = pieces.zip(block_pieces(&mut cand_cost, &item_start));
+    let blocks = pieces.zip(sign_pieces).zip(moves.par_chunks(ITEM_BLOCK));
+    blocks
         .enumerate()
-        .try_for_each(|(j, ((cells, costs), (xb, xh)))| {
-            let err = |reason: String| BuildError {
-                particle: j,
-                reason,
-            };
-            if !xh.iter().all(|v| v.is_finite()) {
-                return Err(err(format!(
-                    "advected position {:?} is not finite",
-                    xh.as_slice()
-                )));
-            }
-            let Some(home) = grid.cell_of(xb) else {
-                return Err(err(format!(
-                    "previous position {:?} is outside the domain",
-                    xb.as_slice()
-                )));
-            };
-            if !grid.contains(xh) {
-                return Err(err(format!(
-                    "advected position {:?} is outside the domain",
-                    xh.as_slice()
-                )));
-            }
-            for (i, o) in offsets.iter().enumerate() {
-                let Some(c) = offset_cell(grid, home, o) else {
-                    continue;
-                };
-                let ci = grid.cell_index(c);
-                if !solid[ci] {
-                    cells[i] = ci as u32;
-                    costs[i] = match penalty.map(|p| p[ci]) {
+        .for_each(|(b, (((bins, costs), signs), block))| {
+            let mut k = 0;
+            for (j, m) in block.iter().enumerate() {
+                let xh = &x_hat[b * ITEM_BLOCK + j];
+                let home_low = low(grid.cell_index(m.home));
+                // `|phi_close(x_hat, c) - x_hat|^2` summed axis by axis, each axis's term for the
+                // home cell's coordinate shifted by -1, 0 and +1.
+                let gap: [[f64; 3]; D] = std::array::from_fn(|a| {
+                    std::array::from_fn(|s| match (m.home[a] + s).checked_sub(1) {
+                        Some(c) => (closest_along(xh[a], c, CELL_MARGIN) - xh[a]).powi(2),
+                        None => f64::NAN,
+                    })
+                });
+                for o in allowed(m, &offsets) {
+                    let c = offset_cell(grid, m.home, o).expect("allowed moves stay in the grid");
+                    let ci = grid.cell_index(c);
+                    bins[k] = bin_of_cell[ci];
+                    costs[k] = match penalty.map(|p| p[ci]) {
                         Some(p) if p > 0.0 => p,
-                        _ => (grid.closest_in_cell(xh, c, CELL_MARGIN) - xh).norm_squared(),
+                        _ => (0..D).map(|a| gap[a][(o[a] + 1) as usize]).sum(),
                     };
+                    if let Some(s) = signs.get_mut(k) {
+                        *s = match (home_low, low(ci)) {
+                            (false, true) => 1,
+                            (true, false) => -1,
+                            _ => 0,
+                        };
+                    }
+                    k += 1;
                 }
             }
-            if cells[0] == DROPPED {
-                return Err(err(format!("its previous cell {home:?} is solid")));
-            }
-            Ok(())
-        })?;
-    // In order: number the cells that candidates reach and pack the candidates.
-    let mut bin_of_cell = vec![u32::MAX; grid.num_cells()];
-    let mut p = CorrectionProblem {
+        });
+    Ok(CorrectionProblem {
+        stay: item_start[..moves.len()]
+            .iter()
+            .map(|&k| k as u32)
+            .collect(),
         assignment: BoundedAssignment {
-            item_start: Vec::with_capacity(x_bar.len() + 1),
-            cand_bin: Vec::with_capacity(slot_cell.len()),
-            cand_cost: Vec::with_capacity(slot_cell.len()),
-            ..Default::default()
+            item_start,
+            cand_bin,
+            cand_cost,
+            lower,
+            upper,
         },
-        bin_cell: vec![],
-        stay: Vec::with_capacity(x_bar.len()),
-        band_sign: vec![],
-    };
-    let a = &mut p.assignment;
-    let low = |c: u32| band_r.is_some_and(|r| previous.at_or_below_interface(c as usize, r));
-    a.item_start.push(0);
-    for (cells, costs) in slot_cell.chunks(m).zip(slot_cost.chunks(m)) {
-        p.stay.push(a.cand_bin.len() as u32);
-        let home_low = low(cells[0]);
-        for (&ci, &cost) in cells.iter().zip(costs).filter(|(c, _)| **c != DROPPED) {
-            if band_r.is_some() {
-                p.band_sign.push(match (home_low, low(ci)) {
-                    (false, true) => 1,
-                    (true, false) => -1,
-                    _ => 0,
-                });
+        bin_cell,
+        band_sign,
+    })
+}
+
+/// The bins: the cells that candidates reach, numbered in cell order so that neighbouring
+/// cells are near in memory (the solver's searches walk from cells to their neighbours).
+/// Returns the cell of each bin and the bin of each cell (`u32::MAX` for none).
+fn number_bins<const D: usize>(
+    grid: &Grid<D>,
+    moves: &[Moves<D>],
+    offsets: &[[i64; D]],
+) -> (Vec<usize>, Vec<u32>) {
+    let reached: Vec<AtomicBool> = (0..grid.num_cells())
+        .map(|_| AtomicBool::new(false))
+        .collect();
+    moves
+        .par_iter()
+        .with_min_len(PAR_GRAIN_PARTICLES)
+        .for_each(|m| {
+            for o in allowed(m, offsets) {
+                let c = offset_cell(grid, m.home, o).expect("allowed moves stay in the grid");
+                reached[grid.cell_index(c)].store(true, Ordering::Relaxed);
             }
-            let ci = ci as usize;
-            if bin_of_cell[ci] == u32::MAX {
-                bin_of_cell[ci] = p.bin_cell.len() as u32;
-                p.bin_cell.push(ci);
-                let (lower, upper) = cell_bounds(previous, ci, mu, band_r);
-                a.lower.push(lower);
-                a.upper.push(upper);
+        });
+    let mut bin_cell = vec![];
+    let bin_of_cell = reached
+        .iter()
+        .enumerate()
+        .map(|(c, r)| {
+            if !r.load(Ordering::Relaxed) {
+                return u32::MAX;
             }
-            a.cand_bin.push(bin_of_cell[ci]);
-            a.cand_cost.push(cost);
-        }
-        a.item_start.push(a.cand_bin.len());
-    }
-    Ok(p)
+            bin_cell.push(c);
+            bin_cell.len() as u32 - 1
+        })
+        .collect();
+    (bin_cell, bin_of_cell)
 }
 
 #[cfg(test)]
