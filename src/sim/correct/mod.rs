@@ -24,9 +24,10 @@ use std::time::{Duration, Instant};
 )]
 #[serde(rename_all = "kebab-case")]
 pub enum Solver {
-    /// Exact min-cost flow by successive shortest paths ([`min_cost_flow`]).
+    /// Exact min-cost flow by successive shortest paths (solvers/min_cost_flow.rs).
     Flow,
-    /// The LP relaxation by microlp's simplex ([`lp`]): the reference, slow on large problems.
+    /// The LP relaxation by microlp's simplex (solvers/lp.rs): the reference, slow on large
+    /// problems.
     Simplex,
 }
 
