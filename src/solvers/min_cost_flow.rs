@@ -340,7 +340,12 @@ impl<'a> Network<'a> {
     fn reduced(&self, from: usize, to: usize) -> f64 {
         let p = self.p;
         let (a, b) = (p.cand_bin[from] as usize, p.cand_bin[to] as usize);
-        (p.cand_cost[to] - p.cand_cost[from] - self.potential[a] + self.potential[b]).max(0.0)
+        self.reduced_delta(p.cand_cost[to] - p.cand_cost[from], a, b)
+    }
+
+    /// The reduced cost of a move from bin `a` to bin `b` whose cost changes by `delta`.
+    fn reduced_delta(&self, delta: f64, a: usize, b: usize) -> f64 {
+        (delta - self.potential[a] + self.potential[b]).max(0.0)
     }
 
     /// Potentials after a forward search that reached its target at distance `reach`:
@@ -377,7 +382,7 @@ impl<'a> Network<'a> {
             self.refresh_out_arcs(vi);
             for j in 0..self.out_arcs[vi].len() {
                 let OutArc { to, cand, delta } = self.out_arcs[vi][j];
-                let rc = (delta - self.potential[vi] + self.potential[to as usize]).max(0.0);
+                let rc = self.reduced_delta(delta, vi, to as usize);
                 let target = to != s && self.load[to as usize] < self.p.lower[to as usize];
                 self.touch(to, d + rc, v, cand, target);
             }

@@ -186,16 +186,17 @@ fn offset_cell<const D: usize>(grid: &Grid<D>, c: Cell<D>, o: &[i64; D]) -> Opti
     Some(out)
 }
 
-/// The allowed offsets of `m`, in order.
+/// The allowed moves of `m`, in order: each offset with the cell it leads to.
 fn allowed<'a, const D: usize>(
+    grid: &'a Grid<D>,
     m: &Moves<D>,
     offsets: &'a [[i64; D]],
-) -> impl Iterator<Item = &'a [i64; D]> {
-    let bits = m.allowed;
-    offsets
-        .iter()
-        .enumerate()
-        .filter_map(move |(i, o)| (bits >> i & 1 == 1).then_some(o))
+) -> impl Iterator<Item = (&'a [i64; D], Cell<D>)> {
+    let (bits, home) = (m.allowed, m.home);
+    offsets.iter().enumerate().filter_map(move |(i, o)| {
+        let c = (bits >> i & 1 == 1).then(|| offset_cell(grid, home, o));
+        c.map(|c| (o, c.expect("allowed moves stay in the grid")))
+    })
 }
 
 /// Items per parallel task when packing candidates.
@@ -287,8 +288,7 @@ pub fn build<const D: usize>(
                         None => f64::NAN,
                     })
                 });
-                for o in allowed(m, &offsets) {
-                    let c = offset_cell(grid, m.home, o).expect("allowed moves stay in the grid");
+                for (o, c) in allowed(grid, m, &offsets) {
                     let ci = grid.cell_index(c);
                     bins[k] = bin_of_cell[ci];
                     costs[k] = match penalty.map(|p| p[ci]) {
@@ -338,8 +338,7 @@ fn number_bins<const D: usize>(
         .par_iter()
         .with_min_len(PAR_GRAIN_PARTICLES)
         .for_each(|m| {
-            for o in allowed(m, offsets) {
-                let c = offset_cell(grid, m.home, o).expect("allowed moves stay in the grid");
+            for (_, c) in allowed(grid, m, offsets) {
                 reached[grid.cell_index(c)].store(true, Ordering::Relaxed);
             }
         });
