@@ -1,6 +1,6 @@
 //! The band method (paper sec. band_method): exact bookkeeping of the deep over long runs in 2D
-//! and 3D, feasibility of all three band corrections, their objectives against each other, and
-//! a known-answer case of fig. path.
+//! and 3D, feasibility of all band corrections, their objectives against each other (and
+//! exact-paths' second step against the simplex), and a known-answer case of fig. path.
 
 mod common;
 
@@ -28,6 +28,20 @@ fn run_band<const D: usize>(
     steps: u64,
     cross_check: bool,
 ) -> (Vec<f64>, Simulation<D>) {
+    let (volumes, sim, _) = run_band_counted(name, band, overrides, steps, cross_check);
+    (volumes, sim)
+}
+
+/// [`run_band`], also counting the steps on which the simplex checked exact-paths' second step
+/// (with `cross_check`, `band` exact-paths, and particles to move across).
+fn run_band_counted<const D: usize>(
+    name: &str,
+    band: BandMode,
+    overrides: Overrides,
+    steps: u64,
+    cross_check: bool,
+) -> (Vec<f64>, Simulation<D>, usize) {
+    let mut second_steps_checked = 0;
     let overrides = Overrides {
         method: Some(MethodKind::Ccp),
         band: Some(band),
@@ -67,23 +81,46 @@ fn run_band<const D: usize>(
             "{at}"
         );
         if cross_check {
-            for (v, o) in &b.other_objectives {
-                let o = o
+            let cost = |v: BandVariant| match v == b.variant {
+                true => Some(b.cost),
+                false => b.other_costs.iter().find(|(w, _)| *w == v).map(|(_, o)| {
+                    *o.as_ref()
+                        .unwrap_or_else(|e| panic!("{at}: {} failed: {e}", v.name()))
+                }),
+            };
+            let at_most = |a: f64, b: f64| a <= b * (1.0 + 1e-9) + 1e-9;
+            let costs: Vec<f64> = BandVariant::ALL.iter().filter_map(|&v| cost(v)).collect();
+            assert_eq!(
+                costs.len(),
+                BandVariant::ALL.len(),
+                "{at}: every variant ran"
+            );
+            // full is the optimum of the constrained problem; the others are feasible for it.
+            let full = cost(BandVariant::Full).unwrap();
+            assert!(
+                costs.iter().all(|&o| at_most(full, o)),
+                "{at}: full {full} > {costs:?}"
+            );
+            // exact-paths solves the problem of the paths exactly.
+            let (exact, paths) = (cost(BandVariant::ExactPaths), cost(BandVariant::Paths));
+            assert!(
+                at_most(exact.unwrap(), paths.unwrap()),
+                "{at}: {exact:?} > {paths:?}"
+            );
+            if let Some(d) = &c.cross_check {
+                let d = d
                     .as_ref()
-                    .unwrap_or_else(|e| panic!("{at}: {} failed: {e}", v.name()));
-                // full is the optimum of the constrained problem; the others are feasible for it.
-                if *v == BandVariant::Full {
-                    assert!(
-                        *o <= b.objective * (1.0 + 1e-9) + 1e-9,
-                        "{at}: full {o} > {}",
-                        b.objective
-                    );
-                }
+                    .unwrap_or_else(|e| panic!("{at}: simplex failed: {e}"));
+                assert!(
+                    *d <= 1e-9,
+                    "{at}: exact-paths' second step {d} from the simplex"
+                );
+                second_steps_checked += 1;
             }
         }
         volumes.push(rep.volume_percent);
     });
-    (volumes, runner.sim)
+    (volumes, runner.sim, second_steps_checked)
 }
 
 fn min(v: &[f64]) -> f64 {
@@ -132,8 +169,8 @@ fn band_conserves_volume_over_a_long_3d_run() {
 }
 
 #[test]
-fn all_three_band_variants_stay_feasible_and_full_is_the_optimum_2d() {
-    // Every step runs all three variants on the same problem (cross-check).
+fn all_band_variants_stay_feasible_and_full_is_the_optimum_2d() {
+    // Every step runs all variants on the same problem (cross-check).
     let small = Overrides {
         cells: Some(24),
         band_r: Some(2),
@@ -150,7 +187,7 @@ fn all_three_band_variants_stay_feasible_and_full_is_the_optimum_2d() {
 }
 
 #[test]
-fn all_three_band_variants_stay_feasible_3d() {
+fn all_band_variants_stay_feasible_3d() {
     let small = Overrides {
         cells: Some(12),
         band_r: Some(1),
@@ -159,6 +196,36 @@ fn all_three_band_variants_stay_feasible_3d() {
     for band in [BandMode::Paths, BandMode::OneWay, BandMode::Full] {
         run_band::<3>("dam-3d", band, small.clone(), 30, true);
     }
+}
+
+/// Exact-paths runs on its own, with every step cross-checked: it is never above the paths and
+/// its second step equals the simplex's optimum of the same problem. The scenes must really
+/// move particles across the interface, so that the check cannot pass without checking.
+fn exact_paths_is_the_optimum_of_the_second_step<const D: usize>(
+    name: &str,
+    cells: usize,
+    band_r: u32,
+    steps: u64,
+) {
+    let small = Overrides {
+        cells: Some(cells),
+        band_r: Some(band_r),
+        ..Default::default()
+    };
+    let (v, _, checked) = run_band_counted::<D>(name, BandMode::ExactPaths, small, steps, true);
+    assert!(
+        min(&v) >= 100.0 - 1e-9,
+        "{name}: volume fell to {}%",
+        min(&v)
+    );
+    assert!(checked >= 5, "{name}: only {checked} second steps checked");
+}
+
+#[test]
+fn exact_paths_is_the_optimum_of_the_second_step_2d_and_3d() {
+    exact_paths_is_the_optimum_of_the_second_step::<2>("dam-2d", 24, 2, 80);
+    exact_paths_is_the_optimum_of_the_second_step::<2>("falling-obstacle-2d", 24, 2, 80);
+    exact_paths_is_the_optimum_of_the_second_step::<3>("dam-3d", 12, 1, 30);
 }
 
 #[test]
@@ -251,6 +318,10 @@ fn a_move_into_a_full_interface_is_undone<const D: usize>() {
         if variant != BandVariant::Full {
             assert_eq!((b.n_in, b.n_out, b.s_in, b.n_move), (1, 0, -1, 1), "{at}");
         }
+        if variant == BandVariant::ExactPaths {
+            // From b* with the first solve's prices: one augmenting path per particle.
+            assert_eq!(b.paths_applied, 1, "{at}");
+        }
         if variant == BandVariant::Paths {
             assert_eq!(b.paths_applied, 1, "{at}");
             let p = &b.paths[0];
@@ -262,10 +333,14 @@ fn a_move_into_a_full_interface_is_undone<const D: usize>() {
                 "{at}"
             );
         }
-        objectives.push(b.objective);
+        objectives.push(b.cost);
     }
-    // full is the optimum; one-way and paths cannot beat it.
-    assert!(objectives[0] <= objectives[1] + 1e-12 && objectives[0] <= objectives[2] + 1e-12);
+    // full is the optimum; no other variant beats it, and exact-paths is never above paths.
+    assert!(
+        objectives.iter().all(|&o| objectives[0] <= o + 1e-12),
+        "{objectives:?}"
+    );
+    assert!(objectives[3] <= objectives[2] + 1e-12, "{objectives:?}");
 }
 
 #[test]

@@ -21,7 +21,7 @@ use crate::sim::solids::ObstacleMode;
 use crate::sim::{transfer, State};
 use anyhow::Context;
 use std::any::Any;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 /// The paper's method, as registered.
@@ -242,6 +242,11 @@ impl<const D: usize> FluidMethod<D> for CcpSim<D> {
             std::fs::write(path, mps).with_context(|| format!("cannot write '{}'", path.display()))?;
             self.totals.exported = Some((*step, path.clone()));
         }
+        if let (Some(mps), Some((_, path))) = (rep.second_mps.take(), export) {
+            let second = second_step_path(path);
+            std::fs::write(&second, mps).with_context(|| format!("cannot write '{}'", second.display()))?;
+            self.totals.exported_second = Some(second);
+        }
         self.step.correction = rep;
         Ok(())
     }
@@ -378,8 +383,8 @@ fn record_band_correction<const D: usize>(b: &BandCorrection<D>, log: &mut dyn L
     ] {
         log.scalar(&format!("metrics/band/{name}"), v);
     }
-    log.scalar(&format!("metrics/band/objective/{}", b.variant.name()), b.objective);
-    for (v, o) in &b.other_objectives {
+    log.scalar(&format!("metrics/band/objective/{}", b.variant.name()), b.cost);
+    for (v, o) in &b.other_costs {
         match o {
             Ok(o) => log.scalar(&format!("metrics/band/objective/{}", v.name()), *o),
             Err(e) => log.warn(&format!("band variant {} failed on this step's problem: {e}", v.name())),
@@ -463,6 +468,7 @@ struct Totals {
     second_times: Vec<Duration>,
     band_gaps: Vec<(&'static str, Vec<f64>)>,
     exported: Option<(u64, PathBuf)>,
+    exported_second: Option<PathBuf>,
 }
 
 impl Totals {
@@ -494,8 +500,8 @@ impl Totals {
         self.band_moves += b.n_move as u64;
         self.band_failures += b.failure.is_some() as u64;
         self.second_times.push(b.second_time);
-        for (v, o) in &b.other_objectives {
-            let gap = o.as_ref().map_or(f64::NAN, |o| (o - b.objective) / b.objective.abs().max(1e-12));
+        for (v, o) in &b.other_costs {
+            let gap = o.as_ref().map_or(f64::NAN, |o| (o - b.cost) / b.cost.abs().max(1e-12));
             match self.band_gaps.iter_mut().find(|(n, _)| *n == v.name()) {
                 Some((_, g)) => g.push(gap),
                 None => self.band_gaps.push((v.name(), vec![gap])),
@@ -520,8 +526,12 @@ impl Totals {
                 .zip(&self.solver_times)
                 .map(|(o, t)| o.as_secs_f64() / t.as_secs_f64().max(1e-9))
                 .collect();
+            let what = match band {
+                Some(("exact-paths", _)) => "the simplex on exact-paths' second steps",
+                _ => "the other solver",
+            };
             out.push(format!(
-                "  cross-check: objectives differ by at most {d:.2e} (relative); the other solver took median {:.2} ms, {:.0}x (min {:.0}x, max {:.0}x)",
+                "  cross-check: objectives differ by at most {d:.2e} (relative); {what} took median {:.2} ms, {:.0}x the first solve's (min {:.0}x, max {:.0}x)",
                 ms(median(&self.cross_check_times)),
                 median(&ratios).unwrap_or(f64::NAN),
                 ratios.iter().cloned().fold(f64::INFINITY, f64::min),
@@ -533,6 +543,9 @@ impl Totals {
         }
         if let Some((step, path)) = &self.exported {
             out.push(format!("wrote the correction problem of step {step} to {}", path.display()));
+        }
+        if let Some(path) = &self.exported_second {
+            out.push(format!("wrote its exact-paths second step to {}", path.display()));
         }
         out
     }
@@ -564,4 +577,11 @@ impl Totals {
         }
         out
     }
+}
+
+/// Where `exact-paths` writes its second-step problem: next to the exported problem,
+/// `...-step3.mps` -> `...-step3-second.mps`.
+fn second_step_path(path: &Path) -> PathBuf {
+    let stem = path.file_stem().map_or_else(Default::default, |s| s.to_string_lossy());
+    path.with_file_name(format!("{stem}-second.mps"))
 }

@@ -210,6 +210,9 @@ struct Network<'a> {
     /// Per bin, its cheapest move to each other bin (see [`OutArc`]); rebuilt when `stale`.
     out_arcs: Vec<Vec<OutArc>>,
     stale: Vec<bool>,
+    /// Scratch of [`Network::refresh_out_arcs`]: per bin, its arc's index in the list being
+    /// rebuilt (`NONE` outside a rebuild), so that a bin with many items rebuilds in linear time.
+    arc_of: Vec<u32>,
     /// Flow on the arc bin -> t, kept within `[lower, upper]`.
     sink_flow: Vec<u32>,
     /// Node potentials; node `bins()` is the sink `t`.
@@ -225,20 +228,26 @@ struct Network<'a> {
     stats: FlowStats,
 }
 
+/// The cheapest candidate of every item (ties go to the first): optimal when bounds are ignored.
+fn cheapest_choice(p: &BoundedAssignment) -> Vec<u32> {
+    (0..p.items())
+        .map(|i| {
+            p.candidates(i)
+                .min_by(|&a, &b| p.cand_cost[a].total_cmp(&p.cand_cost[b]).then(a.cmp(&b)))
+                .expect("every item has a candidate") as u32
+        })
+        .collect()
+}
+
 impl<'a> Network<'a> {
-    fn new(p: &'a BoundedAssignment) -> Self {
+    /// The network at assignment `choice`, with zero potentials.
+    fn new(p: &'a BoundedAssignment, choice: Vec<u32>) -> Self {
         let bins = p.bins();
         let mut cand_item = vec![0u32; p.cand_bin.len()];
-        let mut choice = Vec::with_capacity(p.items());
         for i in 0..p.items() {
-            let r = p.candidates(i);
-            cand_item[r.clone()].iter_mut().for_each(|x| *x = i as u32);
-            // The cheapest candidate; ties go to the first.
-            let best = r
-                .clone()
-                .min_by(|&a, &b| p.cand_cost[a].total_cmp(&p.cand_cost[b]).then(a.cmp(&b)))
-                .expect("every item has a candidate");
-            choice.push(best as u32);
+            cand_item[p.candidates(i)]
+                .iter_mut()
+                .for_each(|x| *x = i as u32);
         }
         let mut bin_start = vec![0usize; bins + 1];
         for &b in &p.cand_bin {
@@ -277,6 +286,7 @@ impl<'a> Network<'a> {
             slot,
             out_arcs: vec![vec![]; bins],
             stale: vec![true; bins],
+            arc_of: vec![NONE; bins],
             sink_flow,
             potential: vec![0.0; nodes],
             search: 0,
@@ -469,13 +479,34 @@ impl<'a> Network<'a> {
                     cand: k2 as u32,
                     delta,
                 };
-                match arcs.iter_mut().find(|a| a.to == to) {
-                    Some(a) if delta < a.delta => *a = arc,
-                    Some(_) => {}
-                    None => arcs.push(arc),
+                match self.arc_of[to as usize] {
+                    NONE => {
+                        self.arc_of[to as usize] = arcs.len() as u32;
+                        arcs.push(arc);
+                    }
+                    at if delta < arcs[at as usize].delta => arcs[at as usize] = arc,
+                    _ => {}
                 }
             }
         }
+        for a in arcs.iter() {
+            self.arc_of[a.to as usize] = NONE;
+        }
+    }
+
+    /// The least reduced cost of any move of an item from its bin, under `prices`.
+    fn min_reduced_cost(&self, prices: &[f64]) -> f64 {
+        let p = self.p;
+        (0..p.items())
+            .flat_map(|i| {
+                let k = self.choice[i] as usize;
+                p.candidates(i).map(move |k2| (k, k2))
+            })
+            .map(|(k, k2)| {
+                let (a, b) = (p.cand_bin[k] as usize, p.cand_bin[k2] as usize);
+                p.cand_cost[k2] - p.cand_cost[k] - prices[a] + prices[b]
+            })
+            .fold(f64::INFINITY, f64::min)
     }
 
     fn move_item(&mut self, to_cand: usize, from: u32, to: u32) {
@@ -498,10 +529,58 @@ impl<'a> Network<'a> {
     }
 }
 
+/// An optimal assignment with prices that prove it optimal.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Solution {
+    /// The chosen candidate (a global candidate index) of every item.
+    pub choice: Vec<u32>,
+    /// A potential per bin under which every move of an item to another of its candidates has
+    /// a non-negative reduced cost `cost(to) - cost(from) - price(from bin) + price(to bin)`:
+    /// the dual certificate of `choice`, and the warm start of [`solve_from`].
+    pub prices: Vec<f64>,
+    pub stats: FlowStats,
+}
+
 /// Solves a bounded assignment problem exactly. Returns the chosen candidate (a global
 /// candidate index) of every item.
 pub fn solve(p: &BoundedAssignment) -> Result<(Vec<u32>, FlowStats), Infeasible> {
-    let mut net = Network::new(p);
+    solve_priced(p).map(|s| (s.choice, s.stats))
+}
+
+/// Solves a bounded assignment problem exactly, from the cheapest candidate of every item.
+pub fn solve_priced(p: &BoundedAssignment) -> Result<Solution, Infeasible> {
+    repair(Network::new(p, cheapest_choice(p)))
+}
+
+/// Solves a bounded assignment problem exactly from `start`: an assignment (which may break
+/// bounds) with its `prices`, which must give every move of an item a non-negative reduced cost
+/// (as the prices of a [`Solution`] do for its choice on a problem with the same candidates).
+/// Only the bins in conflict are repaired, so a start near the optimum solves quickly.
+pub fn solve_from(p: &BoundedAssignment, start: Solution) -> Result<Solution, Infeasible> {
+    assert_eq!(start.prices.len(), p.bins(), "one price per bin");
+    let mut net = Network::new(p, start.choice);
+    debug_assert!(net.min_reduced_cost(&start.prices) >= -1e-9);
+    // The sink's price: every arc bin -> t with room must have a non-negative reduced cost,
+    // and so must every arc t -> bin (a bin above its lower bound).
+    let bins = 0..p.bins();
+    let (prices, flow) = (&start.prices, &net.sink_flow);
+    let t = bins
+        .clone()
+        .filter(|&b| flow[b] < p.upper[b])
+        .map(|b| prices[b]);
+    let t = t.fold(f64::NEG_INFINITY, f64::max);
+    let t = if t.is_finite() { t } else { 0.0 };
+    debug_assert!(bins
+        .filter(|&b| flow[b] > p.lower[b])
+        .all(|b| prices[b] >= t));
+    net.potential[..p.bins()].copy_from_slice(prices);
+    net.potential[p.bins()] = t;
+    repair(net)
+}
+
+/// Successive shortest paths: sends every bin's excess away, then fills every bin's deficit.
+fn repair(mut net: Network<'_>) -> Result<Solution, Infeasible> {
+    let p = net.p;
     let bins = p.bins();
     net.stats.overfull_bins = (0..bins).filter(|&b| net.load[b] > p.upper[b]).count();
     net.stats.underfull_bins = (0..bins).filter(|&b| net.load[b] < p.lower[b]).count();
@@ -515,7 +594,12 @@ pub fn solve(p: &BoundedAssignment) -> Result<(Vec<u32>, FlowStats), Infeasible>
             net.pull_deficit(b as u32)?;
         }
     }
-    Ok((net.choice, net.stats))
+    net.potential.truncate(bins);
+    Ok(Solution {
+        choice: net.choice,
+        prices: net.potential,
+        stats: net.stats,
+    })
 }
 
 #[cfg(test)]
@@ -586,6 +670,64 @@ mod tests {
         p.check(&choice).unwrap();
         assert_eq!(p.objective(&choice), 1.0);
         assert_eq!(stats.underfull_bins, 1);
+    }
+
+    /// `items` items on a ring of `bins` bins, each with candidates its own bin and the two
+    /// next to it at pseudo-random costs, and loose bounds.
+    fn ring(items: usize, bins: u32) -> BoundedAssignment {
+        let mut seed = 12345u64;
+        let mut cost = move || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let cands: Vec<Vec<(u32, f64)>> = (0..items)
+            .map(|i| {
+                let b = i as u32 % bins;
+                [b, (b + 1) % bins, (b + bins - 1) % bins]
+                    .map(|b| (b, cost()))
+                    .to_vec()
+            })
+            .collect();
+        let refs: Vec<&[(u32, f64)]> = cands.iter().map(|c| c.as_slice()).collect();
+        let n = bins as usize;
+        problem(&refs, &vec![0; n], &vec![(items / n + 2) as u32; n])
+    }
+
+    #[test]
+    fn a_warm_start_from_an_optimum_finds_the_optimum_of_tighter_bounds() {
+        let p = ring(60, 12);
+        let first = solve_priced(&p).unwrap();
+        p.check(&first.choice).unwrap();
+        let net = Network::new(&p, first.choice.clone());
+        assert!(
+            net.min_reduced_cost(&first.prices) >= -1e-12,
+            "prices certify the optimum"
+        );
+        // Every bin keeps its load, but bin 0 gives two items to bins 5 and 6 (room for 3).
+        let mut load = vec![0u32; p.bins()];
+        for &k in &first.choice {
+            load[p.cand_bin[k as usize] as usize] += 1;
+        }
+        let mut q = p.clone();
+        q.lower.clone_from(&load);
+        q.upper.clone_from(&load);
+        (q.lower[0], q.upper[0]) = (load[0] - 2, load[0] - 2);
+        q.upper[5] += 2;
+        q.upper[6] += 1;
+        let warm = solve_from(&q, first.clone()).unwrap();
+        let (cold, _) = solve(&q).unwrap();
+        q.check(&warm.choice).unwrap();
+        assert_eq!(warm.stats.augmentations, 2, "one path per unit from bin 0");
+        let (w, c) = (q.objective(&warm.choice), q.objective(&cold));
+        assert!((w - c).abs() <= 1e-12 * c.abs(), "warm {w} vs cold {c}");
+        assert!(
+            w > p.objective(&first.choice),
+            "the tighter problem costs more"
+        );
+        let net = Network::new(&q, warm.choice.clone());
+        assert!(net.min_reduced_cost(&warm.prices) >= -1e-12);
     }
 
     #[test]

@@ -14,16 +14,20 @@
 //! - [`BandVariant::Paths`]: keep `b*` and push `n_move` particles along grid paths into or out
 //!   of `L` (sec. push_part): alg. find (a multi-source Dijkstra over cells), alg. edge (the
 //!   cheapest particle per edge, by `sigma_edge` of eq. edge) and alg. update, as written.
+//! - [`BandVariant::ExactPaths`] (beyond the paper): keep `b*` and solve the problem the paths
+//!   solve greedily to optimality, as a min-cost flow ([`super::exact_paths`]).
 
 use crate::grid::{Cell, Grid, Vector};
 use crate::sim::advect::CELL_MARGIN;
 use crate::sim::markings::{CellKind, DepthLevel, Markings};
 use crate::solvers::lp::{self, SideConstraint};
+use crate::solvers::min_cost_flow;
 use rayon::prelude::*;
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 use std::time::{Duration, Instant};
 
+use super::exact_paths::SecondStep;
 use super::problem::CorrectionProblem;
 
 /// How the correction keeps the band's count right (sec. band_con, band_con2, push_part).
@@ -32,6 +36,7 @@ pub enum BandVariant {
     Full,
     OneWay,
     Paths,
+    ExactPaths,
 }
 
 /// The band setting of method ccp (`simulation.band`, `--band`): no band, or the band with the
@@ -49,6 +54,9 @@ pub enum BandMode {
     OneWay,
     /// Eq. problem3 with eq. band_con as one integer program: small grids only.
     Full,
+    /// Beyond the paper: the problem `paths` solves greedily (move `n_move` particles from
+    /// sources to sinks, other cells keeping their count), solved exactly as a min-cost flow.
+    ExactPaths,
 }
 
 impl BandMode {
@@ -59,6 +67,7 @@ impl BandMode {
             BandMode::Paths => Some(BandVariant::Paths),
             BandMode::OneWay => Some(BandVariant::OneWay),
             BandMode::Full => Some(BandVariant::Full),
+            BandMode::ExactPaths => Some(BandVariant::ExactPaths),
         }
     }
 
@@ -68,14 +77,26 @@ impl BandMode {
 }
 
 impl BandVariant {
-    pub const ALL: [BandVariant; 3] = [BandVariant::Full, BandVariant::OneWay, BandVariant::Paths];
+    pub const ALL: [BandVariant; 4] = [
+        BandVariant::Full,
+        BandVariant::OneWay,
+        BandVariant::Paths,
+        BandVariant::ExactPaths,
+    ];
 
     pub fn name(self) -> &'static str {
         match self {
             BandVariant::Full => "full",
             BandVariant::OneWay => "one-way",
             BandVariant::Paths => "paths",
+            BandVariant::ExactPaths => "exact-paths",
         }
+    }
+
+    /// Whether the variant solves integer programs by branch and bound (microlp), which only
+    /// small problems allow.
+    pub fn needs_ilp(self) -> bool {
+        matches!(self, BandVariant::Full | BandVariant::OneWay)
     }
 }
 
@@ -114,6 +135,7 @@ pub struct BandCorrection<const D: usize> {
     /// Particles that had to be moved into (`s_out < 0`) or out of (`s_in < 0`) `C_<=-R`.
     pub n_move: usize,
     /// `paths`: paths applied, paths found by all calls of alg. find, and those calls.
+    /// `exact-paths`: the flow solver's augmenting paths (each moves one particle across).
     pub paths_applied: usize,
     pub paths_found: usize,
     pub find_calls: usize,
@@ -122,6 +144,9 @@ pub struct BandCorrection<const D: usize> {
     /// `sum |x_j - x_hat_j|^2` after the first solve and of the final positions.
     pub first_objective: f64,
     pub objective: f64,
+    /// Eq. problem3's objective (`sigma_solid_obj` included) of the final positions: what the
+    /// variants are compared by.
+    pub cost: f64,
     /// `n_in - n_out` of the final positions; the band constraint asks `0 <= net <= alpha`.
     pub net_in: i64,
     /// Set when the variant could not meet the band constraint (a finding: the paper says it
@@ -129,8 +154,9 @@ pub struct BandCorrection<const D: usize> {
     pub failure: Option<String>,
     /// The paths applied (`paths`).
     pub paths: Vec<BandPath<D>>,
-    /// With cross-checking: the final objective of every other variant on the same problem.
-    pub other_objectives: Vec<(BandVariant, Result<f64, String>)>,
+    /// With cross-checking: the final `cost` of every other variant on the same problem (the
+    /// integer programs only on small problems, see [`ILP_CROSS_CHECK_CANDIDATES`]).
+    pub other_costs: Vec<(BandVariant, Result<f64, String>)>,
 }
 
 impl<const D: usize> BandCorrection<D> {
@@ -154,37 +180,65 @@ impl<const D: usize> BandCorrection<D> {
             second_time: Duration::ZERO,
             first_objective: first,
             objective: 0.0,
+            cost: 0.0,
             net_in: 0,
             failure: None,
             paths: vec![],
-            other_objectives: vec![],
+            other_costs: vec![],
         }
     }
 }
 
-/// The first solve `b*` of eq. problem3 (for `full`, its only solve, with eq. band_con): the
-/// choice, the flow solver's augmenting paths, and why it failed if it did (every particle
-/// then keeps its previous cell).
+/// Cross-checking runs the variants that need integer programs only on problems with at most
+/// this many candidates: microlp's branch and bound takes minutes on larger ones.
+pub const ILP_CROSS_CHECK_CANDIDATES: usize = 100_000;
+
+/// The first solve `b*` of eq. problem3 (for `full`, its only solve, with eq. band_con).
+struct FirstSolve {
+    choice: Vec<u32>,
+    /// The flow solver's augmenting paths.
+    augmentations: usize,
+    /// Why the solver failed, if it did: every particle then keeps its previous cell.
+    fallback: Option<String>,
+    /// The flow solver's prices for `choice` (for `exact-paths`, which starts from them).
+    prices: Option<Vec<f64>>,
+}
+
 fn first_solve<const D: usize>(
     p: &CorrectionProblem<D>,
     variant: BandVariant,
     alpha: i64,
     solver: super::Solver,
-) -> (Vec<u32>, usize, Option<String>) {
-    let first = match variant {
-        BandVariant::Full => solve_full(p, alpha).map(|c| (c, 0)),
-        _ => solver.solve(&p.assignment),
+) -> FirstSolve {
+    let a = &p.assignment;
+    let first = match (variant, solver) {
+        (BandVariant::Full, _) => solve_full(p, alpha).map(|c| (c, 0, None)),
+        (BandVariant::ExactPaths, super::Solver::Flow) => min_cost_flow::solve_priced(a)
+            .map(|s| (s.choice, s.stats.augmentations, Some(s.prices)))
+            .map_err(|e| e.to_string()),
+        _ => solver.solve(a).map(|(c, aug)| (c, aug, None)),
     }
-    .and_then(|(c, aug)| p.assignment.check(&c).map(|()| (c, aug)));
+    .and_then(|(c, aug, prices)| a.check(&c).map(|()| (c, aug, prices)));
     match first {
-        Ok((c, aug)) => (c, aug, None),
+        Ok((choice, augmentations, prices)) => FirstSolve {
+            choice,
+            augmentations,
+            fallback: None,
+            prices,
+        },
         Err(e) => {
             let who = match variant {
                 BandVariant::Full => "band ILP (simplex)",
                 _ => solver.name(),
             };
-            let why = format!("{who} solver failed ({e}); particles keep their cells");
-            (p.stay.clone(), 0, Some(why))
+            FirstSolve {
+                choice: p.stay.clone(),
+                augmentations: 0,
+                fallback: Some(format!(
+                    "{who} solver failed ({e}); particles keep their cells"
+                )),
+                prices: None,
+            }
         }
     }
 }
@@ -319,6 +373,37 @@ pub enum PathDirection {
     Out,
 }
 
+impl PathDirection {
+    /// The direction that undoes `b*`'s imbalance: out of `C_<=-R` when too many went in.
+    pub fn of(s_in: i64) -> Self {
+        if s_in < 0 {
+            PathDirection::Out
+        } else {
+            PathDirection::In
+        }
+    }
+
+    /// Whether a path may start in cell `c` (if it holds a particle): a surface cell for paths
+    /// in, a band interface cell for paths out (of the previous markings).
+    pub fn is_source(self, previous: &Markings, r: u32, c: usize) -> bool {
+        previous.kind[c] == CellKind::Fluid
+            && match self {
+                PathDirection::In => previous.surface[c],
+                PathDirection::Out => previous.level(c, r) == DepthLevel::Interface,
+            }
+    }
+
+    /// Whether a path may end in the non-solid cell `c` (if it has room): a cell of
+    /// `C_<=-R` for paths in, any other cell for paths out.
+    pub fn is_sink(self, previous: &Markings, r: u32, c: usize) -> bool {
+        let low = previous.at_or_below_interface(c, r);
+        match self {
+            PathDirection::In => low,
+            PathDirection::Out => !low,
+        }
+    }
+}
+
 /// What pushing particles along paths did.
 #[derive(Clone, Debug, Default)]
 pub struct PathOutcome<const D: usize> {
@@ -380,20 +465,8 @@ pub struct PathPusher<'a, const D: usize> {
 }
 
 impl<const D: usize> PathPusher<'_, D> {
-    fn low(&self, c: usize) -> bool {
-        self.previous.at_or_below_interface(c, self.r)
-    }
-
     fn is_source(&self, c: usize) -> bool {
-        match self.direction {
-            PathDirection::In => {
-                self.previous.kind[c] == CellKind::Fluid && self.previous.surface[c]
-            }
-            PathDirection::Out => {
-                self.previous.kind[c] == CellKind::Fluid
-                    && self.previous.level(c, self.r) == DepthLevel::Interface
-            }
-        }
+        self.direction.is_source(self.previous, self.r, c)
     }
 
     /// Whether `c` can end a path. Cells an obstacle wants (`C_new_solid`, sec. 7) only with
@@ -401,10 +474,8 @@ impl<const D: usize> PathPusher<'_, D> {
     fn is_sink(&self, c: usize, allow_wanted: bool) -> bool {
         let wanted = self.penalty.is_some_and(|p| p[c] > 0.0);
         (allow_wanted || !wanted)
-            && match self.direction {
-                PathDirection::In => self.low(c),
-                PathDirection::Out => !self.solid[c] && !self.low(c),
-            }
+            && !self.solid[c]
+            && self.direction.is_sink(self.previous, self.r, c)
     }
 
     /// `sigma_edge(j, c)` of eq. edge: the cost of particle `j` at its best point of cell `c`
@@ -597,60 +668,80 @@ pub struct BandOutcome<const D: usize> {
     /// Eq. problem3's objective (`sigma_solid_obj` included) at the first solve's choice: the
     /// value an LP solver finds for the exported problem (but for `full`).
     pub first_cost: f64,
+    /// `exact-paths`: the second step's problem and its optimum, for export.
+    pub second_step: Option<(SecondStep, f64)>,
+}
+
+/// Everything a band correction reads besides the problem.
+pub struct BandScene<'a, const D: usize> {
+    pub grid: &'a Grid<D>,
+    pub x_bar: &'a [Vector<D>],
+    pub x_hat: &'a [Vector<D>],
+    pub previous: &'a Markings,
+    pub solid: &'a [bool],
+    /// `sigma_solid_obj`'s penalty per cell (sec. 7), > 0 on `C_new_solid`.
+    pub penalty: Option<&'a [f64]>,
+    pub mu: u32,
+}
+
+impl<const D: usize> BandScene<'_, D> {
+    fn pusher(&self, r: u32, direction: PathDirection) -> PathPusher<'_, D> {
+        PathPusher {
+            grid: self.grid,
+            x_bar: self.x_bar,
+            x_hat: self.x_hat,
+            previous: self.previous,
+            solid: self.solid,
+            penalty: self.penalty,
+            mu: self.mu,
+            r,
+            direction,
+        }
+    }
+
+    /// Eq. problem3's objective of final positions: the penalty of those in `C_new_solid`,
+    /// the squared displacement of the others.
+    fn cost(&self, pos: &[Vector<D>]) -> f64 {
+        let ends = pos.iter().zip(self.x_hat);
+        let ends = ends.map(|(x, h)| (self.grid.cell_index_of(x), (x - h).norm_squared()));
+        let (displacement, penalty) = super::objective_parts(ends, self.penalty);
+        displacement + penalty
+    }
 }
 
 /// Corrects the advected positions `x_hat` with the band variant of `ctx`: the first solve of
 /// eq. problem3 by `solver` (for `full`, the integer program), then the variant's second step.
-#[allow(clippy::too_many_arguments)]
 pub fn correct_band<const D: usize>(
-    grid: &Grid<D>,
+    sc: &BandScene<'_, D>,
     p: &CorrectionProblem<D>,
-    x_bar: &[Vector<D>],
-    x_hat: &[Vector<D>],
-    previous: &Markings,
-    solid: &[bool],
-    penalty: Option<&[f64]>,
-    mu: u32,
     ctx: BandContext,
     solver: super::Solver,
 ) -> BandOutcome<D> {
+    let (grid, x_hat) = (sc.grid, sc.x_hat);
     // Negative only if an earlier step left excess without room (reported there): then no
     // particle may enter.
-    let alpha = room_at_or_below_interface(previous, ctx.r, mu, ctx.n_deep).max(0);
+    let alpha = room_at_or_below_interface(sc.previous, ctx.r, sc.mu, ctx.n_deep).max(0);
     let t0 = Instant::now();
-    let (choice, augmentations, fallback) = first_solve(p, ctx.variant, alpha, solver);
+    let first = first_solve(p, ctx.variant, alpha, solver);
     let solve_time = t0.elapsed();
-    let first_cost = p.assignment.objective(&choice);
-    let (n_in, n_out) = flows(p, &choice);
-    let mut pos: Vec<Vector<D>> = positions(grid, p, &choice, x_hat);
-    let mut rep = BandCorrection::new(ctx.variant, alpha, (n_in, n_out), objective(&pos, x_hat));
-    // Out of the interface when too many went in (`s_in < 0`), else into it.
-    let pusher = |out: bool| PathPusher {
-        grid,
-        x_bar,
-        x_hat,
-        previous,
-        solid,
-        penalty,
-        mu,
-        r: ctx.r,
-        direction: if out {
-            PathDirection::Out
-        } else {
-            PathDirection::In
-        },
-    };
+    let choice = &first.choice;
+    let first_cost = p.assignment.objective(choice);
+    let flows = flows(p, choice);
+    let mut pos: Vec<Vector<D>> = positions(grid, p, choice, x_hat);
+    let mut rep = BandCorrection::new(ctx.variant, alpha, flows, objective(&pos, x_hat));
+    let direction = PathDirection::of(rep.s_in);
+    let mut second_step = None;
     let t1 = Instant::now();
     match ctx.variant {
+        _ if rep.n_move == 0 => {}
         BandVariant::Full => {}
-        BandVariant::OneWay if rep.n_move > 0 => {
-            match solve_one_way(p, &choice, alpha).and_then(|c| p.assignment.check(&c).map(|()| c))
-            {
+        BandVariant::OneWay => {
+            match solve_one_way(p, choice, alpha).and_then(|c| p.assignment.check(&c).map(|()| c)) {
                 Ok(c) => pos = positions(grid, p, &c, x_hat),
                 Err(e) => {
                     // The paper says the second solve is always feasible; if it is not (or
                     // times out), correct b* along paths instead.
-                    let o = pusher(rep.s_in < 0).push(&mut pos, rep.n_move);
+                    let o = sc.pusher(ctx.r, direction).push(&mut pos, rep.n_move);
                     rep.failure = Some(format!(
                         "one-way second solve failed ({e}); corrected along {} paths instead",
                         o.applied
@@ -658,9 +749,8 @@ pub fn correct_band<const D: usize>(
                 }
             }
         }
-        BandVariant::OneWay => {}
-        BandVariant::Paths if rep.n_move > 0 => {
-            let o = pusher(rep.s_in < 0).push(&mut pos, rep.n_move);
+        BandVariant::Paths => {
+            let o = sc.pusher(ctx.r, direction).push(&mut pos, rep.n_move);
             rep.paths_applied = o.applied;
             rep.paths_found = o.found;
             rep.find_calls = o.find_calls;
@@ -672,24 +762,41 @@ pub fn correct_band<const D: usize>(
                 ));
             }
         }
-        BandVariant::Paths => {}
+        BandVariant::ExactPaths => {
+            let bounds = (ctx.r, sc.mu);
+            let step = SecondStep::build(p, choice, sc.previous, bounds, direction, rep.n_move);
+            let solved = step.and_then(|s| {
+                let (c, stats) = s.solve(choice, first.prices.as_deref())?;
+                Ok((s, c, stats))
+            });
+            match solved {
+                Ok((s, c, stats)) => {
+                    pos = positions(grid, p, &c, x_hat);
+                    rep.paths_applied = stats.augmentations;
+                    second_step = Some((s, p.assignment.objective(&c)));
+                }
+                Err(e) => rep.failure = Some(format!("exact second step failed ({e}); b* kept")),
+            }
+        }
     }
     rep.second_time = t1.elapsed();
-    rep.net_in = net_into_interface(grid, x_bar, &pos, previous, ctx.r);
-    if rep.failure.is_none() && fallback.is_none() && !(0..=alpha).contains(&rep.net_in) {
+    rep.net_in = net_into_interface(grid, sc.x_bar, &pos, sc.previous, ctx.r);
+    if rep.failure.is_none() && first.fallback.is_none() && !(0..=alpha).contains(&rep.net_in) {
         rep.failure = Some(format!(
             "the band constraint 0 <= n_in - n_out = {} <= alpha = {alpha} does not hold",
             rep.net_in
         ));
     }
     rep.objective = objective(&pos, x_hat);
+    rep.cost = sc.cost(&pos);
     BandOutcome {
         pos,
         report: rep,
         solve_time,
-        augmentations,
-        fallback,
+        augmentations: first.augmentations,
+        fallback: first.fallback,
         first_cost,
+        second_step,
     }
 }
 

@@ -8,12 +8,13 @@
 
 pub mod band;
 pub mod deep;
+pub mod exact_paths;
 pub mod problem;
 
 use crate::grid::{Grid, Vector};
 use crate::sim::markings::Markings;
 use crate::solvers::{lp, min_cost_flow, mps};
-use band::{BandContext, BandCorrection, BandVariant};
+use band::{BandContext, BandCorrection, BandScene, BandVariant, ILP_CROSS_CHECK_CANDIDATES};
 use problem::{BuildError, CorrectionProblem, Directions};
 use rayon::prelude::*;
 use std::time::{Duration, Instant};
@@ -89,7 +90,8 @@ pub struct CorrectionReport<const D: usize> {
     pub augmentations: usize,
     /// Set when the solver failed and every particle stayed in its previous cell.
     pub fallback: Option<String>,
-    /// `|objective(other solver) - objective| / max(1, |objective|)`, with `cross_check`.
+    /// `|objective(other solver) - objective| / max(1, |objective|)`, with `cross_check`; with
+    /// `exact-paths`, of its second step (on small problems, when it had particles to move).
     pub cross_check: Option<Result<f64, String>>,
     /// Time the other solver took on the same problem, with `cross_check`.
     pub cross_check_time: Option<Duration>,
@@ -98,6 +100,8 @@ pub struct CorrectionReport<const D: usize> {
     pub moves: Vec<(Vector<D>, Vector<D>)>,
     /// The problem as free-format MPS, when asked for.
     pub mps: Option<String>,
+    /// `exact-paths` when it had particles to move: its second-step problem as MPS, when asked.
+    pub second_mps: Option<String>,
     /// The band correction, with the band method.
     pub band: Option<BandCorrection<D>>,
 }
@@ -143,18 +147,20 @@ pub fn correct<const D: usize>(
     };
     match band {
         Some(ctx) => {
-            let inputs = BandInputs {
+            let x_hat = pos.to_vec();
+            let scene = BandScene {
                 grid,
-                problem: &problem,
                 x_bar,
+                x_hat: &x_hat,
                 previous,
                 solid,
                 penalty,
                 mu,
             };
-            let first_cost = correct_band(&inputs, pos, settings, ctx, &mut rep);
+            let (first_cost, second) = correct_band(&scene, &problem, pos, settings, ctx, &mut rep);
             if want_mps {
                 rep.mps = Some(band_mps(&problem, &rep, first_cost, settings, ctx.variant));
+                rep.second_mps = second.map(|(s, optimum)| second_step_mps(&s, optimum));
             }
         }
         None => {
@@ -229,7 +235,7 @@ fn solve<const D: usize>(
 /// Splits eq. problem3's objective by where the particles end: the displacement `sum |x -
 /// x_hat|^2` of those outside `C_new_solid`, and the penalty `sum sigma_solid_obj` (their
 /// cell's) of those in it. `ends` yields each particle's final cell and squared displacement.
-fn objective_parts(
+pub(super) fn objective_parts(
     ends: impl Iterator<Item = (usize, f64)>,
     penalty: Option<&[f64]>,
 ) -> (f64, f64) {
@@ -275,53 +281,55 @@ fn band_mps<const D: usize>(
     mps::write(&problem.assignment, "cellflip-correction", &comment)
 }
 
-/// What every band variant reads.
-struct BandInputs<'a, const D: usize> {
-    grid: &'a Grid<D>,
-    problem: &'a CorrectionProblem<D>,
-    x_bar: &'a [Vector<D>],
-    previous: &'a Markings,
-    solid: &'a [bool],
-    penalty: Option<&'a [f64]>,
-    mu: u32,
+/// `exact-paths`' second-step problem as MPS (see [`exact_paths`]) with its optimum.
+fn second_step_mps(step: &exact_paths::SecondStep, optimum: f64) -> String {
+    let comment = [
+        "exact-paths: the band method's second step (sources lose n_move particles, sinks gain \
+         up to mu, other cells keep their count; ghost items count the particles that leave)"
+            .to_string(),
+        objective_comment(optimum, Solver::Flow, None),
+    ];
+    mps::write(&step.problem, "cellflip-band-second-step", &comment)
 }
 
 /// The band method's correction: the variant of `ctx`, and with cross-checking every other
-/// variant on the same problem, for their objectives. Returns eq. problem3's objective at the
-/// first solve, for the exported problem.
+/// variant on the same problem, for their costs (the integer programs only on small problems).
+/// Returns eq. problem3's objective at the first solve, for the exported problem, and the
+/// second step of `exact-paths` with its optimum.
 fn correct_band<const D: usize>(
-    inp: &BandInputs<'_, D>,
+    scene: &BandScene<'_, D>,
+    problem: &CorrectionProblem<D>,
     pos: &mut [Vector<D>],
     settings: &CorrectionSettings,
     ctx: BandContext,
     rep: &mut CorrectionReport<D>,
-) -> f64 {
-    let x_hat = pos.to_vec();
+) -> (f64, Option<(exact_paths::SecondStep, f64)>) {
     let run = |variant| {
         let ctx = BandContext { variant, ..ctx };
-        band::correct_band(
-            inp.grid,
-            inp.problem,
-            inp.x_bar,
-            &x_hat,
-            inp.previous,
-            inp.solid,
-            inp.penalty,
-            inp.mu,
-            ctx,
-            settings.solver,
-        )
+        band::correct_band(scene, problem, ctx, settings.solver)
     };
     let out = run(ctx.variant);
     let mut report = out.report;
     if settings.cross_check {
-        for v in BandVariant::ALL.into_iter().filter(|&v| v != ctx.variant) {
+        let small = problem.assignment.cand_bin.len() <= ILP_CROSS_CHECK_CANDIDATES;
+        let others = BandVariant::ALL.into_iter().filter(|&v| v != ctx.variant);
+        for v in others.filter(|v| small || !v.needs_ilp()) {
             let o = run(v);
             let result = match (o.fallback, o.report.failure) {
                 (Some(e), _) | (None, Some(e)) => Err(e),
-                (None, None) => Ok(o.report.objective),
+                (None, None) => Ok(o.report.cost),
             };
-            report.other_objectives.push((v, result));
+            report.other_costs.push((v, result));
+        }
+        if let Some((step, optimum)) = out.second_step.as_ref().filter(|_| small) {
+            let t0 = Instant::now();
+            let simplex = lp::solve(&step.problem).map_err(|e| e.to_string());
+            rep.cross_check_time = Some(t0.elapsed());
+            rep.cross_check = Some(simplex.and_then(|c| {
+                step.problem.check(&c)?;
+                let o = step.problem.objective(&c);
+                Ok((o - optimum).abs() / optimum.abs().max(1.0))
+            }));
         }
     }
     pos.copy_from_slice(&out.pos);
@@ -329,17 +337,17 @@ fn correct_band<const D: usize>(
     rep.augmentations = out.augmentations;
     rep.fallback = out.fallback;
     rep.band = Some(report);
-    let grid = inp.grid;
-    let ends = pos.iter().zip(&x_hat);
+    let (grid, x_hat) = (scene.grid, scene.x_hat);
+    let ends = pos.iter().zip(x_hat);
     let ends = ends.map(|(x, h)| (grid.cell_index_of(x), (x - h).norm_squared()));
-    (rep.objective, rep.penalty) = objective_parts(ends, inp.penalty);
+    (rep.objective, rep.penalty) = objective_parts(ends, scene.penalty);
     rep.moves = x_hat
         .iter()
         .zip(pos.iter())
         .filter(|(h, x)| grid.cell_index_of(h) != grid.cell_index_of(x))
         .map(|(h, x)| (*h, *x))
         .collect();
-    out.first_cost
+    (out.first_cost, out.second_step)
 }
 
 fn overfull_cells<const D: usize>(grid: &Grid<D>, pos: &[Vector<D>], mu: u32) -> usize {
