@@ -134,7 +134,9 @@ pub struct RunArgs {
     #[arg(long, value_enum)]
     pub obstacle: Option<ObstacleMode>,
     /// Solve every correction with both solvers and report their largest objective difference;
-    /// with a band, run every band variant on each step's problem and record their objectives.
+    /// with a band, run every band variant on each step's problem and record their objectives
+    /// (full and one-way, integer programs, only up to 50,000 candidates), and check
+    /// exact-paths' second step against the simplex.
     #[arg(long)]
     pub cross_check: bool,
     /// Write the correction problem of step N as free-format MPS next to the recording (in
@@ -190,7 +192,8 @@ pub struct BenchArgs {
     #[arg(long, value_enum, value_delimiter = ',')]
     pub band: Vec<BandMode>,
     /// Method ccp: also solve every correction with the other solver and compare their times;
-    /// with a band, run all band variants on each problem and compare their objectives.
+    /// with a band, run all band variants on each problem and compare their objectives (full
+    /// and one-way only up to 50,000 candidates).
     #[arg(long)]
     pub cross_check: bool,
 }

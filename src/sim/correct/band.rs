@@ -191,7 +191,7 @@ impl<const D: usize> BandCorrection<D> {
 
 /// Cross-checking runs the variants that need integer programs only on problems with at most
 /// this many candidates: microlp's branch and bound takes minutes on larger ones.
-pub const ILP_CROSS_CHECK_CANDIDATES: usize = 100_000;
+pub const ILP_CROSS_CHECK_CANDIDATES: usize = 50_000;
 
 /// The first solve `b*` of eq. problem3 (for `full`, its only solve, with eq. band_con).
 struct FirstSolve {
