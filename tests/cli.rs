@@ -416,6 +416,42 @@ fn options_a_method_lacks_are_refused_before_anything_is_written() {
     assert!(String::from_utf8_lossy(&o.stderr).contains("--band"));
 }
 
+/// `cellflip solve FILE --solver flow,simplex` finds the file's recorded optimum with both.
+fn solves_to_the_recorded_optimum(file: &std::path::Path) {
+    let args = ["solve", file.to_str().unwrap(), "--solver", "flow,simplex"];
+    let o = cellflip(&[&args[..], &["--repeat", "1"]].concat());
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let gaps: Vec<f64> = text
+        .lines()
+        .filter_map(|l| {
+            l.split(" from the recorded optimum")
+                .next()?
+                .rsplit(", ")
+                .next()
+        })
+        .filter_map(|g| g.parse().ok())
+        .collect();
+    assert!(gaps.len() == 2 && gaps.iter().all(|&g| g <= 1e-9), "{text}");
+}
+
+#[test]
+fn exact_paths_exports_its_second_step_with_its_optimum() {
+    // dam-2d at 50^2 moves particles across the band interface at step 40.
+    let dir = scratch_dir("export-second");
+    let args = ["run", "dam-2d", "--band", "exact-paths", "--steps", "40"];
+    let more = ["--export-lp", "40", "--no-record"];
+    let o = cellflip_in(&dir, &[&args[..], &more[..]].concat());
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let name = "dam-2d-ccp-50x50-band-exact-paths-step40-second.mps";
+    assert!(text.contains(name), "the summary names the file: {text}");
+    let file = dir.join("recordings").join(name);
+    let mps = std::fs::read_to_string(&file).unwrap();
+    assert!(mps.contains("exact-paths: the band method's second step"));
+    solves_to_the_recorded_optimum(&file);
+}
+
 #[test]
 fn exported_problems_are_named_after_the_run_beside_the_recording_or_in_recordings() {
     let dir = scratch_dir("export-names");
@@ -452,21 +488,7 @@ fn exported_problems_are_named_after_the_run_beside_the_recording_or_in_recordin
     let mps = std::fs::read_to_string(&file);
     assert!(mps.unwrap().starts_with("* optimal objective "));
     // `cellflip solve` reads it back and finds the recorded optimum with both solvers.
-    let args = ["solve", file.to_str().unwrap(), "--solver", "flow,simplex"];
-    let o = cellflip(&[&args[..], &["--repeat", "1"]].concat());
-    let text = String::from_utf8_lossy(&o.stdout);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let gaps: Vec<f64> = text
-        .lines()
-        .filter_map(|l| {
-            l.split(" from the recorded optimum")
-                .next()?
-                .rsplit(", ")
-                .next()
-        })
-        .filter_map(|g| g.parse().ok())
-        .collect();
-    assert!(gaps.len() == 2 && gaps.iter().all(|&g| g <= 1e-9), "{text}");
+    solves_to_the_recorded_optimum(&file);
     // A file it cannot read is named with the line and the reason.
     let bad = dir.join("bad.mps");
     std::fs::write(&bad, "NAME t\nROWS\n G bin0\n").unwrap();
