@@ -451,38 +451,31 @@ struct FoundPath {
 }
 
 /// The state alg. find, alg. edge and alg. update work on.
-pub struct PathPusher<'a, const D: usize> {
-    pub grid: &'a Grid<D>,
-    pub x_bar: &'a [Vector<D>],
-    pub x_hat: &'a [Vector<D>],
-    pub previous: &'a Markings,
-    pub solid: &'a [bool],
-    /// `sigma_solid_obj`'s penalty per cell (sec. 7), > 0 on `C_new_solid`.
-    pub penalty: Option<&'a [f64]>,
-    pub mu: u32,
-    pub r: u32,
-    pub direction: PathDirection,
+struct PathPusher<'a, const D: usize> {
+    sc: &'a BandScene<'a, D>,
+    r: u32,
+    direction: PathDirection,
 }
 
 impl<const D: usize> PathPusher<'_, D> {
     fn is_source(&self, c: usize) -> bool {
-        self.direction.is_source(self.previous, self.r, c)
+        self.direction.is_source(self.sc.previous, self.r, c)
     }
 
     /// Whether `c` can end a path. Cells an obstacle wants (`C_new_solid`, sec. 7) only with
     /// `allow_wanted`: a path into one blocks the obstacle, so they are the last resort.
     fn is_sink(&self, c: usize, allow_wanted: bool) -> bool {
-        let wanted = self.penalty.is_some_and(|p| p[c] > 0.0);
+        let wanted = self.sc.penalty.is_some_and(|p| p[c] > 0.0);
         (allow_wanted || !wanted)
-            && !self.solid[c]
-            && self.direction.is_sink(self.previous, self.r, c)
+            && !self.sc.solid[c]
+            && self.direction.is_sink(self.sc.previous, self.r, c)
     }
 
     /// `sigma_edge(j, c)` of eq. edge: the cost of particle `j` at its best point of cell `c`
     /// minus the cost of where it is now.
     fn sigma_edge(&self, j: usize, c: Cell<D>, x: &Vector<D>) -> f64 {
-        let xh = &self.x_hat[j];
-        (self.grid.closest_in_cell(xh, c, CELL_MARGIN) - xh).norm_squared()
+        let xh = &self.sc.x_hat[j];
+        (self.sc.grid.closest_in_cell(xh, c, CELL_MARGIN) - xh).norm_squared()
             - (x - xh).norm_squared()
     }
 
@@ -491,11 +484,11 @@ impl<const D: usize> PathPusher<'_, D> {
     /// alg. find still finds some. Paths into cells an obstacle wants are searched for only
     /// when no other path is left (reverting `b*` must stay possible, sec. push_part).
     pub fn push(&self, pos: &mut [Vector<D>], n_move: usize) -> PathOutcome<D> {
-        let grid = self.grid;
+        let grid = self.sc.grid;
         let n = grid.num_cells();
         let mut cell_of: Vec<u32> = pos.iter().map(|x| grid.cell_index_of(x) as u32).collect();
         let mut out = PathOutcome::default();
-        let mut allow_wanted = self.penalty.is_none();
+        let mut allow_wanted = self.sc.penalty.is_none();
         while out.applied < n_move {
             // gamma_c of the current positions, as lists (counting sort).
             let mut start = vec![0usize; n + 1];
@@ -544,7 +537,7 @@ impl<const D: usize> PathPusher<'_, D> {
         gamma: &impl Fn(usize) -> &'g [u32],
         allow_wanted: bool,
     ) -> (Vec<FoundPath>, Vec<u32>) {
-        let grid = self.grid;
+        let grid = self.sc.grid;
         let n = grid.num_cells();
         let mut parent = vec![NONE; n];
         let mut finished = vec![false; n];
@@ -573,7 +566,7 @@ impl<const D: usize> PathPusher<'_, D> {
             }
             parent[c] = a.edge;
             sigma[c] = a.cost;
-            if self.is_sink(c, allow_wanted) && (gamma(c).len() as u32) < self.mu {
+            if self.is_sink(c, allow_wanted) && (gamma(c).len() as u32) < self.sc.mu {
                 finished[a.root as usize] = true;
                 paths.push(FoundPath {
                     edge: a.edge,
@@ -589,14 +582,14 @@ impl<const D: usize> PathPusher<'_, D> {
                         continue;
                     };
                     let c2 = grid.cell_index(nb);
-                    if parent[c2] != NONE || self.solid[c2] {
+                    if parent[c2] != NONE || self.sc.solid[c2] {
                         continue; // visited, a source or solid
                     }
                     // alg. edge: the cheapest particle of c that may move to c2, i.e. one whose
                     // previous cell is c or c2.
                     let mut best: Option<(f64, u32)> = None;
                     for &j in gamma(c) {
-                        let home = grid.cell_index_of(&self.x_bar[j as usize]);
+                        let home = grid.cell_index_of(&self.sc.x_bar[j as usize]);
                         if home != c && home != c2 {
                             continue;
                         }
@@ -635,13 +628,13 @@ impl<const D: usize> PathPusher<'_, D> {
         pos: &mut [Vector<D>],
         cell_of: &mut [u32],
     ) -> BandPath<D> {
-        let grid = self.grid;
+        let grid = self.sc.grid;
         let (mut j, mut c) = (path.edge, path.sink as usize);
         let mut cells = vec![grid.center(grid.cell_coords(c))];
         while j != ROOT {
             let from = cell_of[j as usize] as usize;
             let ju = j as usize;
-            pos[ju] = grid.closest_in_cell(&self.x_hat[ju], grid.cell_coords(c), CELL_MARGIN);
+            pos[ju] = grid.closest_in_cell(&self.sc.x_hat[ju], grid.cell_coords(c), CELL_MARGIN);
             cell_of[ju] = c as u32;
             cells.push(grid.center(grid.cell_coords(from)));
             j = parent[from];
@@ -685,27 +678,20 @@ pub struct BandScene<'a, const D: usize> {
 }
 
 impl<const D: usize> BandScene<'_, D> {
-    fn pusher(&self, r: u32, direction: PathDirection) -> PathPusher<'_, D> {
+    fn pusher<'s>(&'s self, r: u32, direction: PathDirection) -> PathPusher<'s, D> {
         PathPusher {
-            grid: self.grid,
-            x_bar: self.x_bar,
-            x_hat: self.x_hat,
-            previous: self.previous,
-            solid: self.solid,
-            penalty: self.penalty,
-            mu: self.mu,
+            sc: self,
             r,
             direction,
         }
     }
 
-    /// Eq. problem3's objective of final positions: the penalty of those in `C_new_solid`,
-    /// the squared displacement of the others.
-    fn cost(&self, pos: &[Vector<D>]) -> f64 {
+    /// Eq. problem3's objective of final positions in two parts: the squared displacement of
+    /// the particles outside `C_new_solid`, and the penalty of those in it.
+    pub fn cost_parts(&self, pos: &[Vector<D>]) -> (f64, f64) {
         let ends = pos.iter().zip(self.x_hat);
         let ends = ends.map(|(x, h)| (self.grid.cell_index_of(x), (x - h).norm_squared()));
-        let (displacement, penalty) = super::objective_parts(ends, self.penalty);
-        displacement + penalty
+        super::objective_parts(ends, self.penalty)
     }
 }
 
@@ -788,7 +774,8 @@ pub fn correct_band<const D: usize>(
         ));
     }
     rep.objective = objective(&pos, x_hat);
-    rep.cost = sc.cost(&pos);
+    let (displacement, penalty) = sc.cost_parts(&pos);
+    rep.cost = displacement + penalty;
     BandOutcome {
         pos,
         report: rep,

@@ -337,10 +337,8 @@ fn correct_band<const D: usize>(
     rep.augmentations = out.augmentations;
     rep.fallback = out.fallback;
     rep.band = Some(report);
+    (rep.objective, rep.penalty) = scene.cost_parts(pos);
     let (grid, x_hat) = (scene.grid, scene.x_hat);
-    let ends = pos.iter().zip(x_hat);
-    let ends = ends.map(|(x, h)| (grid.cell_index_of(x), (x - h).norm_squared()));
-    (rep.objective, rep.penalty) = objective_parts(ends, scene.penalty);
     rep.moves = x_hat
         .iter()
         .zip(pos.iter())
