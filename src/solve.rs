@@ -33,7 +33,11 @@ pub fn solve(args: &SolveArgs) -> Result<()> {
             }
             let ms = median(&times).expect("at least one solve");
             match last.expect("at least one solve") {
-                Ok((choice, augmentations)) => {
+                Ok(crate::sim::correct::Solved {
+                    choice,
+                    augmentations,
+                    ..
+                }) => {
                     p.check(&choice)
                         .map_err(anyhow::Error::msg)
                         .with_context(|| format!("{}: {} solver", path.display(), solver.name()))?;

@@ -527,7 +527,9 @@ impl Totals {
                 .map(|(o, t)| o.as_secs_f64() / t.as_secs_f64().max(1e-9))
                 .collect();
             let what = match band {
-                Some(("exact-paths", _)) => "the simplex on exact-paths' second steps",
+                Some((v, _)) if v == BandVariant::ExactPaths.name() => {
+                    "the simplex on exact-paths' second steps"
+                }
                 _ => "the other solver",
             };
             out.push(format!(

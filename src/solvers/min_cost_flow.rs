@@ -494,21 +494,6 @@ impl<'a> Network<'a> {
         }
     }
 
-    /// The least reduced cost of any move of an item from its bin, under `prices`.
-    fn min_reduced_cost(&self, prices: &[f64]) -> f64 {
-        let p = self.p;
-        (0..p.items())
-            .flat_map(|i| {
-                let k = self.choice[i] as usize;
-                p.candidates(i).map(move |k2| (k, k2))
-            })
-            .map(|(k, k2)| {
-                let (a, b) = (p.cand_bin[k] as usize, p.cand_bin[k2] as usize);
-                p.cand_cost[k2] - p.cand_cost[k] - prices[a] + prices[b]
-            })
-            .fold(f64::INFINITY, f64::min)
-    }
-
     fn move_item(&mut self, to_cand: usize, from: u32, to: u32) {
         self.stale[from as usize] = true;
         self.stale[to as usize] = true;
@@ -527,6 +512,18 @@ impl<'a> Network<'a> {
         self.slot[item] = self.bin_items[to as usize].len() as u32;
         self.bin_items[to as usize].push(item as u32);
     }
+}
+
+/// The least reduced cost of any move of an item from its candidate in `choice` to another of
+/// its candidates, under `prices`: non-negative when `prices` certify `choice` optimal.
+fn min_reduced_cost(p: &BoundedAssignment, choice: &[u32], prices: &[f64]) -> f64 {
+    (0..p.items())
+        .flat_map(|i| p.candidates(i).map(move |k2| (choice[i] as usize, k2)))
+        .map(|(k, k2)| {
+            let (a, b) = (p.cand_bin[k] as usize, p.cand_bin[k2] as usize);
+            p.cand_cost[k2] - p.cand_cost[k] - prices[a] + prices[b]
+        })
+        .fold(f64::INFINITY, f64::min)
 }
 
 /// An optimal assignment with prices that prove it optimal.
@@ -558,8 +555,8 @@ pub fn solve_priced(p: &BoundedAssignment) -> Result<Solution, Infeasible> {
 /// Only the bins in conflict are repaired, so a start near the optimum solves quickly.
 pub fn solve_from(p: &BoundedAssignment, start: Solution) -> Result<Solution, Infeasible> {
     assert_eq!(start.prices.len(), p.bins(), "one price per bin");
+    debug_assert!(min_reduced_cost(p, &start.choice, &start.prices) >= -1e-9);
     let mut net = Network::new(p, start.choice);
-    debug_assert!(net.min_reduced_cost(&start.prices) >= -1e-9);
     // The sink's price: every arc bin -> t with room must have a non-negative reduced cost,
     // and so must every arc t -> bin (a bin above its lower bound).
     let bins = 0..p.bins();
@@ -700,9 +697,8 @@ mod tests {
         let p = ring(60, 12);
         let first = solve_priced(&p).unwrap();
         p.check(&first.choice).unwrap();
-        let net = Network::new(&p, first.choice.clone());
         assert!(
-            net.min_reduced_cost(&first.prices) >= -1e-12,
+            min_reduced_cost(&p, &first.choice, &first.prices) >= -1e-12,
             "prices certify the optimum"
         );
         // Every bin keeps its load, but bin 0 gives two items to bins 5 and 6 (room for 3).
@@ -726,8 +722,7 @@ mod tests {
             w > p.objective(&first.choice),
             "the tighter problem costs more"
         );
-        let net = Network::new(&q, warm.choice.clone());
-        assert!(net.min_reduced_cost(&warm.prices) >= -1e-12);
+        assert!(min_reduced_cost(&q, &warm.choice, &warm.prices) >= -1e-12);
     }
 
     #[test]

@@ -21,7 +21,6 @@ use crate::grid::{Cell, Grid, Vector};
 use crate::sim::advect::CELL_MARGIN;
 use crate::sim::markings::{CellKind, DepthLevel, Markings};
 use crate::solvers::lp::{self, SideConstraint};
-use crate::solvers::min_cost_flow;
 use rayon::prelude::*;
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
@@ -29,6 +28,7 @@ use std::time::{Duration, Instant};
 
 use super::exact_paths::SecondStep;
 use super::problem::CorrectionProblem;
+use super::Solved;
 
 /// How the correction keeps the band's count right (sec. band_con, band_con2, push_part).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -193,52 +193,38 @@ impl<const D: usize> BandCorrection<D> {
 /// this many candidates: microlp's branch and bound takes minutes on larger ones.
 pub const ILP_CROSS_CHECK_CANDIDATES: usize = 50_000;
 
-/// The first solve `b*` of eq. problem3 (for `full`, its only solve, with eq. band_con).
-struct FirstSolve {
-    choice: Vec<u32>,
-    /// The flow solver's augmenting paths.
-    augmentations: usize,
-    /// Why the solver failed, if it did: every particle then keeps its previous cell.
-    fallback: Option<String>,
-    /// The flow solver's prices for `choice` (for `exact-paths`, which starts from them).
-    prices: Option<Vec<f64>>,
-}
-
+/// The first solve `b*` of eq. problem3 (for `full`, its only solve, with eq. band_con), and
+/// why it failed if it did: every particle then keeps its previous cell.
 fn first_solve<const D: usize>(
     p: &CorrectionProblem<D>,
     variant: BandVariant,
     alpha: i64,
     solver: super::Solver,
-) -> FirstSolve {
+) -> (Solved, Option<String>) {
     let a = &p.assignment;
-    let first = match (variant, solver) {
-        (BandVariant::Full, _) => solve_full(p, alpha).map(|c| (c, 0, None)),
-        (BandVariant::ExactPaths, super::Solver::Flow) => min_cost_flow::solve_priced(a)
-            .map(|s| (s.choice, s.stats.augmentations, Some(s.prices)))
-            .map_err(|e| e.to_string()),
-        _ => solver.solve(a).map(|(c, aug)| (c, aug, None)),
-    }
-    .and_then(|(c, aug, prices)| a.check(&c).map(|()| (c, aug, prices)));
-    match first {
-        Ok((choice, augmentations, prices)) => FirstSolve {
+    let first = match variant {
+        BandVariant::Full => solve_full(p, alpha).map(|choice| Solved {
             choice,
-            augmentations,
-            fallback: None,
-            prices,
-        },
+            augmentations: 0,
+            prices: None,
+        }),
+        _ => solver.solve(a),
+    }
+    .and_then(|s| a.check(&s.choice).map(|()| s));
+    match first {
+        Ok(s) => (s, None),
         Err(e) => {
             let who = match variant {
                 BandVariant::Full => "band ILP (simplex)",
                 _ => solver.name(),
             };
-            FirstSolve {
+            let stay = Solved {
                 choice: p.stay.clone(),
                 augmentations: 0,
-                fallback: Some(format!(
-                    "{who} solver failed ({e}); particles keep their cells"
-                )),
                 prices: None,
-            }
+            };
+            let why = format!("{who} solver failed ({e}); particles keep their cells");
+            (stay, Some(why))
         }
     }
 }
@@ -708,7 +694,7 @@ pub fn correct_band<const D: usize>(
     // particle may enter.
     let alpha = room_at_or_below_interface(sc.previous, ctx.r, sc.mu, ctx.n_deep).max(0);
     let t0 = Instant::now();
-    let first = first_solve(p, ctx.variant, alpha, solver);
+    let (first, fallback) = first_solve(p, ctx.variant, alpha, solver);
     let solve_time = t0.elapsed();
     let choice = &first.choice;
     let first_cost = p.assignment.objective(choice);
@@ -767,7 +753,7 @@ pub fn correct_band<const D: usize>(
     }
     rep.second_time = t1.elapsed();
     rep.net_in = net_into_interface(grid, sc.x_bar, &pos, sc.previous, ctx.r);
-    if rep.failure.is_none() && first.fallback.is_none() && !(0..=alpha).contains(&rep.net_in) {
+    if rep.failure.is_none() && fallback.is_none() && !(0..=alpha).contains(&rep.net_in) {
         rep.failure = Some(format!(
             "the band constraint 0 <= n_in - n_out = {} <= alpha = {alpha} does not hold",
             rep.net_in
@@ -781,7 +767,7 @@ pub fn correct_band<const D: usize>(
         report: rep,
         solve_time,
         augmentations: first.augmentations,
-        fallback: first.fallback,
+        fallback,
         first_cost,
         second_step,
     }

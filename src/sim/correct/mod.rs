@@ -42,17 +42,42 @@ impl Solver {
         }
     }
 
-    pub(crate) fn solve(
-        self,
-        p: &min_cost_flow::BoundedAssignment,
-    ) -> Result<(Vec<u32>, usize), String> {
+    pub(crate) fn solve(self, p: &min_cost_flow::BoundedAssignment) -> Result<Solved, String> {
         match self {
-            Solver::Flow => min_cost_flow::solve(p)
-                .map(|(c, s)| (c, s.augmentations))
+            Solver::Flow => min_cost_flow::solve_priced(p)
+                .map(|s| Solved {
+                    choice: s.choice,
+                    augmentations: s.stats.augmentations,
+                    prices: Some(s.prices),
+                })
                 .map_err(|e| e.to_string()),
-            Solver::Simplex => lp::solve(p).map(|c| (c, 0)).map_err(|e| e.to_string()),
+            Solver::Simplex => lp::solve(p)
+                .map(|choice| Solved {
+                    choice,
+                    augmentations: 0,
+                    prices: None,
+                })
+                .map_err(|e| e.to_string()),
         }
     }
+}
+
+/// What a solver found: the chosen candidate of every item, the flow solver's augmenting paths
+/// and its prices (the dual certificate that `exact-paths` starts from).
+pub(crate) struct Solved {
+    pub choice: Vec<u32>,
+    pub augmentations: usize,
+    pub prices: Option<Vec<f64>>,
+}
+
+/// `|objective(choice) - reference| / max(1, |reference|)`, or why `choice` breaks `p`.
+fn relative_gap(
+    p: &min_cost_flow::BoundedAssignment,
+    choice: &[u32],
+    reference: f64,
+) -> Result<f64, String> {
+    p.check(choice)?;
+    Ok((p.objective(choice) - reference).abs() / reference.abs().max(1.0))
 }
 
 /// How the correction is set up.
@@ -194,12 +219,12 @@ fn solve<const D: usize>(
     let solved = settings
         .solver
         .solve(&problem.assignment)
-        .and_then(|(choice, aug)| problem.assignment.check(&choice).map(|()| (choice, aug)));
+        .and_then(|s| problem.assignment.check(&s.choice).map(|()| s));
     rep.solver_time = t0.elapsed();
     let choice = match solved {
-        Ok((choice, augmentations)) => {
-            rep.augmentations = augmentations;
-            choice
+        Ok(s) => {
+            rep.augmentations = s.augmentations;
+            s.choice
         }
         Err(e) => {
             rep.fallback = Some(format!(
@@ -223,11 +248,9 @@ fn solve<const D: usize>(
         let t1 = Instant::now();
         let other_result = other.solve(&problem.assignment);
         rep.cross_check_time = Some(t1.elapsed());
-        rep.cross_check = Some(other_result.and_then(|(c, _)| {
-            problem.assignment.check(&c)?;
-            let o = problem.assignment.objective(&c);
-            Ok((o - rep.total()).abs() / rep.total().abs().max(1.0))
-        }));
+        let total = rep.total();
+        rep.cross_check =
+            Some(other_result.and_then(|s| relative_gap(&problem.assignment, &s.choice, total)));
     }
     choice
 }
@@ -325,11 +348,7 @@ fn correct_band<const D: usize>(
             let t0 = Instant::now();
             let simplex = lp::solve(&step.problem).map_err(|e| e.to_string());
             rep.cross_check_time = Some(t0.elapsed());
-            rep.cross_check = Some(simplex.and_then(|c| {
-                step.problem.check(&c)?;
-                let o = step.problem.objective(&c);
-                Ok((o - optimum).abs() / optimum.abs().max(1.0))
-            }));
+            rep.cross_check = Some(simplex.and_then(|c| relative_gap(&step.problem, &c, *optimum)));
         }
     }
     pos.copy_from_slice(&out.pos);
