@@ -268,13 +268,72 @@ impl<const D: usize> MacField<D> {
     /// Multilinear interpolation of the field at `x` (grid units).
     #[inline]
     pub fn interpolate(&self, grid: &Grid<D>, x: &Vector<D>) -> Vector<D> {
-        Vector::<D>::from_fn(|a, _| self.interpolate_component(grid, a, x))
+        let at = FacePoint::new(grid, x);
+        Vector::<D>::from_fn(|a, _| FaceStencil::at(grid, &at, a).apply(&self.comp[a]))
     }
 
     /// Multilinear interpolation of component `a` at `x`.
     #[inline]
     pub fn interpolate_component(&self, grid: &Grid<D>, a: usize, x: &Vector<D>) -> f64 {
         FaceStencil::new(grid, a, x).apply(&self.comp[a])
+    }
+}
+
+/// Where a point lies among the face layers along one axis: the lower face's layer, the upper
+/// face's weight (the lower one has `1 - hi`), and whether an upper face exists.
+#[derive(Clone, Copy, Debug, Default)]
+struct AxisSplit {
+    layer: usize,
+    hi: f64,
+    has_upper: bool,
+}
+
+impl AxisSplit {
+    /// `s` is the point's coordinate in units of the layers, `top` the last layer's index.
+    #[inline]
+    fn new(s: f64, top: usize) -> Self {
+        let s = s.clamp(0.0, top as f64);
+        // `0 <= s < 2^31` (cells per axis are bounded), so truncation is the floor; through
+        // i32, whose conversion is one instruction where usize's takes a dozen.
+        let layer = (s as i32 as usize).min(top.saturating_sub(1));
+        // A single layer keeps weight 1 on it: `s` is clamped to 0 there.
+        Self {
+            layer,
+            hi: s - layer as f64,
+            has_upper: top > 0,
+        }
+    }
+
+    /// Along axis `k` of the grid: faces at integer positions on a component's own axis (one
+    /// more layer than cells), at half-integers on the others.
+    #[inline]
+    fn along<const D: usize>(grid: &Grid<D>, k: usize, xk: f64, own_axis: bool) -> Self {
+        if own_axis {
+            Self::new(xk, grid.dims[k])
+        } else {
+            Self::new(xk - 0.5, grid.dims[k] - 1)
+        }
+    }
+}
+
+/// A point's place among the face layers of every component, computed once per point: along
+/// axis `k`, component `k`'s faces sit at integers and the other components' at half-integers,
+/// so `2 D` splits serve all `D` stencils (instead of `D^2`).
+#[derive(Clone, Copy, Debug)]
+pub struct FacePoint<const D: usize> {
+    /// Per axis `k`: the split for the faces of component `k`, and for the other components.
+    split: [[AxisSplit; 2]; D],
+}
+
+impl<const D: usize> FacePoint<D> {
+    #[inline]
+    pub fn new(grid: &Grid<D>, x: &Vector<D>) -> Self {
+        // A plain loop: `array::from_fn` with a closure is not always inlined here.
+        let mut split = [[AxisSplit::default(); 2]; D];
+        for (k, s) in split.iter_mut().enumerate() {
+            *s = [true, false].map(|own| AxisSplit::along(grid, k, x[k], own));
+        }
+        Self { split }
     }
 }
 
@@ -295,42 +354,34 @@ impl<const D: usize> FaceStencil<D> {
         1 << D
     };
 
-    /// Corner `c` (bit `k` set: the upper face along axis `k`) has the weight
-    /// `prod_k (frac_k or 1 - frac_k)`, multiplied in axis order.
+    /// The stencil of component `axis` at `x`.
     #[inline]
     pub fn new(grid: &Grid<D>, axis: usize, x: &Vector<D>) -> Self {
-        let (fd, strides) = (&grid.face_dims[axis], &grid.face_strides[axis]);
-        let mut base = 0;
-        // Per axis: the weights of the lower and the upper face, and the upper face's offset.
-        let (mut lo, mut hi, mut up) = ([1.0f64; 3], [0.0f64; 3], [0usize; 3]);
+        Self::from_splits(grid, axis, |k| AxisSplit::along(grid, k, x[k], k == axis))
+    }
+
+    /// The stencil of component `axis` at a point located once for all components.
+    #[inline]
+    pub fn at(grid: &Grid<D>, point: &FacePoint<D>, axis: usize) -> Self {
+        Self::from_splits(grid, axis, |k| point.split[k][usize::from(k != axis)])
+    }
+
+    /// Corner `c` (bit `k` set: the upper face along axis `k`) has the weight
+    /// `prod_k (hi_k or 1 - hi_k)`, multiplied in axis order: the corners are built axis by
+    /// axis, each axis doubling the corners found so far.
+    #[inline]
+    fn from_splits(grid: &Grid<D>, axis: usize, split: impl Fn(usize) -> AxisSplit) -> Self {
+        let strides = &grid.face_strides[axis];
+        let (mut idx, mut w) = ([0usize; 8], [1.0f64; 8]);
         for k in 0..D {
-            // Face positions along k: integers on the face axis, half-integers on the others.
-            let s = if k == axis { x[k] } else { x[k] - 0.5 };
-            let top = fd[k] - 1;
-            let s = s.clamp(0.0, top as f64);
-            // `0 <= s < 2^31` (cells per axis are bounded), so truncation is the floor; through
-            // i32, whose conversion is one instruction where usize's takes a dozen.
-            let i = (s as i32 as usize).min(top.saturating_sub(1));
-            base += i * strides[k];
-            // A single layer of faces along k keeps weight 1 on it (and offset 0 above it).
-            if top > 0 {
-                hi[k] = s - i as f64;
-                lo[k] = 1.0 - hi[k];
-                up[k] = strides[k];
+            let s = split(k);
+            let (m, up) = (1 << k, if s.has_upper { strides[k] } else { 0 });
+            for c in 0..m {
+                idx[c] += s.layer * strides[k];
+                idx[c + m] = idx[c] + up;
+                w[c + m] = w[c] * s.hi;
+                w[c] *= 1.0 - s.hi;
             }
-        }
-        let (mut idx, mut w) = ([0usize; 8], [0.0f64; 8]);
-        for c in 0..Self::CORNERS {
-            let (mut i, mut wc) = (base, 1.0);
-            for k in 0..D {
-                if (c >> k) & 1 == 1 {
-                    i += up[k];
-                    wc *= hi[k];
-                } else {
-                    wc *= lo[k];
-                }
-            }
-            (idx[c], w[c]) = (i, wc);
         }
         Self { idx, w }
     }
@@ -494,6 +545,33 @@ mod tests {
                 assert!((total - 1.0).abs() < 1e-15);
             }
         }
+    }
+
+    #[test]
+    fn a_point_located_once_gives_every_component_its_own_stencil() {
+        fn check<const D: usize>(dims: [usize; D], points: &[[f64; D]]) {
+            let g = Grid::new(dims);
+            for x in points.iter().map(|x| Vector::<D>::from(*x)) {
+                let at = FacePoint::new(&g, &x);
+                for a in 0..D {
+                    let (one, all) = (FaceStencil::new(&g, a, &x), FaceStencil::at(&g, &at, a));
+                    let (one, all): (Vec<_>, Vec<_>) =
+                        (one.weights().collect(), all.weights().collect());
+                    assert_eq!(one, all, "axis {a} at {x:?} in {dims:?}");
+                }
+            }
+        }
+        let in_2d = [[0.0, 0.0], [3.999, 2.999], [0.2, 1.7], [-0.3, 9.0]];
+        check([4, 3], &in_2d);
+        check([1, 5], &in_2d);
+        let in_3d = [
+            [0.0, 0.0, 0.0],
+            [3.999, 2.999, 4.999],
+            [0.2, 1.7, 2.5],
+            [3.9, -0.1, 7.5],
+        ];
+        check([4, 3, 5], &in_3d);
+        check([3, 1, 1], &in_3d);
     }
 
     #[test]

@@ -3,7 +3,7 @@
 //! without fluid, and grid-to-particle with a FLIP/PIC blend. The band method's velocity
 //! combination is in [`crate::sim::band`].
 
-use crate::grid::{Cell, FaceStencil, Grid, MacField, Vector};
+use crate::grid::{Cell, FacePoint, FaceStencil, Grid, MacField, Vector};
 use crate::{PAR_GRAIN, PAR_GRAIN_PARTICLES};
 use rayon::prelude::*;
 
@@ -62,8 +62,9 @@ fn splat<const D: usize>(
                 for &p in &order[starts[slab]..starts[slab + 1]] {
                     let (x, v) = (&pos[p], &vel[p]);
                     let m = mass.map_or(1.0, |m| m[p]);
+                    let at = FacePoint::new(grid, x);
                     for (a, (offset, faces)) in win.iter_mut().enumerate() {
-                        for (i, w) in FaceStencil::new(grid, a, x).weights() {
+                        for (i, w) in FaceStencil::at(grid, &at, a).weights() {
                             let face = &mut faces[i - *offset];
                             face[0] += m * w * v[a];
                             face[1] += m * w;
@@ -237,8 +238,9 @@ pub fn grid_to_particles<const D: usize>(
     let vel = vel.par_iter_mut().with_min_len(PAR_GRAIN_PARTICLES);
     vel.zip(pos)
         .map(|(v, x)| {
+            let at = FacePoint::new(grid, x);
             Vector::<D>::from_fn(|a, _| {
-                let st = FaceStencil::new(grid, a, x);
+                let st = FaceStencil::at(grid, &at, a);
                 let (un, uo) = (st.apply(&new.comp[a]), st.apply(&old.comp[a]));
                 v[a] = flip_ratio * (v[a] + un - uo) + (1.0 - flip_ratio) * un;
                 un
