@@ -5,6 +5,7 @@
 use crate::cli::SolveArgs;
 use crate::metrics::median;
 use crate::outln;
+use crate::sim::correct::Solver;
 use crate::solvers::mps;
 use anyhow::{Context, Result};
 use std::time::Instant;
@@ -36,6 +37,7 @@ pub fn solve(args: &SolveArgs) -> Result<()> {
                 Ok(crate::sim::correct::Solved {
                     choice,
                     augmentations,
+                    settled,
                     ..
                 }) => {
                     p.check(&choice)
@@ -46,9 +48,16 @@ pub fn solve(args: &SolveArgs) -> Result<()> {
                         let rel = (objective - o).abs() / o.abs().max(1.0);
                         format!(", {rel:.1e} from the recorded optimum")
                     });
+                    // The flow solver's work, which a loaded machine does not blur.
+                    let work = match solver {
+                        Solver::Flow => {
+                            format!("  {augmentations} augmentations, {settled} nodes settled")
+                        }
+                        Solver::Simplex => String::new(),
+                    };
                     outln!(
-                        "  {:<8} {ms:>10.2} ms (median of {})  objective {objective:.12e}{versus}  \
-                         {augmentations} augmentations",
+                        "  {:<8} {ms:>10.2} ms (median of {})  objective {objective:.12e}{versus}\
+                         {work}",
                         solver.name(),
                         args.repeat
                     );

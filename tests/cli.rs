@@ -416,7 +416,8 @@ fn options_a_method_lacks_are_refused_before_anything_is_written() {
     assert!(String::from_utf8_lossy(&o.stderr).contains("--band"));
 }
 
-/// `cellflip solve FILE --solver flow,simplex` finds the file's recorded optimum with both.
+/// `cellflip solve FILE --solver flow,simplex` finds the file's recorded optimum with both, and
+/// reports the flow solver's work.
 fn solves_to_the_recorded_optimum(file: &std::path::Path) {
     let args = ["solve", file.to_str().unwrap(), "--solver", "flow,simplex"];
     let o = cellflip(&[&args[..], &["--repeat", "1"]].concat());
@@ -433,6 +434,8 @@ fn solves_to_the_recorded_optimum(file: &std::path::Path) {
         .filter_map(|g| g.parse().ok())
         .collect();
     assert!(gaps.len() == 2 && gaps.iter().all(|&g| g <= 1e-9), "{text}");
+    let flow = text.lines().find(|l| l.trim_start().starts_with("flow"));
+    assert!(flow.is_some_and(|l| l.contains(" nodes settled")), "{text}");
 }
 
 #[test]

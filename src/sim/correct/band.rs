@@ -206,6 +206,7 @@ fn first_solve<const D: usize>(
         BandVariant::Full => solve_full(p, alpha).map(|choice| Solved {
             choice,
             augmentations: 0,
+            settled: 0,
             prices: None,
         }),
         _ => solver.solve(a),
@@ -221,6 +222,7 @@ fn first_solve<const D: usize>(
             let stay = Solved {
                 choice: p.stay.clone(),
                 augmentations: 0,
+                settled: 0,
                 prices: None,
             };
             let why = format!("{who} solver failed ({e}); particles keep their cells");

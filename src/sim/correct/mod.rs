@@ -48,6 +48,7 @@ impl Solver {
                 .map(|s| Solved {
                     choice: s.choice,
                     augmentations: s.stats.augmentations,
+                    settled: s.stats.nodes_settled,
                     prices: Some(s.prices),
                 })
                 .map_err(|e| e.to_string()),
@@ -55,6 +56,7 @@ impl Solver {
                 .map(|choice| Solved {
                     choice,
                     augmentations: 0,
+                    settled: 0,
                     prices: None,
                 })
                 .map_err(|e| e.to_string()),
@@ -62,11 +64,13 @@ impl Solver {
     }
 }
 
-/// What a solver found: the chosen candidate of every item, the flow solver's augmenting paths
-/// and its prices (the dual certificate that `exact-paths` starts from).
+/// What a solver found: the chosen candidate of every item, the flow solver's augmenting paths,
+/// the nodes its searches settled (its work, whatever the machine) and its prices (the dual
+/// certificate that `exact-paths` starts from).
 pub(crate) struct Solved {
     pub choice: Vec<u32>,
     pub augmentations: usize,
+    pub settled: usize,
     pub prices: Option<Vec<f64>>,
 }
 
