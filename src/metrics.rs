@@ -3,6 +3,8 @@
 use crate::grid::{Grid, Vector};
 use crate::sim::correct::problem::cell_bounds;
 use crate::sim::markings::{CellKind, Markings};
+use crate::PAR_GRAIN;
+use rayon::prelude::*;
 use std::time::Duration;
 
 /// Total fluid volume `V = sum_c V_c` in cells (paper eq. volume):
@@ -168,27 +170,29 @@ pub fn check_cell_counts<const D: usize>(
     for x in pos {
         count[grid.cell_index_of(x)] += 1;
     }
-    for (c, &n) in count.iter().enumerate() {
-        let prev = previous.count[c];
-        let cell = grid.cell_coords(c);
-        let (lower, upper) = cell_bounds(previous, c, mu, band_r);
-        if n > upper {
-            return Err(InvariantViolation(format!(
-                "cell {cell:?} holds {n} particles after the correction (mu = {mu}, before: {prev})"
-            )));
-        }
-        if n < lower {
-            return Err(InvariantViolation(format!(
-                "inner cell {cell:?} lost particles in the correction: {prev} -> {n}"
-            )));
-        }
-        if solid[c] && n > 0 {
-            return Err(InvariantViolation(format!(
-                "solid cell {cell:?} holds {n} particles"
-            )));
-        }
-    }
-    Ok(())
+    let breaks = |c: usize| {
+        let (n, (lower, upper)) = (count[c], cell_bounds(previous, c, mu, band_r));
+        n > upper || n < lower || (solid[c] && n > 0)
+    };
+    // The first broken cell, whatever the thread count.
+    let Some(c) = (0..count.len())
+        .into_par_iter()
+        .with_min_len(PAR_GRAIN)
+        .find_first(|&c| breaks(c))
+    else {
+        return Ok(());
+    };
+    let (n, prev, cell) = (count[c], previous.count[c], grid.cell_coords(c));
+    let (lower, upper) = cell_bounds(previous, c, mu, band_r);
+    Err(InvariantViolation(if n > upper {
+        format!(
+            "cell {cell:?} holds {n} particles after the correction (mu = {mu}, before: {prev})"
+        )
+    } else if n < lower {
+        format!("inner cell {cell:?} lost particles in the correction: {prev} -> {n}")
+    } else {
+        format!("solid cell {cell:?} holds {n} particles")
+    }))
 }
 
 #[cfg(test)]
@@ -224,6 +228,46 @@ mod tests {
         assert_eq!(m.depth[g.cell_index([0, 0])], -3);
         let v = volume_cells(&m, mu);
         assert!((v - (24.0 - 0.5)).abs() < 1e-12, "{v}");
+    }
+
+    /// One particle per cell of a full tank, then one moved: the check names the first broken
+    /// cell in index order, with the reason, whatever the thread count.
+    fn cell_count_check_names_the_first_broken_cell<const D: usize>() {
+        let g = Grid::new([4; D]);
+        let centers: Vec<_> = (0..g.num_cells())
+            .map(|c| g.center(g.cell_coords(c)))
+            .collect();
+        let solid = vec![false; g.num_cells()];
+        let prev = Markings::compute(&g, &centers, &solid);
+        let check = |pos: &[Vector<D>], solid: &[bool]| {
+            check_cell_counts(&g, pos, &prev, solid, 1, None).map_err(|e| e.0)
+        };
+        assert_eq!(check(&centers, &solid), Ok(()));
+        let (inner, other) = (g.cell_index([1; D]), g.cell_index([2; D]));
+        let mut moved = centers.clone();
+        moved[inner] = centers[other];
+        let e = check(&moved, &solid).unwrap_err();
+        assert!(e.contains(&format!("inner cell {:?} lost", [1; D])), "{e}");
+        let mut moved = centers.clone();
+        moved[other] = centers[inner];
+        let e = check(&moved, &solid).unwrap_err();
+        assert!(
+            e.contains(&format!("cell {:?} holds 2 particles", [1; D])),
+            "{e}"
+        );
+        let mut walls = solid.clone();
+        walls[g.cell_index([3; D])] = true;
+        let e = check(&centers, &walls).unwrap_err();
+        assert!(
+            e.contains(&format!("solid cell {:?} holds 1", [3; D])),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn cell_count_check_names_the_first_broken_cell_2d_and_3d() {
+        cell_count_check_names_the_first_broken_cell::<2>();
+        cell_count_check_names_the_first_broken_cell::<3>();
     }
 
     #[test]
