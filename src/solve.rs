@@ -34,12 +34,7 @@ pub fn solve(args: &SolveArgs) -> Result<()> {
             }
             let ms = median(&times).expect("at least one solve");
             match last.expect("at least one solve") {
-                Ok(crate::sim::correct::Solved {
-                    choice,
-                    augmentations,
-                    settled,
-                    ..
-                }) => {
+                Ok(crate::sim::correct::Solved { choice, work, .. }) => {
                     p.check(&choice)
                         .map_err(anyhow::Error::msg)
                         .with_context(|| format!("{}: {} solver", path.display(), solver.name()))?;
@@ -51,7 +46,10 @@ pub fn solve(args: &SolveArgs) -> Result<()> {
                     // The flow solver's work, which a loaded machine does not blur.
                     let work = match solver {
                         Solver::Flow => {
-                            format!("  {augmentations} augmentations, {settled} nodes settled")
+                            format!(
+                                "  {} augmentations, {} nodes settled",
+                                work.augmentations, work.nodes_settled
+                            )
                         }
                         Solver::Simplex => String::new(),
                     };

@@ -21,6 +21,7 @@ use crate::grid::{Cell, Grid, Vector};
 use crate::sim::advect::CELL_MARGIN;
 use crate::sim::markings::{CellKind, DepthLevel, Markings};
 use crate::solvers::lp::{self, SideConstraint};
+use crate::solvers::min_cost_flow::FlowStats;
 use rayon::prelude::*;
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
@@ -205,8 +206,7 @@ fn first_solve<const D: usize>(
     let first = match variant {
         BandVariant::Full => solve_full(p, alpha).map(|choice| Solved {
             choice,
-            augmentations: 0,
-            settled: 0,
+            work: FlowStats::default(),
             prices: None,
         }),
         _ => solver.solve(a),
@@ -221,8 +221,7 @@ fn first_solve<const D: usize>(
             };
             let stay = Solved {
                 choice: p.stay.clone(),
-                augmentations: 0,
-                settled: 0,
+                work: FlowStats::default(),
                 prices: None,
             };
             let why = format!("{who} solver failed ({e}); particles keep their cells");
@@ -768,7 +767,7 @@ pub fn correct_band<const D: usize>(
         pos,
         report: rep,
         solve_time,
-        augmentations: first.augmentations,
+        augmentations: first.work.augmentations,
         fallback,
         first_cost,
         second_step,

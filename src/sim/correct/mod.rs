@@ -13,7 +13,8 @@ pub mod problem;
 
 use crate::grid::{Grid, Vector};
 use crate::sim::markings::Markings;
-use crate::solvers::{lp, min_cost_flow, mps};
+use crate::solvers::min_cost_flow::{self, FlowStats};
+use crate::solvers::{lp, mps};
 use band::{BandContext, BandCorrection, BandScene, BandVariant, ILP_CROSS_CHECK_CANDIDATES};
 use problem::{BuildError, CorrectionProblem, Directions};
 use rayon::prelude::*;
@@ -47,16 +48,14 @@ impl Solver {
             Solver::Flow => min_cost_flow::solve_priced(p)
                 .map(|s| Solved {
                     choice: s.choice,
-                    augmentations: s.stats.augmentations,
-                    settled: s.stats.nodes_settled,
+                    work: s.stats,
                     prices: Some(s.prices),
                 })
                 .map_err(|e| e.to_string()),
             Solver::Simplex => lp::solve(p)
                 .map(|choice| Solved {
                     choice,
-                    augmentations: 0,
-                    settled: 0,
+                    work: FlowStats::default(),
                     prices: None,
                 })
                 .map_err(|e| e.to_string()),
@@ -64,13 +63,12 @@ impl Solver {
     }
 }
 
-/// What a solver found: the chosen candidate of every item, the flow solver's augmenting paths,
-/// the nodes its searches settled (its work, whatever the machine) and its prices (the dual
-/// certificate that `exact-paths` starts from).
+/// What a solver found: the chosen candidate of every item, the flow solver's work (augmenting
+/// paths and nodes settled; zero for the others) and its prices (the dual certificate that
+/// `exact-paths` starts from).
 pub(crate) struct Solved {
     pub choice: Vec<u32>,
-    pub augmentations: usize,
-    pub settled: usize,
+    pub work: FlowStats,
     pub prices: Option<Vec<f64>>,
 }
 
@@ -227,7 +225,7 @@ fn solve<const D: usize>(
     rep.solver_time = t0.elapsed();
     let choice = match solved {
         Ok(s) => {
-            rep.augmentations = s.augmentations;
+            rep.augmentations = s.work.augmentations;
             s.choice
         }
         Err(e) => {
