@@ -28,7 +28,7 @@ pub fn solve(args: &SolveArgs) -> Result<()> {
             let mut last = None;
             for _ in 0..args.repeat {
                 let t0 = Instant::now();
-                let result = solver.solve(p);
+                let result = solver.solve(p, None);
                 times.push(t0.elapsed().as_secs_f64() * 1e3);
                 last = Some(result);
             }

@@ -307,6 +307,7 @@ fn a_move_into_a_full_interface_is_undone<const D: usize>() {
             Some(ctx),
             None,
             false,
+            &mut Default::default(),
         )
         .unwrap();
         let b = rep.band.unwrap();

@@ -81,6 +81,18 @@ fn agree_on_random_instances<const D: usize>(count: usize, seed: u64) {
             (of - os).abs() <= 1e-9 * os.abs().max(1.0),
             "instance {n} ({D}D, mu {mu}): flow {of} vs simplex {os}"
         );
+        // A warm start from any prices (here random, of either sign and up to a few cells^2,
+        // so that bins start above and below the sink's price) finds the same optimum.
+        let prices: Vec<f64> = (0..a.bins()).map(|_| rng.random_range(-3.0..3.0)).collect();
+        let warm = min_cost_flow::solve_warm(a, &prices)
+            .unwrap_or_else(|e| panic!("instance {n}, warm: {e}"));
+        a.check(&warm.choice)
+            .unwrap_or_else(|e| panic!("instance {n}, warm: {e}"));
+        let ow = a.objective(&warm.choice);
+        assert!(
+            (ow - os).abs() <= 1e-9 * os.abs().max(1.0),
+            "instance {n} ({D}D, mu {mu}): warm flow {ow} vs simplex {os}"
+        );
         constrained += (stats.augmentations > 0) as usize;
     }
     // Most instances must actually exercise the repair, or the test proves little.
@@ -133,6 +145,22 @@ fn collapsing_column<const D: usize>(width: usize, height: usize, mu: u32) {
     let units = stats.augmentations;
     assert!(units >= width.pow(D as u32 - 1), "{stats:?}");
     assert!(stats.nodes_settled > units * height, "{stats:?}");
+    // From the optimum's own prices a warm start finds the optimum again with a fraction of
+    // the work: its start is the optimum but for ties.
+    let cold = min_cost_flow::solve_priced(a).unwrap();
+    let prices: Vec<f64> = cold.prices.iter().map(|p| p - cold.sink_price).collect();
+    let warm = min_cost_flow::solve_warm(a, &prices).unwrap();
+    a.check(&warm.choice).unwrap();
+    let ow = a.objective(&warm.choice);
+    assert!(
+        (ow - os).abs() <= 1e-9 * os.abs().max(1.0),
+        "{D}D column: warm {ow} vs {os}"
+    );
+    assert!(
+        warm.stats.nodes_settled * 4 < stats.nodes_settled,
+        "{D}D column: warm {:?} vs cold {stats:?}",
+        warm.stats
+    );
 }
 
 #[test]
@@ -274,8 +302,19 @@ fn a_failed_solve_is_exported_as_a_fallback_not_an_optimum() {
     let x_bar = full[1..].to_vec();
     let mut pos = x_bar.clone();
     let settings = CorrectionSettings::default();
+    let mut memory = correct::PriceMemory::default();
     let rep = correct::correct(
-        &g, &x_bar, &mut pos, &prev, &solid, 1, &settings, None, None, true,
+        &g,
+        &x_bar,
+        &mut pos,
+        &prev,
+        &solid,
+        1,
+        &settings,
+        None,
+        None,
+        true,
+        &mut memory,
     )
     .unwrap();
     let why = rep.fallback.expect("the solver failed");

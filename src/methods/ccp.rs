@@ -41,6 +41,8 @@ pub struct CcpSim<const D: usize> {
     /// This step's report, filled by the hooks.
     step: CcpReport<D>,
     totals: Totals,
+    /// The last correction's prices, the next one's warm start.
+    prices: correct::PriceMemory,
 }
 
 /// The correction's and the band's panels: counts, objectives, penalties and times apart.
@@ -164,6 +166,7 @@ impl MethodType for Ccp {
             export_lp: s.export_lp.clone(),
             step: CcpReport::default(),
             totals: Totals::default(),
+            prices: Default::default(),
         })
     }
 }
@@ -235,6 +238,7 @@ impl<const D: usize> FluidMethod<D> for CcpSim<D> {
         let mut rep = correct::correct(
             &s.grid, &self.x_bar, pos, &s.markings, solid, mu, &self.correction, ctx, penalty,
             export.is_some(),
+            &mut self.prices,
         )
         .map_err(|e| InvariantViolation(format!("correction problem: {e}")))?;
         metrics::check_cell_counts(&s.grid, pos, &s.markings, solid, mu, ctx.map(|b| b.r))?;

@@ -172,6 +172,11 @@ impl PartialOrd for Entry {
 
 const NONE: u32 = u32::MAX;
 
+/// Prices this close count as equal when a start's sink flows are set: the rounding of the
+/// potential updates, far below any cost difference that matters (costs are squared distances
+/// in cells).
+const PRICE_TIE: f64 = 1e-9;
+
 /// A node's state in the current search, together so that one cache line holds it.
 #[derive(Clone, Copy, Debug, Default)]
 struct Label {
@@ -298,6 +303,27 @@ impl<'a> Network<'a> {
         }
     }
 
+    /// Sets the potentials to `prices` (one per bin) and `sink_price`, and each bin's sink flow
+    /// to what keeps the arcs to and from the sink at non-negative reduced cost: the upper
+    /// bound for a bin priced above the sink, the lower bound for one below it, and its load
+    /// within the bounds for one priced like the sink (within [`PRICE_TIE`]). The repair then
+    /// moves the difference between load and sink flow.
+    fn set_prices(&mut self, prices: &[f64], sink_price: f64) {
+        let p = self.p;
+        for (b, flow) in self.sink_flow.iter_mut().enumerate() {
+            let above = prices[b] - sink_price;
+            *flow = if above > PRICE_TIE {
+                p.upper[b]
+            } else if above < -PRICE_TIE {
+                p.lower[b]
+            } else {
+                self.load[b].clamp(p.lower[b], p.upper[b])
+            };
+        }
+        self.potential[..p.bins()].copy_from_slice(prices);
+        self.potential[p.bins()] = sink_price;
+    }
+
     fn sink(&self) -> u32 {
         self.p.bins() as u32
     }
@@ -385,7 +411,7 @@ impl<'a> Network<'a> {
                 return Err(Infeasible { bin: s as usize });
             };
             let vi = v as usize;
-            if v == t || (v != s && self.load[vi] < self.p.lower[vi]) {
+            if v == t || self.load[vi] < self.sink_flow[vi] {
                 break (d, v);
             }
             // The cheapest item of `v` moving to each other bin.
@@ -393,7 +419,7 @@ impl<'a> Network<'a> {
             for j in 0..self.out_arcs[vi].len() {
                 let OutArc { to, cand, delta } = self.out_arcs[vi][j];
                 let rc = self.reduced_delta(delta, vi, to as usize);
-                let target = to != s && self.load[to as usize] < self.p.lower[to as usize];
+                let target = self.load[to as usize] < self.sink_flow[to as usize];
                 self.touch(to, d + rc, v, cand, target);
             }
             if self.sink_flow[vi] < self.p.upper[vi] {
@@ -535,6 +561,9 @@ pub struct Solution {
     /// a non-negative reduced cost `cost(to) - cost(from) - price(from bin) + price(to bin)`:
     /// the dual certificate of `choice`, and the warm start of [`solve_from`].
     pub prices: Vec<f64>,
+    /// The sink's potential: `prices` minus it are the bins' prices relative to the sink, the
+    /// form [`solve_warm`] starts from.
+    pub sink_price: f64,
     pub stats: FlowStats,
 }
 
@@ -570,8 +599,27 @@ pub fn solve_from(p: &BoundedAssignment, start: Solution) -> Result<Solution, In
     debug_assert!(bins
         .filter(|&b| flow[b] > p.lower[b])
         .all(|b| prices[b] >= t));
-    net.potential[..p.bins()].copy_from_slice(prices);
-    net.potential[p.bins()] = t;
+    net.set_prices(prices, t);
+    repair(net)
+}
+
+/// Solves a bounded assignment problem exactly from `prices` alone (one per bin, relative to
+/// the sink's; e.g. a similar problem's [`Solution::prices`] minus its `sink_price`): every item
+/// starts at its cheapest candidate under the prices, which gives every move a non-negative
+/// reduced cost, and the repair only has to undo what the prices get wrong. Any prices are
+/// valid; good ones leave little to repair.
+pub fn solve_warm(p: &BoundedAssignment, prices: &[f64]) -> Result<Solution, Infeasible> {
+    assert_eq!(prices.len(), p.bins(), "one price per bin");
+    let choice = (0..p.items())
+        .map(|i| {
+            let priced = |k: usize| p.cand_cost[k] + prices[p.cand_bin[k] as usize];
+            p.candidates(i)
+                .min_by(|&a, &b| priced(a).total_cmp(&priced(b)).then(a.cmp(&b)))
+                .expect("every item has a candidate") as u32
+        })
+        .collect();
+    let mut net = Network::new(p, choice);
+    net.set_prices(prices, 0.0);
     repair(net)
 }
 
@@ -591,10 +639,12 @@ fn repair(mut net: Network<'_>) -> Result<Solution, Infeasible> {
             net.pull_deficit(b as u32)?;
         }
     }
+    let sink_price = net.potential[bins];
     net.potential.truncate(bins);
     Ok(Solution {
         choice: net.choice,
         prices: net.potential,
+        sink_price,
         stats: net.stats,
     })
 }

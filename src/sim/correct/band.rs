@@ -208,8 +208,9 @@ fn first_solve<const D: usize>(
             choice,
             work: FlowStats::default(),
             prices: None,
+            sink_price: 0.0,
         }),
-        _ => solver.solve(a),
+        _ => solver.solve(a, None),
     }
     .and_then(|s| a.check(&s.choice).map(|()| s));
     match first {
@@ -223,6 +224,7 @@ fn first_solve<const D: usize>(
                 choice: p.stay.clone(),
                 work: FlowStats::default(),
                 prices: None,
+                sink_price: 0.0,
             };
             let why = format!("{who} solver failed ({e}); particles keep their cells");
             (stay, Some(why))

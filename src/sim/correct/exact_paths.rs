@@ -142,6 +142,7 @@ impl SecondStep {
                 let start = Solution {
                     choice,
                     prices,
+                    sink_price: 0.0,
                     stats: FlowStats::default(),
                 };
                 min_cost_flow::solve_from(q, start)
