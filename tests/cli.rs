@@ -6,7 +6,7 @@ mod common;
 
 use cellflip::scene::{ErrorKind, Overrides, Scene, SceneError};
 use std::collections::BTreeSet;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Output};
 
 fn cellflip(args: &[&str]) -> Output {
@@ -23,11 +23,8 @@ fn cellflip_in(dir: &Path, args: &[&str]) -> Output {
         .expect("the binary runs")
 }
 
-fn scratch_dir(test: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("cellflip-test-{}-{test}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+fn scratch_dir(test: &str) -> common::Scratch {
+    common::Scratch::new("test", test)
 }
 
 const GOOD: &str = r#"

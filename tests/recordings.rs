@@ -10,10 +10,9 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 /// Runs `cellflip run <scene> --steps <steps> <extra>` into a scratch folder and returns the
-/// recording's path.
-fn record(test: &str, scene: &str, steps: &str, extra: &[&str]) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("cellflip-rec-{}-{test}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+/// folder (which goes when dropped) and the recording's path.
+fn record(test: &str, scene: &str, steps: &str, extra: &[&str]) -> (common::Scratch, PathBuf) {
+    let dir = common::Scratch::new("rec", test);
     let out = dir.join(format!("{scene}-{}.rrd", extra.join("")));
     let o = Command::new(env!("CARGO_BIN_EXE_cellflip"))
         .args(["run", scene, "--steps", steps, "-q", "--out"])
@@ -22,7 +21,7 @@ fn record(test: &str, scene: &str, steps: &str, extra: &[&str]) -> PathBuf {
         .output()
         .expect("the binary runs");
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    out
+    (dir, out)
 }
 
 /// Whether query line `q` (`+ path` or `+ path/**`) takes the entity `e`.
@@ -80,7 +79,7 @@ fn every_panel_plots_what_the_run_logs_and_every_metric_has_one_panel() {
         ("drop-3d", "10", &["--res", "12"]),
     ];
     for (scene, steps, extra) in runs {
-        let rrd = record("panels", scene, steps, extra);
+        let (_dir, rrd) = record("panels", scene, steps, extra);
         let views = check_layout(&rrd);
         let names = names(&views);
         let band = extra.contains(&"--band") || scene == "drop-3d";
@@ -103,7 +102,7 @@ fn every_panel_plots_what_the_run_logs_and_every_metric_has_one_panel() {
 #[test]
 fn the_world_view_comes_first_the_side_panels_start_collapsed_and_3d_has_a_slice() {
     for (scene, world_class, slice) in [("dam-2d", "2D", false), ("drop-3d", "3D", true)] {
-        let rrd = record("world", scene, "2", &["--res", "24"]);
+        let (_dir, rrd) = record("world", scene, "2", &["--res", "24"]);
         let (views, panels) = common::blueprint(&rrd);
         let world: Vec<&ReadView> = views.iter().filter(|v| v.name == "world").collect();
         assert_eq!(world.len(), 1, "{views:?}");
@@ -124,7 +123,7 @@ fn the_world_view_comes_first_the_side_panels_start_collapsed_and_3d_has_a_slice
 #[test]
 fn band_levels_have_their_own_view_and_leave_the_world_view_but_not_the_paths() {
     let q = |s: &str| s.to_string();
-    let rrd = record("layers", "dam-2d", "3", &["--band", "paths", "--res", "24"]);
+    let (_dir, rrd) = record("layers", "dam-2d", "3", &["--band", "paths", "--res", "24"]);
     let (views, _) = common::blueprint(&rrd);
     let world = views.iter().find(|v| v.name == "world").unwrap();
     assert!(
@@ -145,7 +144,7 @@ fn band_levels_have_their_own_view_and_leave_the_world_view_but_not_the_paths() 
         "{levels:?}"
     );
     // In 3D both are views of the slice: the slice leaves out the band levels, not the paths.
-    let rrd = record("layers", "drop-3d", "2", &["--res", "12"]);
+    let (_dir, rrd) = record("layers", "drop-3d", "2", &["--res", "12"]);
     let (views, _) = common::blueprint(&rrd);
     let slice = views.iter().find(|v| v.name == "slice").unwrap();
     assert!(
@@ -167,7 +166,7 @@ fn band_levels_have_their_own_view_and_leave_the_world_view_but_not_the_paths() 
 #[test]
 fn every_move_counted_is_drawn_as_one_arrow_in_both_move_styles() {
     for moves in ["arrows", "hops"] {
-        let rrd = record("moves", "dam-2d", "12", &["--moves", moves]);
+        let (_dir, rrd) = record("moves", "dam-2d", "12", &["--moves", moves]);
         let drawn = common::arrows_2d_per_step(&rrd, "world/corrector/moves");
         let counted = common::scalars_per_step(&rrd, "metrics/correction/moved");
         assert_eq!(drawn.len(), 12, "{drawn:?}");
@@ -184,7 +183,7 @@ fn every_move_counted_is_drawn_as_one_arrow_in_both_move_styles() {
 
 #[test]
 fn step_zero_has_the_state_metrics() {
-    let rrd = record("zero", "falling-obstacle-2d", "1", &[]);
+    let (_dir, rrd) = record("zero", "falling-obstacle-2d", "1", &[]);
     for entity in [
         "metrics/volume_percent",
         "metrics/particles",

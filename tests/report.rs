@@ -48,11 +48,12 @@ fn fields(line: &str) -> Vec<String> {
     out
 }
 
-/// Runs the tiny matrix once per test binary and returns its folder.
+/// Runs the tiny matrix once per test binary and returns its folder: one under cargo's target
+/// folder, replaced by every run (the tests share it, so no test can remove it).
 fn tiny_report() -> PathBuf {
     static DIR: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
     DIR.get_or_init(|| {
-        let dir = std::env::temp_dir().join(format!("cellflip-report-{}", std::process::id()));
+        let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("tiny-report");
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
         std::fs::write(dir.join("overflow.toml"), OVERFLOW).unwrap();

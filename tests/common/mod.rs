@@ -11,7 +11,7 @@ use cellflip::scene::{Overrides, Scene};
 use cellflip::sim::correct::band::BandMode;
 use cellflip::sim::{SimConfig, Simulation, StepReport};
 use std::collections::BTreeSet;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 pub fn load(name: &str, o: &Overrides) -> Scene {
     Scene::load(name, o).unwrap_or_else(|e| panic!("{name}: {e:#}"))
@@ -372,4 +372,37 @@ fn per_step<T>(
     }
     out.sort_by_key(|(s, _)| *s);
     out
+}
+
+/// A scratch folder for one test, `<temp>/cellflip-<kind>-<pid>-<test>`: created empty, removed
+/// with everything in it when dropped (also when the test fails), so that test runs leave no
+/// files behind.
+pub struct Scratch(PathBuf);
+
+impl Scratch {
+    pub fn new(kind: &str, test: &str) -> Scratch {
+        let d = std::env::temp_dir().join(format!("cellflip-{kind}-{}-{test}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        Scratch(d)
+    }
+}
+
+impl std::ops::Deref for Scratch {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl AsRef<Path> for Scratch {
+    fn as_ref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
 }
