@@ -7,7 +7,9 @@
 //! the deep's bookkeeping ([`crate::sim::correct::deep`]). The band's geometry (levels,
 //! velocity combination, advection of the grid velocity) is [`crate::sim::band`].
 
-use super::{FluidMethod, Known, MethodInfo, MethodOption, MethodReport, MethodSettings, MethodType};
+use super::{
+    FluidMethod, Known, MethodInfo, MethodOption, MethodReport, MethodSettings, MethodType,
+};
 use crate::grid::{MacField, Vector};
 use crate::metrics::{self, median, InvariantViolation};
 use crate::record::layout::{LayerView, Needs, Panel};
@@ -207,7 +209,8 @@ impl<const D: usize> FluidMethod<D> for CcpSim<D> {
     }
 
     fn particles_to_grid(&mut self, s: &State<D>) -> anyhow::Result<(MacField<D>, Known<D>)> {
-        let (mut u, mut known) = transfer::particles_to_grid(&s.grid, &s.particles.pos, &s.particles.vel);
+        let (mut u, mut known) =
+            transfer::particles_to_grid(&s.grid, &s.particles.pos, &s.particles.vel);
         if let Some(b) = self.band() {
             b.combine_with_grid(&s.grid, &mut u, &mut known, &s.velocity, &s.markings);
         }
@@ -225,7 +228,11 @@ impl<const D: usize> FluidMethod<D> for CcpSim<D> {
         }
     }
 
-    fn correct_positions(&mut self, s: &mut State<D>, penalty: Option<&[f64]>) -> anyhow::Result<()> {
+    fn correct_positions(
+        &mut self,
+        s: &mut State<D>,
+        penalty: Option<&[f64]>,
+    ) -> anyhow::Result<()> {
         let export = self.export_lp.as_ref().filter(|(n, _)| *n == s.steps + 1);
         let mu = s.config.mu();
         let ctx = self.band.map(|(b, variant)| BandContext {
@@ -236,19 +243,29 @@ impl<const D: usize> FluidMethod<D> for CcpSim<D> {
         let solid = &s.solids.solid;
         let pos = &mut s.particles.pos;
         let mut rep = correct::correct(
-            &s.grid, &self.x_bar, pos, &s.markings, solid, mu, &self.correction, ctx, penalty,
+            &s.grid,
+            &self.x_bar,
+            pos,
+            &s.markings,
+            solid,
+            mu,
+            &self.correction,
+            ctx,
+            penalty,
             export.is_some(),
             &mut self.prices,
         )
         .map_err(|e| InvariantViolation(format!("correction problem: {e}")))?;
         metrics::check_cell_counts(&s.grid, pos, &s.markings, solid, mu, ctx.map(|b| b.r))?;
         if let (Some(mps), Some((step, path))) = (rep.mps.take(), export) {
-            std::fs::write(path, mps).with_context(|| format!("cannot write '{}'", path.display()))?;
+            std::fs::write(path, mps)
+                .with_context(|| format!("cannot write '{}'", path.display()))?;
             self.totals.exported = Some((*step, path.clone()));
         }
         if let (Some(mps), Some((_, path))) = (rep.second_mps.take(), export) {
             let second = second_step_path(path);
-            std::fs::write(&second, mps).with_context(|| format!("cannot write '{}'", second.display()))?;
+            std::fs::write(&second, mps)
+                .with_context(|| format!("cannot write '{}'", second.display()))?;
             self.totals.exported_second = Some(second);
         }
         self.step.correction = rep;
@@ -269,7 +286,9 @@ impl<const D: usize> FluidMethod<D> for CcpSim<D> {
     /// With the band: every cell holds at most `mu` after the exchange, and no real particle
     /// is left in the deep. (The correction's own guarantees are checked right after it.)
     fn check_invariants(&self, s: &State<D>) -> Result<(), InvariantViolation> {
-        let Some(band) = self.band() else { return Ok(()) };
+        let Some(band) = self.band() else {
+            return Ok(());
+        };
         let mu = s.config.mu();
         if let Some(c) = (0..s.grid.num_cells()).find(|&c| s.markings.count[c] > mu) {
             return Err(InvariantViolation(format!(
@@ -336,8 +355,14 @@ impl<const D: usize> MethodReport<D> for CcpReport<D> {
             log.scalar("metrics/correction/penalty", c.penalty);
         }
         log.scalar("metrics/correction/moved", c.moves.len() as f64);
-        log.scalar("metrics/correction/overfull_before", c.overfull_before as f64);
-        log.scalar("metrics/correction/solver_ms", c.solver_time.as_secs_f64() * 1e3);
+        log.scalar(
+            "metrics/correction/overfull_before",
+            c.overfull_before as f64,
+        );
+        log.scalar(
+            "metrics/correction/solver_ms",
+            c.solver_time.as_secs_f64() * 1e3,
+        );
         log.scalar("metrics/correction/augmentations", c.augmentations as f64);
         match &c.cross_check {
             Some(Ok(d)) => log.scalar("metrics/correction/cross_check", *d),
@@ -387,11 +412,17 @@ fn record_band_correction<const D: usize>(b: &BandCorrection<D>, log: &mut dyn L
     ] {
         log.scalar(&format!("metrics/band/{name}"), v);
     }
-    log.scalar(&format!("metrics/band/objective/{}", b.variant.name()), b.cost);
+    log.scalar(
+        &format!("metrics/band/objective/{}", b.variant.name()),
+        b.cost,
+    );
     for (v, o) in &b.other_costs {
         match o {
             Ok(o) => log.scalar(&format!("metrics/band/objective/{}", v.name()), *o),
-            Err(e) => log.warn(&format!("band variant {} failed on this step's problem: {e}", v.name())),
+            Err(e) => log.warn(&format!(
+                "band variant {} failed on this step's problem: {e}",
+                v.name()
+            )),
         }
     }
     if let Some(f) = &b.failure {
@@ -505,7 +536,9 @@ impl Totals {
         self.band_failures += b.failure.is_some() as u64;
         self.second_times.push(b.second_time);
         for (v, o) in &b.other_costs {
-            let gap = o.as_ref().map_or(f64::NAN, |o| (o - b.cost) / b.cost.abs().max(1e-12));
+            let gap = o
+                .as_ref()
+                .map_or(f64::NAN, |o| (o - b.cost) / b.cost.abs().max(1e-12));
             match self.band_gaps.iter_mut().find(|(n, _)| *n == v.name()) {
                 Some((_, g)) => g.push(gap),
                 None => self.band_gaps.push((v.name(), vec![gap])),
@@ -513,7 +546,12 @@ impl Totals {
         }
     }
 
-    fn lines(&self, s: &CorrectionSettings, band: Option<(&str, u32)>, n_deep: usize) -> Vec<String> {
+    fn lines(
+        &self,
+        s: &CorrectionSettings,
+        band: Option<(&str, u32)>,
+        n_deep: usize,
+    ) -> Vec<String> {
         let ms = |d: Option<Duration>| d.map_or(0.0, |d| d.as_secs_f64() * 1e3);
         let mut out = vec![format!(
             "correction: {} particles sent to another cell in all; up to {} over-full cells before one correction; {} solver fallbacks; {} solver median {:.2} ms",
@@ -548,10 +586,16 @@ impl Totals {
             out.extend(self.band_lines(variant, r, n_deep));
         }
         if let Some((step, path)) = &self.exported {
-            out.push(format!("wrote the correction problem of step {step} to {}", path.display()));
+            out.push(format!(
+                "wrote the correction problem of step {step} to {}",
+                path.display()
+            ));
         }
         if let Some(path) = &self.exported_second {
-            out.push(format!("wrote its exact-paths second step to {}", path.display()));
+            out.push(format!(
+                "wrote its exact-paths second step to {}",
+                path.display()
+            ));
         }
         out
     }
@@ -588,6 +632,8 @@ impl Totals {
 /// Where `exact-paths` writes its second-step problem: next to the exported problem,
 /// `...-step3.mps` -> `...-step3-second.mps`.
 fn second_step_path(path: &Path) -> PathBuf {
-    let stem = path.file_stem().map_or_else(Default::default, |s| s.to_string_lossy());
+    let stem = path
+        .file_stem()
+        .map_or_else(Default::default, |s| s.to_string_lossy());
     path.with_file_name(format!("{stem}-second.mps"))
 }

@@ -155,7 +155,11 @@ impl MethodType for Idp {
 }
 
 impl<const D: usize> FluidMethod<D> for IdpSim<D> {
-    fn correct_positions(&mut self, s: &mut State<D>, _penalty: Option<&[f64]>) -> anyhow::Result<()> {
+    fn correct_positions(
+        &mut self,
+        s: &mut State<D>,
+        _penalty: Option<&[f64]>,
+    ) -> anyhow::Result<()> {
         let settings = PcgSettings {
             tolerance: s.config.pressure_tolerance,
             ..Default::default()
@@ -268,16 +272,27 @@ pub fn project_density<const D: usize, R: Rng>(
     let (phi, pcg) = system.solve(rhs, inp.pcg);
     rep.pcg = pcg;
     let d = displacement(grid, inp.solid, &phi, push);
-    rep.class = (0..s.len()).map(|c| ErrorClass::of(fluid[c], in_solve[c], s[c]) as u8).collect();
-    rep.error = (0..s.len()).map(|c| if in_solve[c] { s[c] } else { 0.0 }).collect();
+    rep.class = (0..s.len())
+        .map(|c| ErrorClass::of(fluid[c], in_solve[c], s[c]) as u8)
+        .collect();
+    rep.error = (0..s.len())
+        .map(|c| if in_solve[c] { s[c] } else { 0.0 })
+        .collect();
     move_particles(grid, inp.particle_free, &d, pos, &mut rep);
     rep
 }
 
 /// The push-out field of step 2 and how many particles it pushes.
-fn push_field<const D: usize>(grid: &Grid<D>, solid: &[bool], pos: &[Vector<D>]) -> (MacField<D>, usize) {
+fn push_field<const D: usize>(
+    grid: &Grid<D>,
+    solid: &[bool],
+    pos: &[Vector<D>],
+) -> (MacField<D>, usize) {
     let mut push = MacField::zeros(grid);
-    let inside: Vec<&Vector<D>> = pos.iter().filter(|x| solid[grid.cell_index_of(x)]).collect();
+    let inside: Vec<&Vector<D>> = pos
+        .iter()
+        .filter(|x| solid[grid.cell_index_of(x)])
+        .collect();
     if inside.is_empty() {
         return (push, 0);
     }
@@ -318,9 +333,15 @@ pub fn push_out<const D: usize>(
     let mut best: Option<(usize, f64)> = None;
     for axis in 0..D {
         for dir in [-1, 1] {
-            let Some(nb) = grid.neighbor(c, axis, dir) else { continue };
+            let Some(nb) = grid.neighbor(c, axis, dir) else {
+                continue;
+            };
             let nb = grid.cell_index(nb);
-            let to_face = if dir > 0 { c[axis] as f64 + 1.0 - x[axis] } else { x[axis] - c[axis] as f64 };
+            let to_face = if dir > 0 {
+                c[axis] as f64 + 1.0 - x[axis]
+            } else {
+                x[axis] - c[axis] as f64
+            };
             let step = if !solid[nb] {
                 to_face + PUSH_MARGIN
             } else if depth[nb] < here && here != u32::MAX {
@@ -412,7 +433,9 @@ fn density_error<const D: usize>(
             for o in &offsets {
                 let nb: Option<usize> = (0..D).try_fold(0, |idx, k| {
                     let i = cc[k] as i64 + o[k];
-                    (0..grid.dims[k] as i64).contains(&i).then(|| idx + i as usize * grid.cell_stride(k))
+                    (0..grid.dims[k] as i64)
+                        .contains(&i)
+                        .then(|| idx + i as usize * grid.cell_stride(k))
                 });
                 if nb.is_none_or(|n| inp.solid[n]) {
                     s -= share.of(o);
@@ -439,7 +462,8 @@ fn tent_density<const D: usize>(grid: &Grid<D>, pos: &[Vector<D>]) -> Vec<f64> {
         .par_chunks(chunk)
         .map(|xs| {
             let mut acc = vec![0.0; grid.num_cells()];
-            xs.iter().for_each(|x| for_each_cell_weight(grid, x, |i, w| acc[i] += w));
+            xs.iter()
+                .for_each(|x| for_each_cell_weight(grid, x, |i, w| acc[i] += w));
             acc
         })
         .collect();
@@ -451,7 +475,12 @@ fn tent_density<const D: usize>(grid: &Grid<D>, pos: &[Vector<D>]) -> Vec<f64> {
 
 /// Step 4: fluid cells with an empty face neighbour and `s > 0` leave the solve (`s = 0`).
 /// Returns which cells are in the solve. Tested against the fluid cells before the rule.
-fn surface_rule<const D: usize>(grid: &Grid<D>, solid: &[bool], fluid: &[bool], s: &mut [f64]) -> Vec<bool> {
+fn surface_rule<const D: usize>(
+    grid: &Grid<D>,
+    solid: &[bool],
+    fluid: &[bool],
+    s: &mut [f64],
+) -> Vec<bool> {
     let in_solve: Vec<bool> = (0..fluid.len())
         .map(|c| {
             let cc = grid.cell_coords(c);
@@ -475,7 +504,12 @@ fn surface_rule<const D: usize>(grid: &Grid<D>, solid: &[bool], fluid: &[bool], 
 }
 
 /// Step 7's face field: `phi_R - phi_L` between two non-solid cells, the push-out elsewhere.
-fn displacement<const D: usize>(grid: &Grid<D>, solid: &[bool], phi: &[f64], mut push: MacField<D>) -> MacField<D> {
+fn displacement<const D: usize>(
+    grid: &Grid<D>,
+    solid: &[bool],
+    phi: &[f64],
+    mut push: MacField<D>,
+) -> MacField<D> {
     for a in 0..D {
         push.comp[a].par_iter_mut().enumerate().for_each(|(i, v)| {
             let f = grid.face_coords(a, i);
@@ -516,7 +550,10 @@ fn move_particles<const D: usize>(
             (before, *x)
         })
         .collect();
-    rep.max_displacement = moved.iter().map(|(a, b)| (b - a).norm()).fold(0.0, f64::max);
+    rep.max_displacement = moved
+        .iter()
+        .map(|(a, b)| (b - a).norm())
+        .fold(0.0, f64::max);
     rep.moves = moved.into_iter().step_by(every).collect();
 }
 
@@ -531,7 +568,9 @@ fn resample_degenerate<const D: usize, R: Rng>(
     fluid: &[bool],
     r: Resample<'_, D, R>,
 ) -> usize {
-    let degenerate: Vec<usize> = (0..s.len()).filter(|&c| fluid[c] && s[c] < RESAMPLE_BELOW).collect();
+    let degenerate: Vec<usize> = (0..s.len())
+        .filter(|&c| fluid[c] && s[c] < RESAMPLE_BELOW)
+        .collect();
     if degenerate.is_empty() {
         return 0;
     }
@@ -549,7 +588,9 @@ fn resample_degenerate<const D: usize, R: Rng>(
         sub.shuffle(r.rng);
         let cell = grid.cell_coords(c);
         for (&j, &code) in members[c].iter().zip(&sub) {
-            let x = Vector::<D>::from_fn(|k, _| cell[k] as f64 + ((code / q.pow(k as u32)) % q) as f64 / q as f64 + 0.5 / q as f64);
+            let x = Vector::<D>::from_fn(|k, _| {
+                cell[k] as f64 + ((code / q.pow(k as u32)) % q) as f64 / q as f64 + 0.5 / q as f64
+            });
             pos[j] = x;
             vel[j] = r.velocity.interpolate(grid, &x);
         }
@@ -597,7 +638,11 @@ impl ErrorClass {
     fn table() -> [(u16, &'static str, [u8; 4]); 7] {
         [
             (0, "not fluid", [0, 0, 0, 0]),
-            (1, "surface, under-dense (left the solve)", [60, 180, 75, 110]),
+            (
+                1,
+                "surface, under-dense (left the solve)",
+                [60, 180, 75, 110],
+            ),
             (2, "over-dense, clamped (s <= -0.5)", [200, 20, 20, 200]),
             (3, "over-dense (-0.5 < s < -0.05)", [240, 120, 100, 160]),
             (4, "at rest (|s| <= 0.05)", [128, 128, 128, 40]),
@@ -617,7 +662,10 @@ impl<const D: usize> MethodReport<D> for IdpReport<D> {
         log.scalar("metrics/idp/pushed", self.pushed as f64);
         log.scalar("metrics/idp/resampled", self.resampled as f64);
         if !self.pcg.converged {
-            log.warn(&format!("idp: the second solve did not converge ({:?})", self.pcg));
+            log.warn(&format!(
+                "idp: the second solve did not converge ({:?})",
+                self.pcg
+            ));
         }
         if full {
             let class = |c: usize| self.class[c];

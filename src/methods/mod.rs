@@ -35,12 +35,17 @@ use std::any::Any;
 use std::fmt::Debug;
 use std::path::PathBuf;
 
-/// Registers the methods: declares each module and makes [`MethodKind`], the closed list of
-/// names that scene files (`simulation.method`) and the command line (`--method`) accept.
+pub mod ccp;
+pub mod flip;
+pub mod idp;
+pub mod nbflip;
+pub mod powerpic;
+
+/// Registers the methods (each module declared above, where `cargo fmt` sees it): makes
+/// [`MethodKind`], the closed list of names that scene files (`simulation.method`) and the
+/// command line (`--method`) accept.
 macro_rules! methods {
     ($($module:ident :: $ty:ident),* $(,)?) => {
-        $(pub mod $module;)*
-
         /// The fluid methods a scene can run.
         #[derive(
             Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize,

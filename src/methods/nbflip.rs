@@ -26,10 +26,12 @@
 //! the only difference to flip; MantaFlow's scene uses a ghost-fluid surface, RK4 for the
 //! particles and MacCormack for the grid velocity.
 
-use super::{FluidMethod, Known, MethodInfo, MethodOption, MethodReport, MethodSettings, MethodType};
+use super::{
+    FluidMethod, Known, MethodInfo, MethodOption, MethodReport, MethodSettings, MethodType,
+};
 use crate::grid::{Grid, MacField, Vector};
-use crate::particles::Particles;
 use crate::metrics::{median, InvariantViolation};
+use crate::particles::Particles;
 use crate::record::layout::{LayerView, Needs, Panel};
 use crate::record::{depth_level_classes, Layer, Log};
 use crate::sim::band::{combine_velocities, counts_with_full_deep, Band};
@@ -131,7 +133,12 @@ impl<const D: usize> NbflipSim<D> {
     }
 
     /// Resampling against the current level set.
-    fn resampling<'a>(&'a self, grid: &'a Grid<D>, solid: &'a [bool], mu: u32) -> Resampling<'a, D> {
+    fn resampling<'a>(
+        &'a self,
+        grid: &'a Grid<D>,
+        solid: &'a [bool],
+        mu: u32,
+    ) -> Resampling<'a, D> {
         Resampling {
             grid,
             phi: &self.phi,
@@ -171,7 +178,8 @@ pub fn combine<const D: usize>(
     grid_u: &MacField<D>,
 ) {
     combine_velocities(u, known, grid_u, |a, i, weighted| {
-        g.face_cells(a, i).any(|c| m.is_fluid(c)) && (!weighted || phi.at_face(g, a, i) < -(r - 1.0))
+        g.face_cells(a, i).any(|c| m.is_fluid(c))
+            && (!weighted || phi.at_face(g, a, i) < -(r - 1.0))
     });
 }
 
@@ -202,8 +210,17 @@ impl<const D: usize> FluidMethod<D> for NbflipSim<D> {
 
     /// Step 1: particle velocities to the grid, combined with the grid's ([`combine`]).
     fn particles_to_grid(&mut self, s: &State<D>) -> anyhow::Result<(MacField<D>, Known<D>)> {
-        let (mut u, mut known) = transfer::particles_to_grid(&s.grid, &s.particles.pos, &s.particles.vel);
-        combine(&s.grid, &s.markings, &self.phi, self.r(), &mut u, &mut known, &s.velocity);
+        let (mut u, mut known) =
+            transfer::particles_to_grid(&s.grid, &s.particles.pos, &s.particles.vel);
+        combine(
+            &s.grid,
+            &s.markings,
+            &self.phi,
+            self.r(),
+            &mut u,
+            &mut known,
+            &s.velocity,
+        );
         Ok((u, known))
     }
 
@@ -222,7 +239,11 @@ impl<const D: usize> FluidMethod<D> for NbflipSim<D> {
         self.not_held += rep.deleted() as isize - rep.seeded as isize;
         self.first_seed = s.particles.len() - rep.seeded;
         self.step.add(&rep);
-        Some((0..s.grid.num_cells()).map(|c| self.phi.phi[c] < 0.0).collect())
+        Some(
+            (0..s.grid.num_cells())
+                .map(|c| self.phi.phi[c] < 0.0)
+                .collect(),
+        )
     }
 
     /// What resampling guarantees: every particle it kept lies inside the liquid and at most
@@ -243,8 +264,14 @@ impl<const D: usize> FluidMethod<D> for NbflipSim<D> {
         }
         let resampling = self.resampling(g, &s.solids.solid, s.config.mu());
         let seedable = |c: usize| resampling.seedable(c);
-        if let Some(x) = pos[self.first_seed..].iter().find(|x| !seedable(g.cell_index_of(x))) {
-            return Err(InvariantViolation(format!("a particle was seeded at {:?}, outside the band", x.as_slice())));
+        if let Some(x) = pos[self.first_seed..]
+            .iter()
+            .find(|x| !seedable(g.cell_index_of(x)))
+        {
+            return Err(InvariantViolation(format!(
+                "a particle was seeded at {:?}, outside the band",
+                x.as_slice()
+            )));
         }
         let mu = s.config.mu();
         match (0..g.num_cells()).find(|&c| seedable(c) && s.markings.count[c] < mu) {
@@ -262,7 +289,10 @@ impl<const D: usize> FluidMethod<D> for NbflipSim<D> {
         rep.particles = s.particles.len();
         rep.band_r = self.band.r;
         rep.phi = self.phi.clone();
-        self.totals.push(NbflipReport { phi: LevelSet::default(), ..rep.clone() });
+        self.totals.push(NbflipReport {
+            phi: LevelSet::default(),
+            ..rep.clone()
+        });
         Box::new(rep)
     }
 
@@ -282,10 +312,9 @@ impl<const D: usize> FluidMethod<D> for NbflipSim<D> {
     }
 
     fn summary(&self) -> Vec<String> {
-        let (lo, hi) = self
-            .totals
-            .iter()
-            .fold((usize::MAX, 0), |(lo, hi), r| (lo.min(r.particles), hi.max(r.particles)));
+        let (lo, hi) = self.totals.iter().fold((usize::MAX, 0), |(lo, hi), r| {
+            (lo.min(r.particles), hi.max(r.particles))
+        });
         let sum = |f: fn(&NbflipReport) -> usize| self.totals.iter().map(f).sum::<usize>();
         let seeded: Vec<usize> = self.totals.iter().map(|r| r.seeded).collect();
         vec![format!(

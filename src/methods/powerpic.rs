@@ -203,7 +203,9 @@ impl<const D: usize> PowerPicSim<D> {
         let cell_volume = tg.h.powi(D as i32);
         let solid = &s.solids.solid;
         tg.capacity.par_iter_mut().enumerate().for_each(|(j, v)| {
-            let c = s.grid.cell_index_of(&(tg.grid.center(tg.grid.cell_coords(j)) * tg.h));
+            let c = s
+                .grid
+                .cell_index_of(&(tg.grid.center(tg.grid.cell_coords(j)) * tg.h));
             *v = if solid[c] { 0.0 } else { cell_volume };
         });
     }
@@ -219,7 +221,9 @@ impl<const D: usize> PowerPicSim<D> {
     }
 
     fn plan(&self) -> &Transport<D> {
-        self.plan.as_ref().expect("the plan is made in particles_to_grid")
+        self.plan
+            .as_ref()
+            .expect("the plan is made in particles_to_grid")
     }
 
     /// Empty volume of the transport cells of the liquid's cells.
@@ -282,7 +286,12 @@ impl<const D: usize> FluidMethod<D> for PowerPicSim<D> {
         self.fill = fill;
         self.plan = Some(plan);
         self.air_volume = self.air_in_liquid(s);
-        Ok(transfer::weighted_to_grid(&s.grid, &centres, &velocities, &masses))
+        Ok(transfer::weighted_to_grid(
+            &s.grid,
+            &centres,
+            &velocities,
+            &masses,
+        ))
     }
 
     /// Step 4: velocities from the kernels (FLIP/PIC blend), positions to their barycentres.
