@@ -610,17 +610,21 @@ pub fn solve_from(p: &BoundedAssignment, start: Solution) -> Result<Solution, In
 /// valid; good ones leave little to repair.
 pub fn solve_warm(p: &BoundedAssignment, prices: &[f64]) -> Result<Solution, Infeasible> {
     assert_eq!(prices.len(), p.bins(), "one price per bin");
-    let choice = (0..p.items())
+    let mut net = Network::new(p, priced_choice(p, prices));
+    net.set_prices(prices, 0.0);
+    repair(net)
+}
+
+/// Every item's cheapest candidate under bin `prices` (cost plus price; ties go to the first).
+fn priced_choice(p: &BoundedAssignment, prices: &[f64]) -> Vec<u32> {
+    (0..p.items())
         .map(|i| {
             let priced = |k: usize| p.cand_cost[k] + prices[p.cand_bin[k] as usize];
             p.candidates(i)
                 .min_by(|&a, &b| priced(a).total_cmp(&priced(b)).then(a.cmp(&b)))
                 .expect("every item has a candidate") as u32
         })
-        .collect();
-    let mut net = Network::new(p, choice);
-    net.set_prices(prices, 0.0);
-    repair(net)
+        .collect()
 }
 
 /// Successive shortest paths: sends every bin's excess away, then fills every bin's deficit.
