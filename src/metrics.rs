@@ -99,16 +99,9 @@ impl StageTimes {
 }
 
 /// A broken invariant: a bug, reported with what and where.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("invariant broken: {0}")]
 pub struct InvariantViolation(pub String);
-
-impl std::error::Error for InvariantViolation {}
-
-impl std::fmt::Display for InvariantViolation {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "invariant broken: {}", self.0)
-    }
-}
 
 /// Checks the invariants every method keeps, in O(particles): the particle count equals
 /// `expected_count`, every position and velocity is finite and inside the domain, and no

@@ -29,21 +29,15 @@ pub enum ErrorKind {
 }
 
 /// A scene that cannot run: which file, which key, what kind of problem and why.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("{file}: key '{key}': {reason}")]
 pub struct SceneError {
-    pub source: String,
+    /// The scene file (or built-in scene) it came from.
+    pub file: String,
     pub key: String,
     pub kind: ErrorKind,
     pub reason: String,
 }
-
-impl std::fmt::Display for SceneError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{}: key '{}': {}", self.source, self.key, self.reason)
-    }
-}
-
-impl std::error::Error for SceneError {}
 
 /// A TOML error as a [`SceneError`] naming the key it points at (the table headers above it
 /// and the key on its line).
@@ -54,7 +48,7 @@ pub(super) fn toml_error(source: &str, text: &str, e: &toml::de::Error) -> Scene
         .filter(|k| !k.is_empty())
         .unwrap_or_else(|| "(file)".into());
     SceneError {
-        source: source.into(),
+        file: source.into(),
         key,
         kind: ErrorKind::Syntax,
         reason: e.to_string().trim_end().into(),
@@ -120,7 +114,7 @@ struct Checker<'a> {
 impl Checker<'_> {
     fn err<T>(&self, key: &str, kind: ErrorKind, reason: String) -> Checked<T> {
         Err(SceneError {
-            source: self.source.into(),
+            file: self.source.into(),
             key: key.into(),
             kind,
             reason,
@@ -286,7 +280,7 @@ pub(super) fn check(source: &str, file: SceneFile) -> Checked<Scene> {
     let dim = file.dim;
     if dim != 2 && dim != 3 {
         return Err(SceneError {
-            source: source.into(),
+            file: source.into(),
             key: "dim".into(),
             kind: ErrorKind::Range,
             reason: format!("must be 2 or 3, got {dim}"),

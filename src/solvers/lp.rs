@@ -15,29 +15,15 @@ use microlp::{ComparisonOp, OptimizationDirection, Problem};
 pub const TIME_LIMIT: std::time::Duration = std::time::Duration::from_secs(120);
 
 /// Why the simplex gave no assignment.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum LpError {
+    #[error("simplex failed: {0}")]
     Solver(String),
     /// An item's variables are not one 1 and zeros (within 1e-6): the relaxation was not
     /// integral, against prop. LPrelax.
-    NotIntegral {
-        item: usize,
-        values: Vec<f64>,
-    },
+    #[error("LP solution not integral at item {item}: {values:?}")]
+    NotIntegral { item: usize, values: Vec<f64> },
 }
-
-impl std::fmt::Display for LpError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            LpError::Solver(e) => write!(f, "simplex failed: {e}"),
-            LpError::NotIntegral { item, values } => {
-                write!(f, "LP solution not integral at item {item}: {values:?}")
-            }
-        }
-    }
-}
-
-impl std::error::Error for LpError {}
 
 /// A linear constraint `min <= sum coef * b_k <= max` over candidate variables `b_k`.
 #[derive(Clone, Debug, PartialEq)]

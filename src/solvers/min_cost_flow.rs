@@ -132,22 +132,11 @@ pub struct FlowStats {
 }
 
 /// The problem has no feasible assignment: a search from `bin` found no way to repair it.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("no feasible assignment: bin {bin} cannot be repaired")]
 pub struct Infeasible {
     pub bin: usize,
 }
-
-impl std::fmt::Display for Infeasible {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(
-            f,
-            "no feasible assignment: bin {} cannot be repaired",
-            self.bin
-        )
-    }
-}
-
-impl std::error::Error for Infeasible {}
 
 /// Heap entry ordered by smallest distance, then smallest node.
 #[derive(Clone, Copy, Debug, PartialEq)]

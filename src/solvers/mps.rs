@@ -67,19 +67,12 @@ pub fn write(p: &BoundedAssignment, name: &str, comment: &[String]) -> String {
 }
 
 /// A line of an MPS file that [`read`] cannot take, with its 1-based number.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("line {line}: {reason}")]
 pub struct MpsError {
     pub line: usize,
     pub reason: String,
 }
-
-impl std::fmt::Display for MpsError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "line {}: {}", self.line, self.reason)
-    }
-}
-
-impl std::error::Error for MpsError {}
 
 /// A problem read back by [`read`], with the objective its file records, if any.
 #[derive(Clone, Debug, PartialEq)]

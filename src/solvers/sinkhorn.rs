@@ -89,40 +89,24 @@ impl<const D: usize> TransportGrid<D> {
 }
 
 /// Why no plan was found.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum SinkhornError {
     /// A point has no cell with capacity within the kernel's reach.
+    #[error(
+        "point {point} has no free transport cell within the kernel's reach \
+         (epsilon too small for the transport grid, or the point is in a solid)"
+    )]
     KernelVanishes { point: usize },
     /// The points' volume exceeds the capacity of all cells.
+    #[error(
+        "the particles' volume {volume:.6} exceeds the free volume {capacity:.6} of the \
+         transport grid"
+    )]
     Overfull { volume: f64, capacity: f64 },
     /// A scaling became infinite or NaN.
+    #[error("the scalings left the finite range at iteration {iteration}")]
     Diverged { iteration: u32 },
 }
-
-impl std::fmt::Display for SinkhornError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            SinkhornError::KernelVanishes { point } => write!(
-                f,
-                "point {point} has no free transport cell within the kernel's reach \
-                 (epsilon too small for the transport grid, or the point is in a solid)"
-            ),
-            SinkhornError::Overfull { volume, capacity } => write!(
-                f,
-                "the particles' volume {volume:.6} exceeds the free volume {capacity:.6} of \
-                 the transport grid"
-            ),
-            SinkhornError::Diverged { iteration } => {
-                write!(
-                    f,
-                    "the scalings left the finite range at iteration {iteration}"
-                )
-            }
-        }
-    }
-}
-
-impl std::error::Error for SinkhornError {}
 
 /// A running log-sum-exp: `log sum exp(v)` over the values added, with the largest shifted out.
 #[derive(Clone, Copy, Debug)]

@@ -112,16 +112,11 @@ impl<const D: usize> CorrectionProblem<D> {
 }
 
 /// A problem that cannot be built: a bug upstream, reported with the particle.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("particle {particle}: {reason}")]
 pub struct BuildError {
     pub particle: usize,
     pub reason: String,
-}
-
-impl std::fmt::Display for BuildError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "particle {}: {}", self.particle, self.reason)
-    }
 }
 
 /// A particle's home cell (of `x_bar`) and which moves keep it in the domain and out of
