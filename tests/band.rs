@@ -80,6 +80,18 @@ fn run_band_counted<const D: usize>(
                 .is_none(),
             "{at}"
         );
+        if band == BandMode::ExactPaths {
+            // The second step's cell changes as paths: n_move chains from a source to a sink,
+            // then cycles, each step to a neighbouring cell.
+            let chains = b.paths.iter().filter(|p| p.cells.first() != p.cells.last());
+            assert_eq!(chains.count(), b.n_move, "{at}");
+            for p in &b.paths {
+                assert!(
+                    p.cells.windows(2).all(|w| (w[1] - w[0]).amax() == 1.0),
+                    "{at}: {p:?}"
+                );
+            }
+        }
         if cross_check {
             let cost = |v: BandVariant| match v == b.variant {
                 true => Some(b.cost),
@@ -319,12 +331,11 @@ fn a_move_into_a_full_interface_is_undone<const D: usize>() {
         if variant != BandVariant::Full {
             assert_eq!((b.n_in, b.n_out, b.s_in, b.n_move), (1, 0, -1, 1), "{at}");
         }
-        if variant == BandVariant::ExactPaths {
-            // From b* with the first solve's prices: one augmenting path per particle.
+        if [BandVariant::Paths, BandVariant::ExactPaths].contains(&variant) {
+            // Alg. find's one path; exact-paths from b* with the first solve's prices: one
+            // augmenting path per particle, drawn as its one chain of cell changes.
             assert_eq!(b.paths_applied, 1, "{at}");
-        }
-        if variant == BandVariant::Paths {
-            assert_eq!(b.paths_applied, 1, "{at}");
+            assert_eq!(b.paths.len(), 1, "{at}: {:?}", b.paths);
             let p = &b.paths[0];
             // From the interface to a cell above it, through neighbouring cell centres.
             assert_eq!(p.cells.first().unwrap()[1], 2.5, "{at}");

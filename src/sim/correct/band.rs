@@ -153,7 +153,8 @@ pub struct BandCorrection<const D: usize> {
     /// Set when the variant could not meet the band constraint (a finding: the paper says it
     /// always can).
     pub failure: Option<String>,
-    /// The paths applied (`paths`).
+    /// The paths applied (`paths`), or the cell changes of the second step as paths
+    /// (`exact-paths`, [`super::exact_paths::paths_of`]).
     pub paths: Vec<BandPath<D>>,
     /// With cross-checking: the final `cost` of every other variant on the same problem (the
     /// integer programs only on small problems, see [`ILP_CROSS_CHECK_CANDIDATES`]).
@@ -747,6 +748,7 @@ pub fn correct_band<const D: usize>(
             match solved {
                 Ok((s, c, stats)) => {
                     pos = positions(grid, p, &c, x_hat);
+                    rep.paths = super::exact_paths::paths_of(grid, p, choice, &c);
                     rep.paths_applied = stats.augmentations;
                     second_step = Some((s, p.assignment.objective(&c)));
                 }
