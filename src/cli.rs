@@ -140,7 +140,8 @@ pub struct RunArgs {
     #[arg(long)]
     pub cross_check: bool,
     /// Write the correction problem of step N as free-format MPS next to the recording (in
-    /// recordings/ with --no-record), as <scene>-<method>-<cells>[-band-<band>]-step<N>.mps.
+    /// recordings/ with --no-record), as
+    /// <scene>-<method>[-band-<band>-r<R>]-<cells>-ppc<ppc>-seed<seed>-step<N>.mps.
     #[arg(long, value_name = "N")]
     pub export_lp: Option<u64>,
     /// Where to write the recording [default: recordings/<scene>.rrd].

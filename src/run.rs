@@ -7,7 +7,6 @@ use crate::methods::MethodOption;
 use crate::record::{Drawing, Recorder};
 use crate::runner::{Limit, Runner};
 use crate::scene::{Overrides, Scene};
-use crate::sim::correct::band::BandMode;
 use crate::sim::Simulation;
 use anyhow::{anyhow, bail, Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -300,20 +299,10 @@ fn check_export_written(export: Option<u64>, steps: u64) -> Result<()> {
 
 /// Where `--export-lp` writes step `step`'s problem: beside the recording, or without one in
 /// `recordings/` (created here, so that a missing folder fails before the run, not at step
-/// `step`). The name says what tells runs of a scene apart: method, cells per axis and band,
-/// e.g. `dam-3d-ccp-50x50x50-band-paths-step3.mps`.
+/// `step`). The name says what tells runs of a scene apart ([`Scene::run_tags`]), e.g.
+/// `dam-3d-ccp-band-paths-r6-50x50x50-ppc8-seed1-step3.mps`.
 fn mps_path(scene: &Scene, out: Option<&Path>, step: u64) -> Result<PathBuf> {
-    let cells: Vec<String> = scene.dims.iter().map(usize::to_string).collect();
-    let mut name = format!(
-        "{}-{}-{}",
-        scene.name(),
-        scene.method.kind.name(),
-        cells.join("x")
-    );
-    if scene.method.band != BandMode::None {
-        name += &format!("-band-{}", scene.method.band.name());
-    }
-    name += &format!("-step{step}.mps");
+    let name = format!("{}-step{step}.mps", scene.run_tags().join("-"));
     match out {
         Some(p) => Ok(p.with_file_name(name)),
         None => {

@@ -369,7 +369,7 @@ fn recordings_log_exactly_the_documented_entities() {
         missing.is_empty(),
         "in the README but never logged: {missing:?}"
     );
-    let mps = std::fs::read_to_string(dir.join("dam-2d-ccp-50x50-step3.mps")).unwrap();
+    let mps = std::fs::read_to_string(dir.join("dam-2d-ccp-50x50-ppc4-seed1-step3.mps")).unwrap();
     assert!(
         mps.starts_with("* optimal objective ")
             && mps.contains("\nROWS\n")
@@ -444,7 +444,7 @@ fn exact_paths_exports_its_second_step_with_its_optimum() {
     let o = cellflip_in(&dir, &[&args[..], &more[..]].concat());
     let text = String::from_utf8_lossy(&o.stdout);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let name = "dam-2d-ccp-50x50-band-exact-paths-step40-second.mps";
+    let name = "dam-2d-ccp-band-exact-paths-r6-50x50-ppc4-seed1-step40-second.mps";
     assert!(text.contains(name), "the summary names the file: {text}");
     let file = dir.join("recordings").join(name);
     let mps = std::fs::read_to_string(&file).unwrap();
@@ -469,7 +469,8 @@ fn exported_problems_are_named_after_the_run_beside_the_recording_or_in_recordin
     ];
     let o = cellflip(&[&args[..], &["--out", out.to_str().unwrap()]].concat());
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let mps = std::fs::read_to_string(dir.join("dam-3d-ccp-12x12x12-band-paths-step2.mps"));
+    let mps =
+        std::fs::read_to_string(dir.join("dam-3d-ccp-band-paths-r6-12x12x12-ppc8-seed1-step2.mps"));
     assert!(mps.unwrap().contains("\nROWS\n"));
     // Without a recording, in recordings/ of the working folder, which need not exist yet.
     let args = [
@@ -484,7 +485,7 @@ fn exported_problems_are_named_after_the_run_beside_the_recording_or_in_recordin
     ];
     let o = cellflip_in(&dir, &[&args[..], &["--no-record", "-q"]].concat());
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let file = dir.join("recordings/dam-2d-ccp-24x24-step1.mps");
+    let file = dir.join("recordings/dam-2d-ccp-24x24-ppc4-seed1-step1.mps");
     let mps = std::fs::read_to_string(&file);
     assert!(mps.unwrap().starts_with("* optimal objective "));
     // `cellflip solve` reads it back and finds the recorded optimum with both solvers.

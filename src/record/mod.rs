@@ -442,15 +442,10 @@ fn log_new_solid<const D: usize>(
     );
 }
 
-/// The recording's name in the viewer: scene, method (with its band), cells and seed, e.g.
-/// `dam-3d ccp band-paths 50x50x50 seed 1`, so that runs opened side by side differ.
+/// The recording's name in the viewer, [`Scene::run_tags`] (e.g. `dam-3d ccp band-paths r6
+/// 50x50x50 ppc8 seed1`), so that runs opened side by side differ.
 pub fn recording_name(scene: &Scene) -> String {
-    let mut name = format!("{} {}", scene.name(), scene.method.kind.name());
-    if scene.method.band != BandMode::None {
-        name += &format!(" band-{}", scene.method.band.name());
-    }
-    let cells: Vec<String> = scene.dims.iter().map(usize::to_string).collect();
-    name + &format!(" {} seed {}", cells.join("x"), scene.file.simulation.seed)
+    scene.run_tags().join(" ")
 }
 
 /// The run's settings as recording properties (`__properties/run`), shown with the

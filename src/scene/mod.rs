@@ -348,6 +348,22 @@ impl Scene {
         self.file.dim
     }
 
+    /// What tells runs of this scene apart, in order: scene, method, band and its `R` (with a
+    /// band), cells per axis, particles per cell and seed, e.g. `dam-3d ccp band-paths r6
+    /// 50x50x50 ppc8 seed1`. Names recordings and exported problems.
+    pub fn run_tags(&self) -> Vec<String> {
+        let mut tags = vec![self.name().to_string(), self.method.kind.name().to_string()];
+        if self.method.band != BandMode::None {
+            tags.push(format!("band-{}", self.method.band.name()));
+            tags.push(format!("r{}", self.method.band_r));
+        }
+        let cells: Vec<String> = self.dims.iter().map(usize::to_string).collect();
+        tags.push(cells.join("x"));
+        tags.push(format!("ppc{}", self.file.simulation.ppc));
+        tags.push(format!("seed{}", self.file.simulation.seed));
+        tags
+    }
+
     pub fn duration_secs(&self) -> f64 {
         self.file.simulation.duration
     }
