@@ -77,7 +77,7 @@ impl Solver {
 /// What a solver found: the chosen candidate of every item, the flow solver's work (augmenting
 /// paths and nodes settled; zero for the others) and its prices (the dual certificate that
 /// `exact-paths` starts from).
-pub struct Solved {
+pub(crate) struct Solved {
     pub choice: Vec<u32>,
     pub work: FlowStats,
     pub prices: Option<Vec<f64>>,
@@ -100,7 +100,8 @@ pub struct PriceMemory {
 /// settled nodes, all steps summed; `cellflip run dam-3d --method ccp --band none`): at 50^3
 /// over 20 steps 3.99 M cold, 3.14 M at scale 1, 3.03 M at 0.5, 3.39 M at 0.25; at 100^3 over
 /// 12 steps 28.3 M cold, 17.3 M at 0.5 (solver time 10.3 s -> 7.4 s), 16.4 M at 0.7 and
-/// 19.5 M at 0.35, both slower than 0.5 (9.5 s and 7.5 s: more augmenting paths).
+/// 19.5 M at 0.35, both slower than 0.5 (9.5 s and 7.5 s: more augmenting paths). It can lose
+/// while the column starts to fall: at 140^3 10-17% more at steps 3-5, 25-45% less at 6-10.
 pub const WARM_PRICE_SCALE: f64 = 0.5;
 
 impl PriceMemory {
