@@ -108,13 +108,13 @@ impl PriceMemory {
     /// The warm prices of the bins `bin_cell` (0, the sink's price, for a cell that had none),
     /// or `None` before the first solve and after one without prices.
     fn prices_of(&self, bin_cell: &[usize]) -> Option<Vec<f64>> {
-        let price = |&c: &usize| WARM_PRICE_SCALE * self.cell_price[c];
+        let price = |&c: &usize| WARM_PRICE_SCALE * self.cell_price.get(c).copied().unwrap_or(0.0);
         (!self.cell_price.is_empty()).then(|| bin_cell.iter().map(price).collect())
     }
 
-    /// Remembers the prices of `solved` (a problem with bins `bin_cell` on a grid of `cells`
-    /// cells), or forgets them all when it has none (the simplex, or a failed solve).
-    fn remember(&mut self, cells: usize, bin_cell: &[usize], solved: Option<&Solved>) {
+    /// Remembers the prices of `solved` (a problem with bins `bin_cell`), or forgets them all
+    /// when it has none (the simplex, or a failed solve).
+    fn remember(&mut self, bin_cell: &[usize], solved: Option<&Solved>) {
         self.cell_price.clear();
         if let Some(Solved {
             prices: Some(prices),
@@ -122,6 +122,7 @@ impl PriceMemory {
             ..
         }) = solved
         {
+            let cells = bin_cell.iter().max().map_or(0, |&c| c + 1);
             self.cell_price.resize(cells, 0.0);
             for (&c, &p) in bin_cell.iter().zip(prices) {
                 self.cell_price[c] = p - sink_price;
@@ -250,13 +251,7 @@ pub fn correct<const D: usize>(
             }
         }
         None => {
-            let choice = solve(
-                &problem,
-                settings,
-                penalty,
-                &mut rep,
-                (memory, grid.num_cells()),
-            );
+            let choice = solve(&problem, settings, penalty, &mut rep, memory);
             if want_mps {
                 let cost = problem.assignment.objective(&choice);
                 let comment = objective_comment(cost, settings.solver, rep.fallback.as_deref());
@@ -280,7 +275,7 @@ fn solve<const D: usize>(
     settings: &CorrectionSettings,
     penalty: Option<&[f64]>,
     rep: &mut CorrectionReport<D>,
-    (memory, cells): (&mut PriceMemory, usize),
+    memory: &mut PriceMemory,
 ) -> Vec<u32> {
     let t0 = Instant::now();
     let warm = memory.prices_of(&problem.bin_cell);
@@ -290,7 +285,7 @@ fn solve<const D: usize>(
         .solve(&problem.assignment, warm.as_deref())
         .and_then(|s| problem.assignment.check(&s.choice).map(|()| s));
     rep.solver_time = t0.elapsed();
-    memory.remember(cells, &problem.bin_cell, solved.as_ref().ok());
+    memory.remember(&problem.bin_cell, solved.as_ref().ok());
     let choice = match solved {
         Ok(s) => {
             rep.augmentations = s.work.augmentations;
