@@ -23,6 +23,8 @@ pub struct Grid<const D: usize> {
     cell_strides: [usize; D],
     face_dims: [[usize; D]; D],
     face_strides: [[usize; D]; D],
+    /// Per axis `k`: the face layers of component `k` (`[k][0]`) and of the others (`[k][1]`).
+    layers: [[LayerRange; 2]; D],
 }
 
 fn strides<const D: usize>(dims: &[usize; D]) -> [usize; D] {
@@ -46,6 +48,7 @@ impl<const D: usize> Grid<D> {
             cell_strides: strides(&dims),
             face_strides: std::array::from_fn(|a| strides(&face_dims[a])),
             face_dims,
+            layers: dims.map(|n| [LayerRange::new(n, 0.0), LayerRange::new(n - 1, 0.5)]),
         }
     }
 
@@ -279,6 +282,30 @@ impl<const D: usize> MacField<D> {
     }
 }
 
+/// The face layers of one component along one axis, in the form locating a point needs (set up
+/// once in [`Grid::new`], so that locating a point converts no grid sizes): faces at
+/// `offset + i` for `i = 0..=top`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct LayerRange {
+    offset: f64,
+    /// `top` as a coordinate: points beyond it are clamped onto the last layer.
+    top: f64,
+    /// The last layer that can be a stencil's lower one (`top - 1`, or 0 for a single layer).
+    last_lower: i32,
+    has_upper: bool,
+}
+
+impl LayerRange {
+    fn new(top: usize, offset: f64) -> Self {
+        Self {
+            offset,
+            top: top as f64,
+            last_lower: i32::try_from(top.saturating_sub(1)).expect("grid axis too long"),
+            has_upper: top > 0,
+        }
+    }
+}
+
 /// Where a point lies among the face layers along one axis: the lower face's layer, the upper
 /// face's weight (the lower one has `1 - hi`), and whether an upper face exists.
 #[derive(Clone, Copy, Debug, Default)]
@@ -289,18 +316,16 @@ struct AxisSplit {
 }
 
 impl AxisSplit {
-    /// `s` is the point's coordinate in units of the layers, `top` the last layer's index.
+    /// Coordinate `xk` among the layers of `range`, clamped onto the outermost ones.
     #[inline]
-    fn new(s: f64, top: usize) -> Self {
-        let s = s.clamp(0.0, top as f64);
-        // `0 <= s < 2^31` (cells per axis are bounded), so truncation is the floor; through
-        // i32, whose conversion is one instruction where usize's takes a dozen.
-        let layer = (s as i32 as usize).min(top.saturating_sub(1));
-        // A single layer keeps weight 1 on it: `s` is clamped to 0 there.
+    fn new(xk: f64, range: &LayerRange) -> Self {
+        let s = (xk - range.offset).max(0.0).min(range.top);
+        // `0 <= s`, so truncation is the floor. A single layer keeps weight 1 on it (`s` = 0).
+        let layer = (s as i32).min(range.last_lower);
         Self {
-            layer,
-            hi: s - layer as f64,
-            has_upper: top > 0,
+            layer: layer as usize,
+            hi: s - f64::from(layer),
+            has_upper: range.has_upper,
         }
     }
 
@@ -308,11 +333,7 @@ impl AxisSplit {
     /// more layer than cells), at half-integers on the others.
     #[inline]
     fn along<const D: usize>(grid: &Grid<D>, k: usize, xk: f64, own_axis: bool) -> Self {
-        if own_axis {
-            Self::new(xk, grid.dims[k])
-        } else {
-            Self::new(xk - 0.5, grid.dims[k] - 1)
-        }
+        Self::new(xk, &grid.layers[k][usize::from(!own_axis)])
     }
 }
 
@@ -394,9 +415,16 @@ impl<const D: usize> FaceStencil<D> {
     /// `sum_c w_c values[face_c]`, in corner order.
     #[inline]
     pub fn apply(&self, values: &[f64]) -> f64 {
+        // Every corner adds non-negative strides to the first, so the last corner's face is the
+        // largest: one bound check covers all `2^D` reads.
+        assert!(
+            self.idx[Self::CORNERS - 1] < values.len(),
+            "stencil outside the field"
+        );
         let mut v = 0.0;
         for c in 0..Self::CORNERS {
-            v += self.w[c] * values[self.idx[c]];
+            // SAFETY: `idx[c] <= idx[CORNERS - 1] < values.len()`, checked above.
+            v += self.w[c] * unsafe { values.get_unchecked(self.idx[c]) };
         }
         v
     }
@@ -544,6 +572,36 @@ mod tests {
                 let total: f64 = st.weights().map(|(_, w)| w).sum();
                 assert!((total - 1.0).abs() < 1e-15);
             }
+        }
+    }
+
+    #[test]
+    fn points_beyond_the_faces_use_the_outermost_ones() {
+        fn check<const D: usize>(dims: [usize; D], x: [f64; D]) {
+            let g = Grid::new(dims);
+            for a in 0..D {
+                // Component `a`'s faces span [0, n] on its own axis, [1/2, n - 1/2] on the others.
+                let inside = Vector::<D>::from_fn(|k, _| {
+                    let n = dims[k] as f64;
+                    let (lo, hi) = if k == a { (0.0, n) } else { (0.5, n - 0.5) };
+                    x[k].clamp(lo, hi)
+                });
+                let out = FaceStencil::new(&g, a, &Vector::from(x));
+                let want = FaceStencil::new(&g, a, &inside)
+                    .weights()
+                    .collect::<Vec<_>>();
+                assert_eq!(out.weights().collect::<Vec<_>>(), want, "axis {a} at {x:?}");
+            }
+        }
+        check([4, 3], [-2.0, 7.5]);
+        check([4, 3], [9.0, -0.2]);
+        check([4, 3, 5], [-1.0, 3.4, 100.0]);
+        check([4, 1, 5], [4.5, 0.7, -3.0]);
+        // A lost particle (NaN) reads faces inside the field, never past its end.
+        let g = Grid::new([4, 3, 5]);
+        for a in 0..3 {
+            let st = FaceStencil::new(&g, a, &Vector::<3>::repeat(f64::NAN));
+            assert!(st.weights().all(|(i, _)| i < g.num_faces(a)));
         }
     }
 
