@@ -135,7 +135,8 @@ pub struct BandCorrection<const D: usize> {
     pub s_out: i64,
     /// Particles that had to be moved into (`s_out < 0`) or out of (`s_in < 0`) `C_<=-R`.
     pub n_move: usize,
-    /// `paths`: paths applied, paths found by all calls of alg. find, and those calls.
+    /// `paths`: paths applied, paths found by all calls of alg. find (each call stops once it
+    /// has as many as are still needed), and those calls.
     /// `exact-paths`: the flow solver's augmenting paths (each moves one particle across).
     pub paths_applied: usize,
     pub paths_found: usize,
@@ -495,7 +496,8 @@ impl<const D: usize> PathPusher<'_, D> {
                 fill[c as usize] += 1;
             }
             let gamma = |c: usize| &members[start[c]..start[c + 1]];
-            let (found, parent) = self.find(pos, &cell_of, &gamma, allow_wanted);
+            let want = n_move - out.applied;
+            let (found, parent) = self.find(pos, &cell_of, &gamma, allow_wanted, want);
             out.find_calls += 1;
             out.found += found.len();
             if found.is_empty() {
@@ -505,7 +507,7 @@ impl<const D: usize> PathPusher<'_, D> {
                 allow_wanted = true;
                 continue;
             }
-            for path in found.into_iter().take(n_move - out.applied) {
+            for path in found {
                 out.paths
                     .push(self.update(&parent, &path, pos, &mut cell_of));
                 out.applied += 1;
@@ -518,6 +520,11 @@ impl<const D: usize> PathPusher<'_, D> {
     /// each ending at the first sink with room that its search reaches. Returns the paths in
     /// the order found and `J`, each cell's edge (particle) to its parent.
     ///
+    /// The search stops once `want` paths are found: alg. update applies the paths in the order
+    /// found, only as many as are still needed, and a path's cells and edges are final when its
+    /// sink is reached (a visited cell is never revisited), so the paths that would be found
+    /// later could not change the ones applied.
+    ///
     /// One deviation from the listing: a node extends its path from its own cost rather than
     /// from `sigma[c]`, which a cheaper node of an already finished root may have lowered.
     fn find<'g>(
@@ -526,6 +533,7 @@ impl<const D: usize> PathPusher<'_, D> {
         cell_of: &[u32],
         gamma: &impl Fn(usize) -> &'g [u32],
         allow_wanted: bool,
+        want: usize,
     ) -> (Vec<FoundPath>, Vec<u32>) {
         let grid = self.sc.grid;
         let n = grid.num_cells();
@@ -563,6 +571,9 @@ impl<const D: usize> PathPusher<'_, D> {
                     sink: a.cell,
                     cost: a.cost,
                 });
+                if paths.len() == want {
+                    break;
+                }
                 continue;
             }
             let cc = grid.cell_coords(c);
