@@ -477,7 +477,12 @@ impl<const D: usize> PathPusher<'_, D> {
     pub fn push(&self, pos: &mut [Vector<D>], n_move: usize) -> PathOutcome<D> {
         let grid = self.sc.grid;
         let n = grid.num_cells();
-        let mut cell_of: Vec<u32> = pos.iter().map(|x| grid.cell_index_of(x) as u32).collect();
+        let cells = |xs: &[Vector<D>]| -> Vec<u32> {
+            xs.iter().map(|x| grid.cell_index_of(x) as u32).collect()
+        };
+        let mut cell_of = cells(pos);
+        // Each particle's previous cell, which alg. edge reads for every move it considers.
+        let home = cells(self.sc.x_bar);
         let mut out = PathOutcome::default();
         let mut allow_wanted = self.sc.penalty.is_none();
         while out.applied < n_move {
@@ -497,7 +502,7 @@ impl<const D: usize> PathPusher<'_, D> {
             }
             let gamma = |c: usize| &members[start[c]..start[c + 1]];
             let want = n_move - out.applied;
-            let (found, parent) = self.find(pos, &cell_of, &gamma, allow_wanted, want);
+            let (found, parent) = self.find(pos, &cell_of, &home, &gamma, allow_wanted, want);
             out.find_calls += 1;
             out.found += found.len();
             if found.is_empty() {
@@ -531,6 +536,7 @@ impl<const D: usize> PathPusher<'_, D> {
         &self,
         pos: &[Vector<D>],
         cell_of: &[u32],
+        home: &[u32],
         gamma: &impl Fn(usize) -> &'g [u32],
         allow_wanted: bool,
         want: usize,
@@ -590,7 +596,7 @@ impl<const D: usize> PathPusher<'_, D> {
                     // previous cell is c or c2.
                     let mut best: Option<(f64, u32)> = None;
                     for &j in gamma(c) {
-                        let home = grid.cell_index_of(&self.sc.x_bar[j as usize]);
+                        let home = home[j as usize] as usize;
                         if home != c && home != c2 {
                             continue;
                         }
