@@ -20,6 +20,8 @@ pub type Cell<const D: usize> = [usize; D];
 pub struct Grid<const D: usize> {
     /// Cells per axis.
     pub dims: [usize; D],
+    /// `dims` as coordinates (the domain is `[0, extent)`), converted once.
+    extent: [f64; D],
     cell_strides: [usize; D],
     face_dims: [[usize; D]; D],
     face_strides: [[usize; D]; D],
@@ -45,6 +47,7 @@ impl<const D: usize> Grid<D> {
         });
         Self {
             dims,
+            extent: dims.map(|n| n as f64),
             cell_strides: strides(&dims),
             face_strides: std::array::from_fn(|a| strides(&face_dims[a])),
             face_dims,
@@ -142,14 +145,21 @@ impl<const D: usize> Grid<D> {
 
     /// Whether `x` lies inside the domain `[0, dims)`.
     pub fn contains(&self, x: &Vector<D>) -> bool {
-        (0..D).all(|k| x[k] >= 0.0 && x[k] < self.dims[k] as f64)
+        (0..D).all(|k| x[k] >= 0.0 && x[k] < self.extent[k])
     }
 
     /// The cell containing `x`, or `None` outside the domain (or for a non-finite point).
     pub fn cell_of(&self, x: &Vector<D>) -> Option<Cell<D>> {
-        // Inside the domain `x_k >= 0`, so truncation is the floor.
-        self.contains(x)
-            .then(|| std::array::from_fn(|k| (x[k] as usize).min(self.dims[k] - 1)))
+        if !self.contains(x) {
+            return None;
+        }
+        // Inside the domain `0 <= x_k < dims_k < 2^31`, so truncation is the floor; through
+        // i32, whose conversion is one instruction (usize's checks the sign first).
+        let mut c = [0; D];
+        for k in 0..D {
+            c[k] = x[k] as i32 as usize;
+        }
+        Some(c)
     }
 
     /// The linear index of the cell containing `x`; panics outside the domain (a bug).
@@ -573,6 +583,37 @@ mod tests {
                 assert!((total - 1.0).abs() < 1e-15);
             }
         }
+    }
+
+    #[test]
+    fn cell_of_floors_inside_and_refuses_outside_the_domain() {
+        let below = |n: f64| n - n * f64::EPSILON;
+        let g = Grid::new([4, 3]);
+        assert_eq!(g.cell_of(&Vector::<2>::new(0.0, 0.0)), Some([0, 0]));
+        assert_eq!(g.cell_of(&Vector::<2>::new(1.0, 2.5)), Some([1, 2]));
+        assert_eq!(
+            g.cell_of(&Vector::<2>::new(below(4.0), below(3.0))),
+            Some([3, 2])
+        );
+        for x in [
+            [-1e-300, 1.0],
+            [4.0, 1.0],
+            [1.0, 3.0],
+            [f64::NAN, 1.0],
+            [1.0, f64::INFINITY],
+        ] {
+            assert_eq!(g.cell_of(&Vector::<2>::from(x)), None, "{x:?}");
+        }
+        let g = Grid::new([5, 1, 7]);
+        assert_eq!(
+            g.cell_of(&Vector::<3>::new(4.5, 0.999, 6.0)),
+            Some([4, 0, 6])
+        );
+        assert_eq!(
+            g.cell_index_of(&Vector::<3>::new(4.5, 0.999, 6.0)),
+            4 + 5 * 6
+        );
+        assert_eq!(g.cell_of(&Vector::<3>::new(4.5, -0.0, 7.0)), None);
     }
 
     #[test]
