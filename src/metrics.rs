@@ -167,12 +167,13 @@ pub fn check_cell_counts<const D: usize>(
         let (n, (lower, upper)) = (count[c], cell_bounds(previous, c, mu, band_r));
         n > upper || n < lower || (solid[c] && n > 0)
     };
-    // The first broken cell, whatever the thread count.
-    let Some(c) = (0..count.len())
+    // The first broken cell, whatever the thread count: blocks in parallel, each searched by a
+    // plain loop (rayon's per-item `find_first` cost several times the reads).
+    let n = count.len();
+    let r = (0..n.div_ceil(PAR_GRAIN))
         .into_par_iter()
-        .with_min_len(PAR_GRAIN)
-        .find_first(|&c| breaks(c))
-    else {
+        .find_map_first(|b| (b * PAR_GRAIN..n.min((b + 1) * PAR_GRAIN)).find(|&c| breaks(c)));
+    let Some(c) = r else {
         return Ok(());
     };
     let (n, prev, cell) = (count[c], previous.count[c], grid.cell_coords(c));
