@@ -119,19 +119,40 @@ pub struct BuildError {
     pub reason: String,
 }
 
-/// A particle's home cell (of `x_bar`) and which moves keep it in the domain and out of
-/// solids: bit `i` for offset `i`.
+/// A particle's home cell (of `x_bar`), its index, and which moves keep it in the domain and
+/// out of solids: bit `i` for offset `i`.
 #[derive(Clone, Copy)]
 struct Moves<const D: usize> {
     home: Cell<D>,
+    index: usize,
     allowed: u32,
+}
+
+/// The moves' cell offsets, as coordinates and as steps of the cell index (valid for moves
+/// that stay in the grid), computed once per problem.
+struct MoveOffsets<const D: usize> {
+    coords: Vec<[i64; D]>,
+    steps: Vec<isize>,
+}
+
+impl<const D: usize> MoveOffsets<D> {
+    fn new(grid: &Grid<D>, directions: Directions) -> Self {
+        let coords = directions.offsets::<D>();
+        let step = |o: &[i64; D]| -> isize {
+            (0..D)
+                .map(|k| o[k] as isize * grid.cell_stride(k) as isize)
+                .sum()
+        };
+        let steps = coords.iter().map(step).collect();
+        Self { coords, steps }
+    }
 }
 
 /// Checks particle `j`'s positions and finds its allowed moves; the stay move must be one.
 fn particle_moves<const D: usize>(
     grid: &Grid<D>,
     solid: &[bool],
-    offsets: &[[i64; D]],
+    offsets: &MoveOffsets<D>,
     j: usize,
     (xb, xh): (&Vector<D>, &Vector<D>),
 ) -> Result<Moves<D>, BuildError> {
@@ -155,18 +176,24 @@ fn particle_moves<const D: usize>(
             "advected position {at:?} is outside the domain"
         )));
     }
+    let index = grid.cell_index(home);
+    // Away from the domain's walls every move stays in the grid.
+    let inner = (0..D).all(|k| home[k] >= 1 && home[k] + 1 < grid.dims[k]);
     let mut allowed = 0;
-    for (i, o) in offsets.iter().enumerate() {
-        if let Some(c) = offset_cell(grid, home, o) {
-            if !solid[grid.cell_index(c)] {
-                allowed |= 1 << i;
-            }
+    for (i, (o, &step)) in offsets.coords.iter().zip(&offsets.steps).enumerate() {
+        let stays = inner || offset_cell(grid, home, o).is_some();
+        if stays && !solid[index.wrapping_add_signed(step)] {
+            allowed |= 1 << i;
         }
     }
     if allowed & 1 == 0 {
         return Err(err(format!("its previous cell {home:?} is solid")));
     }
-    Ok(Moves { home, allowed })
+    Ok(Moves {
+        home,
+        index,
+        allowed,
+    })
 }
 
 fn offset_cell<const D: usize>(grid: &Grid<D>, c: Cell<D>, o: &[i64; D]) -> Option<Cell<D>> {
@@ -181,17 +208,16 @@ fn offset_cell<const D: usize>(grid: &Grid<D>, c: Cell<D>, o: &[i64; D]) -> Opti
     Some(out)
 }
 
-/// The allowed moves of `m`, in order: each offset with the cell it leads to.
+/// The allowed moves of `m`, in order: each offset with the index of the cell it leads to.
 fn allowed<'a, const D: usize>(
-    grid: &'a Grid<D>,
     m: &Moves<D>,
-    offsets: &'a [[i64; D]],
-) -> impl Iterator<Item = (&'a [i64; D], Cell<D>)> {
-    let (bits, home) = (m.allowed, m.home);
-    offsets.iter().enumerate().filter_map(move |(i, o)| {
-        let c = (bits >> i & 1 == 1).then(|| offset_cell(grid, home, o));
-        c.map(|c| (o, c.expect("allowed moves stay in the grid")))
-    })
+    offsets: &'a MoveOffsets<D>,
+) -> impl Iterator<Item = (&'a [i64; D], usize)> {
+    let (bits, index) = (m.allowed, m.index);
+    let moves = offsets.coords.iter().zip(&offsets.steps).enumerate();
+    moves
+        .filter(move |(i, _)| bits >> i & 1 == 1)
+        .map(move |(_, (o, &step))| (o, index.wrapping_add_signed(step)))
 }
 
 /// Items per parallel task when packing candidates.
@@ -230,13 +256,14 @@ pub fn build<const D: usize>(
     band_r: Option<u32>,
     penalty: Option<&[f64]>,
 ) -> Result<CorrectionProblem<D>, BuildError> {
-    let offsets = directions.offsets::<D>();
+    let offsets = MoveOffsets::new(grid, directions);
     // A particle with no allowed move is one in error; the first is reported.
     let moves: Vec<Moves<D>> = (x_bar.par_iter().zip(x_hat).enumerate())
         .with_min_len(PAR_GRAIN_PARTICLES)
         .map(|(j, x)| {
             particle_moves(grid, solid, &offsets, j, x).unwrap_or(Moves {
                 home: [0; D],
+                index: 0,
                 allowed: 0,
             })
         })
@@ -274,7 +301,7 @@ pub fn build<const D: usize>(
             let mut k = 0;
             for (j, m) in block.iter().enumerate() {
                 let xh = &x_hat[b * ITEM_BLOCK + j];
-                let home_low = low(grid.cell_index(m.home));
+                let home_low = low(m.index);
                 // `|phi_close(x_hat, c) - x_hat|^2` summed axis by axis, each axis's term for the
                 // home cell's coordinate shifted by -1, 0 and +1.
                 let gap: [[f64; 3]; D] = std::array::from_fn(|a| {
@@ -283,8 +310,7 @@ pub fn build<const D: usize>(
                         None => f64::NAN,
                     })
                 });
-                for (o, c) in allowed(grid, m, &offsets) {
-                    let ci = grid.cell_index(c);
+                for (o, ci) in allowed(m, &offsets) {
                     bins[k] = bin_of_cell[ci];
                     costs[k] = match penalty.map(|p| p[ci]) {
                         Some(p) if p > 0.0 => p,
@@ -324,7 +350,7 @@ pub fn build<const D: usize>(
 fn number_bins<const D: usize>(
     grid: &Grid<D>,
     moves: &[Moves<D>],
-    offsets: &[[i64; D]],
+    offsets: &MoveOffsets<D>,
 ) -> (Vec<usize>, Vec<u32>) {
     let reached: Vec<AtomicBool> = (0..grid.num_cells())
         .map(|_| AtomicBool::new(false))
@@ -333,8 +359,8 @@ fn number_bins<const D: usize>(
         .par_iter()
         .with_min_len(PAR_GRAIN_PARTICLES)
         .for_each(|m| {
-            for (_, c) in allowed(grid, m, offsets) {
-                reached[grid.cell_index(c)].store(true, Ordering::Relaxed);
+            for (_, c) in allowed(m, offsets) {
+                reached[c].store(true, Ordering::Relaxed);
             }
         });
     let mut bin_cell = vec![];
