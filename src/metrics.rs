@@ -264,6 +264,32 @@ mod tests {
         cell_count_check_names_the_first_broken_cell::<3>();
     }
 
+    /// A grid of several search blocks (the last one partial): the first broken cell is found
+    /// across blocks, in the last block too, on one thread or two.
+    #[test]
+    fn cell_count_check_searches_every_block_in_order() {
+        let g = Grid::new([211, 211]);
+        assert!(g.num_cells() > 2 * PAR_GRAIN && g.num_cells() % PAR_GRAIN != 0);
+        let centers: Vec<_> = (0..g.num_cells())
+            .map(|c| g.center(g.cell_coords(c)))
+            .collect();
+        let open = vec![false; g.num_cells()];
+        let prev = Markings::compute(&g, &centers, &open);
+        let first_broken = |walls: &[usize], threads: usize| {
+            let mut solid = open.clone();
+            walls.iter().for_each(|&c| solid[c] = true);
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build();
+            let check = || check_cell_counts(&g, &centers, &prev, &solid, 1, None);
+            pool.expect("a thread pool").install(check).unwrap_err().0
+        };
+        let (late, early, last) = (2 * PAR_GRAIN + 5, PAR_GRAIN + 7, g.num_cells() - 1);
+        for threads in [1, 2] {
+            let named = |c: usize| format!("solid cell {:?} holds 1", g.cell_coords(c));
+            assert!(first_broken(&[late, early], threads).contains(&named(early)));
+            assert!(first_broken(&[last], threads).contains(&named(last)));
+        }
+    }
+
     #[test]
     fn invariants_catch_solid_and_nan() {
         let g = Grid::new([4, 4, 4]);
