@@ -227,18 +227,22 @@ pub trait FluidMethod<const D: usize>: Send {
     fn after_projection(&mut self, _s: &mut State<D>, _u: &mut MacField<D>) {}
 
     /// Alg. flip line 4: the grid velocity back to the particles (`u_old` is the field before
-    /// forces and projection). Returns `u(x_p)` per particle when the particles have not moved,
-    /// for the advection (line 5) to use instead of interpolating `u` again at the same points.
+    /// forces and projection), their speeds bounded by `max_speed`. Returns true when it wrote
+    /// `u(x_p)` per particle to `at` and the particles have not moved, for the advection (line
+    /// 5) to use instead of interpolating `u` again at the same points.
     fn grid_to_particles(
         &mut self,
         s: &mut State<D>,
         u: &MacField<D>,
         u_old: &MacField<D>,
-    ) -> Option<Vec<Vector<D>>> {
-        let flip_ratio = s.config.flip_ratio;
-        let p = &mut s.particles;
-        let at = transfer::grid_to_particles(&s.grid, u, u_old, flip_ratio, &p.pos, &mut p.vel);
-        Some(at)
+        at: &mut Vec<Vector<D>>,
+    ) -> bool {
+        let blend = transfer::Blend {
+            flip_ratio: s.config.flip_ratio,
+            max_speed: s.config.max_speed,
+        };
+        transfer::grid_to_particles(&s.grid, u, u_old, blend, &mut s.particles, at);
+        true
     }
 
     /// Just before the particles are advected (their positions are `x_bar`).

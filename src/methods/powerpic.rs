@@ -300,7 +300,8 @@ impl<const D: usize> FluidMethod<D> for PowerPicSim<D> {
         s: &mut State<D>,
         u: &MacField<D>,
         u_old: &MacField<D>,
-    ) -> Option<Vec<Vector<D>>> {
+        _at: &mut Vec<Vector<D>>,
+    ) -> bool {
         let plan = self.plan();
         let (tg, g) = (&self.tg, &s.grid);
         let mut slot = vec![u32::MAX; tg.capacity.len()];
@@ -343,8 +344,9 @@ impl<const D: usize> FluidMethod<D> for PowerPicSim<D> {
             s.particles.vel[p] = v;
             self.row_error = self.row_error.max(e);
         }
+        transfer::limit_speeds(&mut s.particles.vel, s.config.max_speed);
         // The particles moved to their barycentres: advection interpolates there.
-        None
+        false
     }
 
     /// The plan's marginals, recounted from the cells' sums: every particle's row holds its

@@ -154,6 +154,8 @@ impl<const D: usize> State<D> {
 pub struct Simulation<const D: usize> {
     pub state: State<D>,
     pub method: Box<dyn FluidMethod<D>>,
+    /// Grid-to-particle's `u(x_p)` for the advection, its allocation kept between steps.
+    u_at_particles: Vec<Vector<D>>,
 }
 
 impl<const D: usize> Simulation<D> {
@@ -197,7 +199,11 @@ impl<const D: usize> Simulation<D> {
             rng,
         };
         method.start(&mut state);
-        Self { state, method }
+        Self {
+            state,
+            method,
+            u_at_particles: vec![],
+        }
     }
 
     /// Advances the simulation by one step (alg. flip; alg. band with the band).
@@ -205,6 +211,7 @@ impl<const D: usize> Simulation<D> {
         let Simulation {
             state: s,
             method: m,
+            u_at_particles,
         } = self;
         let mut rep = StepReport::new();
         let mut dt = timestep::planned(s);
@@ -230,16 +237,14 @@ impl<const D: usize> Simulation<D> {
         rep.max_speed = timestep::finite_speed(&u, &rep.pcg)?;
         (dt, rep.dt_shortened) = timestep::shortened(dt, rep.max_speed, s.config.cfl);
         // Line 4: grid to particles.
-        let u_at_particles = rep.times.time(Stage::GridToParticles, || {
-            let at = m.grid_to_particles(s, &u, &u_old);
-            transfer::limit_speeds(&mut s.particles.vel, s.config.max_speed);
-            at
+        let have_at = rep.times.time(Stage::GridToParticles, || {
+            m.grid_to_particles(s, &u, &u_old, u_at_particles)
         });
         // Line 5: advection (and, with the band, of the grid velocity).
         m.before_advection(s);
         rep.times.time(Stage::Advect, || {
             let (grid, pos) = (&s.grid, &mut s.particles.pos);
-            let at = u_at_particles.as_deref();
+            let at = have_at.then_some(u_at_particles.as_slice());
             advect::advect_particles(grid, &u, at, &s.solids.solid, dt, pos);
             s.velocity = m.next_grid_velocity(s, u, dt);
         });
