@@ -250,22 +250,27 @@ pub fn grid_to_particles<const D: usize>(
         max_speed,
     } = blend;
     at.resize(particles.len(), Vector::<D>::zeros());
-    let vel = particles
-        .vel
-        .par_iter_mut()
-        .with_min_len(PAR_GRAIN_PARTICLES);
-    vel.zip(&particles.pos).zip(at).for_each(|((v, x), at)| {
-        let point = FacePoint::new(grid, x);
-        // Blended in a local copy, stored once: stores to `v` per component followed by the
-        // speed bound's read of the whole vector stall the store-to-load forwarding.
-        let mut blended = *v;
-        *at = Vector::<D>::from_fn(|a, _| {
-            let st = FaceStencil::at(grid, &point, a);
-            let (un, uo) = (st.apply(&new.comp[a]), st.apply(&old.comp[a]));
-            blended[a] = flip_ratio * (blended[a] + un - uo) + (1.0 - flip_ratio) * un;
-            un
-        });
-        *v = limited(blended, max_speed);
+    let n = PAR_GRAIN_PARTICLES;
+    let vel = particles.vel.par_chunks_mut(n);
+    let chunks = vel
+        .zip(particles.pos.par_chunks(n))
+        .zip(at.par_chunks_mut(n));
+    // A plain loop per chunk, so that the body is inlined into it and the grid's sizes are
+    // read once per chunk rather than once per particle.
+    chunks.for_each(|((vel, pos), at)| {
+        for ((v, x), at) in vel.iter_mut().zip(pos).zip(at) {
+            let point = FacePoint::new(grid, x);
+            // Blended in a local copy, stored once: stores to `v` per component followed by
+            // the speed bound's read of the whole vector stall the store-to-load forwarding.
+            let mut blended = *v;
+            *at = Vector::<D>::from_fn(|a, _| {
+                let st = FaceStencil::at(grid, &point, a);
+                let (un, uo) = (st.apply(&new.comp[a]), st.apply(&old.comp[a]));
+                blended[a] = flip_ratio * (blended[a] + un - uo) + (1.0 - flip_ratio) * un;
+                un
+            });
+            *v = limited(blended, max_speed);
+        }
     });
 }
 
