@@ -10,7 +10,15 @@ use std::io::Write;
 /// (its recording and summary finished first).
 fn main() {
     let cli = Cli::parse();
-    let result = dispatch(cli);
+    // The main thread is one of rayon's workers: it joins in the parallel loops, and rayon
+    // starts one thread fewer. A main thread outside the pool runs the serial parts of a
+    // step while the pool's threads spin looking for work, three threads on as many cores
+    // as the pool has threads.
+    let pool = rayon::ThreadPoolBuilder::new().use_current_thread();
+    let result = match pool.build_global() {
+        Ok(()) => dispatch(cli),
+        Err(e) => Err(anyhow::anyhow!("starting the worker threads: {e}")),
+    };
     if let Err(e) = &result {
         let _ = writeln!(std::io::stderr(), "error: {e:#}");
     }
