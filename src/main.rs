@@ -10,10 +10,10 @@ use std::io::Write;
 /// (its recording and summary finished first).
 fn main() {
     let cli = Cli::parse();
-    // The main thread is one of rayon's workers: it joins in the parallel loops, and rayon
-    // starts one thread fewer. A main thread outside the pool runs the serial parts of a
-    // step while the pool's threads spin looking for work, three threads on as many cores
-    // as the pool has threads.
+    // The main thread is one of rayon's workers: it runs its share of every parallel loop,
+    // and rayon starts one thread fewer. Outside the pool it would wait on every loop and run
+    // the serial parts of a step beside the workers spinning for work, one thread more than
+    // there are cores.
     let pool = rayon::ThreadPoolBuilder::new().use_current_thread();
     let result = match pool.build_global() {
         Ok(()) => dispatch(cli),

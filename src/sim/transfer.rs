@@ -231,7 +231,8 @@ fn for_each_axis_neighbor<const D: usize>(
 pub struct Blend {
     /// The FLIP share of the FLIP/PIC blend.
     pub flip_ratio: f64,
-    /// The speed bound (cells per second) applied after the blend, see [`limited`].
+    /// The speed bound (cells per second): a faster blended velocity is scaled down to it,
+    /// its direction kept.
     pub max_speed: f64,
 }
 
@@ -276,7 +277,7 @@ pub fn grid_to_particles<const D: usize>(
 
 /// `v` scaled down to `max_speed` (cells per second) if faster, its direction kept.
 #[inline]
-pub fn limited<const D: usize>(v: Vector<D>, max_speed: f64) -> Vector<D> {
+fn limited<const D: usize>(v: Vector<D>, max_speed: f64) -> Vector<D> {
     // Squares compared first, so that most particles take no square root: `|v| > max_speed`
     // exactly when `|v|^2 > max_speed^2` rounded, except where `|v|` rounds to `max_speed`,
     // whose scale factor is exactly 1.
