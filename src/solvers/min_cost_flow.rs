@@ -166,16 +166,37 @@ const NONE: u32 = u32::MAX;
 /// in cells).
 const PRICE_TIE: f64 = 1e-9;
 
-/// A node's state in the current search, together so that one cache line holds it.
+/// What a search reads of a node when it offers the node a distance, in one 32-byte block (one
+/// cache line, where separate arrays took four): its potential, the bin's load and sink flow
+/// (unused for the sink), and its label in the current search.
 #[derive(Clone, Copy, Debug, Default)]
-struct Label {
+#[repr(align(32))]
+struct Node {
+    potential: f64,
+    /// Distance in the current search, valid where `stamp` is the current search.
     dist: f64,
     stamp: u32,
-    /// Forward search: the node this one was reached from. Reverse search: the node it leads to.
-    link_node: u32,
-    /// The candidate moved along that link (`NONE` for an arc to or from `t`).
-    link_cand: u32,
     settled: bool,
+    /// Items in the bin.
+    load: u32,
+    /// Flow on the arc bin -> t, kept within `[lower, upper]`.
+    sink_flow: u32,
+}
+
+impl Node {
+    /// Whether the bin holds fewer items than its sink flow: a search's target.
+    fn short(&self) -> bool {
+        self.load < self.sink_flow
+    }
+}
+
+/// How the current search reached a node, read only when a path is walked.
+#[derive(Clone, Copy, Debug, Default)]
+struct Link {
+    /// Forward search: the node this one was reached from. Reverse search: the node it leads to.
+    node: u32,
+    /// The candidate moved along that link (`NONE` for an arc to or from `t`).
+    cand: u32,
 }
 
 /// The cheapest way to move one item from a bin to bin `to`: the item's candidate `cand` in
@@ -197,7 +218,9 @@ struct Network<'a> {
     bin_start: Vec<usize>,
     bin_cands: Vec<u32>,
     choice: Vec<u32>,
-    load: Vec<u32>,
+    /// Per node (the bins, then the sink `t`): potential, load, sink flow, search label.
+    node: Vec<Node>,
+    link: Vec<Link>,
     /// Items currently in each bin, and each item's place in its bin's list.
     bin_items: Vec<Vec<u32>>,
     slot: Vec<u32>,
@@ -207,13 +230,8 @@ struct Network<'a> {
     /// Scratch of [`Network::refresh_out_arcs`]: per bin, its arc's index in the list being
     /// rebuilt (`NONE` outside a rebuild), so that a bin with many items rebuilds in linear time.
     arc_of: Vec<u32>,
-    /// Flow on the arc bin -> t, kept within `[lower, upper]`.
-    sink_flow: Vec<u32>,
-    /// Node potentials; node `bins()` is the sink `t`.
-    potential: Vec<f64>,
-    /// Search scratch per node, valid where `stamp == search`.
+    /// The current search's stamp (see [`Node::stamp`]).
     search: u32,
-    label: Vec<Label>,
     heap: BinaryHeap<Entry>,
     visited: Vec<u32>,
     /// Smallest tentative distance of a target in the current search: nothing farther can lead
@@ -265,26 +283,28 @@ impl<'a> Network<'a> {
             slot[item] = bin_items[b].len() as u32;
             bin_items[b].push(item as u32);
         }
-        let sink_flow = (0..bins)
-            .map(|b| load[b].clamp(p.lower[b], p.upper[b]))
+        let mut node: Vec<Node> = (0..bins)
+            .map(|b| Node {
+                load: load[b],
+                sink_flow: load[b].clamp(p.lower[b], p.upper[b]),
+                ..Node::default()
+            })
             .collect();
-        let nodes = bins + 1;
+        node.push(Node::default());
         Self {
             p,
             cand_item,
             bin_start,
             bin_cands,
             choice,
-            load,
+            link: vec![Link::default(); node.len()],
+            node,
             bin_items,
             slot,
             out_arcs: vec![vec![]; bins],
             stale: vec![true; bins],
             arc_of: vec![NONE; bins],
-            sink_flow,
-            potential: vec![0.0; nodes],
             search: 0,
-            label: vec![Label::default(); nodes],
             heap: BinaryHeap::new(),
             visited: vec![],
             bound: f64::INFINITY,
@@ -299,18 +319,18 @@ impl<'a> Network<'a> {
     /// moves the difference between load and sink flow.
     fn set_prices(&mut self, prices: &[f64], sink_price: f64) {
         let p = self.p;
-        for (b, flow) in self.sink_flow.iter_mut().enumerate() {
-            let above = prices[b] - sink_price;
-            *flow = if above > PRICE_TIE {
+        for (b, (n, &price)) in self.node.iter_mut().zip(prices).enumerate() {
+            let above = price - sink_price;
+            n.sink_flow = if above > PRICE_TIE {
                 p.upper[b]
             } else if above < -PRICE_TIE {
                 p.lower[b]
             } else {
-                self.load[b].clamp(p.lower[b], p.upper[b])
+                n.load.clamp(p.lower[b], p.upper[b])
             };
+            n.potential = price;
         }
-        self.potential[..p.bins()].copy_from_slice(prices);
-        self.potential[p.bins()] = sink_price;
+        self.node[p.bins()].potential = sink_price;
     }
 
     fn sink(&self) -> u32 {
@@ -335,25 +355,26 @@ impl<'a> Network<'a> {
             self.bound = d;
         }
         let i = v as usize;
-        let l = &mut self.label[i];
-        if l.stamp != self.search {
-            l.stamp = self.search;
-            l.settled = false;
-        } else if l.settled || l.dist <= d {
+        let n = &mut self.node[i];
+        if n.stamp != self.search {
+            n.stamp = self.search;
+            n.settled = false;
+        } else if n.settled || n.dist <= d {
             return;
         }
-        (l.dist, l.link_node, l.link_cand) = (d, node, cand);
+        n.dist = d;
+        self.link[i] = Link { node, cand };
         self.heap.push(Entry(d, v));
     }
 
     /// Pops the nearest unsettled node and settles it.
     fn pop(&mut self) -> Option<(f64, u32)> {
         while let Some(Entry(d, v)) = self.heap.pop() {
-            let i = v as usize;
-            if self.label[i].settled || d > self.label[i].dist {
+            let n = &mut self.node[v as usize];
+            if n.settled || d > n.dist {
                 continue;
             }
-            self.label[i].settled = true;
+            n.settled = true;
             self.visited.push(v);
             self.stats.nodes_settled += 1;
             return Some((d, v));
@@ -370,23 +391,23 @@ impl<'a> Network<'a> {
 
     /// The reduced cost of a move from bin `a` to bin `b` whose cost changes by `delta`.
     fn reduced_delta(&self, delta: f64, a: usize, b: usize) -> f64 {
-        (delta - self.potential[a] + self.potential[b]).max(0.0)
+        (delta - self.node[a].potential + self.node[b].potential).max(0.0)
     }
 
     /// Potentials after a forward search that reached its target at distance `reach`:
     /// `pi(v) -= min(d(v), reach)`, up to a common shift that reduced costs ignore.
     fn lift_after_forward(&mut self, reach: f64) {
         for &v in &self.visited {
-            let v = v as usize;
-            self.potential[v] += reach - self.label[v].dist;
+            let n = &mut self.node[v as usize];
+            n.potential += reach - n.dist;
         }
     }
 
     /// Potentials after a reverse search: `pi(v) += min(r(v), reach)`, up to a common shift.
     fn lift_after_reverse(&mut self, reach: f64) {
         for &v in &self.visited {
-            let v = v as usize;
-            self.potential[v] -= reach - self.label[v].dist;
+            let n = &mut self.node[v as usize];
+            n.potential -= reach - n.dist;
         }
     }
 
@@ -400,7 +421,7 @@ impl<'a> Network<'a> {
                 return Err(Infeasible { bin: s as usize });
             };
             let vi = v as usize;
-            if v == t || self.load[vi] < self.sink_flow[vi] {
+            if v == t || self.node[vi].short() {
                 break (d, v);
             }
             // The cheapest item of `v` moving to each other bin.
@@ -408,11 +429,11 @@ impl<'a> Network<'a> {
             for j in 0..self.out_arcs[vi].len() {
                 let OutArc { to, cand, delta } = self.out_arcs[vi][j];
                 let rc = self.reduced_delta(delta, vi, to as usize);
-                let target = self.load[to as usize] < self.sink_flow[to as usize];
+                let target = self.node[to as usize].short();
                 self.touch(to, d + rc, v, cand, target);
             }
-            if self.sink_flow[vi] < self.p.upper[vi] {
-                let rc = (self.potential[t as usize] - self.potential[vi]).max(0.0);
+            if self.node[vi].sink_flow < self.p.upper[vi] {
+                let rc = (self.node[t as usize].potential - self.node[vi].potential).max(0.0);
                 self.touch(t, d + rc, v, NONE, true);
             }
         };
@@ -420,14 +441,13 @@ impl<'a> Network<'a> {
         // Walk back from the target, moving one item per link.
         let mut x = target.1;
         if x == t {
-            let c = self.label[t as usize].link_node;
-            self.sink_flow[c as usize] += 1;
+            let c = self.link[t as usize].node;
+            self.node[c as usize].sink_flow += 1;
             x = c;
         }
         while x != s {
-            let k2 = self.label[x as usize].link_cand as usize;
-            let w = self.label[x as usize].link_node;
-            self.move_item(k2, w, x);
+            let Link { node: w, cand } = self.link[x as usize];
+            self.move_item(cand as usize, w, x);
             x = w;
         }
         self.stats.augmentations += 1;
@@ -457,19 +477,18 @@ impl<'a> Network<'a> {
                     self.touch(self.p.cand_bin[k], r + rc, v, k2 as u32, false);
                 }
             }
-            if self.sink_flow[vi] > self.p.lower[vi] {
-                let rc = (self.potential[vi] - self.potential[t as usize]).max(0.0);
+            if self.node[vi].sink_flow > self.p.lower[vi] {
+                let rc = (self.node[vi].potential - self.node[t as usize].potential).max(0.0);
                 self.touch(t, r + rc, v, NONE, true);
             }
         };
         self.lift_after_reverse(reach);
         // Walk forward from the sink: t -> c, then one item per link until `s`.
-        let mut x = self.label[t as usize].link_node;
-        self.sink_flow[x as usize] -= 1;
+        let mut x = self.link[t as usize].node;
+        self.node[x as usize].sink_flow -= 1;
         while x != s {
-            let k2 = self.label[x as usize].link_cand as usize;
-            let next = self.label[x as usize].link_node;
-            self.move_item(k2, x, next);
+            let Link { node: next, cand } = self.link[x as usize];
+            self.move_item(cand as usize, x, next);
             x = next;
         }
         self.stats.augmentations += 1;
@@ -516,8 +535,8 @@ impl<'a> Network<'a> {
         debug_assert_eq!(self.p.cand_bin[self.choice[item] as usize], from);
         debug_assert_eq!(self.p.cand_bin[to_cand], to);
         self.choice[item] = to_cand as u32;
-        self.load[from as usize] -= 1;
-        self.load[to as usize] += 1;
+        self.node[from as usize].load -= 1;
+        self.node[to as usize].load += 1;
         let list = &mut self.bin_items[from as usize];
         let at = self.slot[item] as usize;
         list.swap_remove(at);
@@ -578,15 +597,15 @@ pub fn solve_from(p: &BoundedAssignment, start: Solution) -> Result<Solution, In
     // The sink's price: every arc bin -> t with room must have a non-negative reduced cost,
     // and so must every arc t -> bin (a bin above its lower bound).
     let bins = 0..p.bins();
-    let (prices, flow) = (&start.prices, &net.sink_flow);
+    let (prices, node) = (&start.prices, &net.node);
     let t = bins
         .clone()
-        .filter(|&b| flow[b] < p.upper[b])
+        .filter(|&b| node[b].sink_flow < p.upper[b])
         .map(|b| prices[b]);
     let t = t.fold(f64::NEG_INFINITY, f64::max);
     let t = if t.is_finite() { t } else { 0.0 };
     debug_assert!(bins
-        .filter(|&b| flow[b] > p.lower[b])
+        .filter(|&b| node[b].sink_flow > p.lower[b])
         .all(|b| prices[b] >= t));
     net.set_prices(prices, t);
     repair(net)
@@ -620,23 +639,23 @@ fn priced_choice(p: &BoundedAssignment, prices: &[f64]) -> Vec<u32> {
 fn repair(mut net: Network<'_>) -> Result<Solution, Infeasible> {
     let p = net.p;
     let bins = p.bins();
-    net.stats.overfull_bins = (0..bins).filter(|&b| net.load[b] > p.upper[b]).count();
-    net.stats.underfull_bins = (0..bins).filter(|&b| net.load[b] < p.lower[b]).count();
+    let load = |net: &Network<'_>, b: usize| net.node[b].load;
+    net.stats.overfull_bins = (0..bins).filter(|&b| load(&net, b) > p.upper[b]).count();
+    net.stats.underfull_bins = (0..bins).filter(|&b| load(&net, b) < p.lower[b]).count();
     for b in 0..bins {
-        while net.load[b] > net.sink_flow[b] {
+        while net.node[b].load > net.node[b].sink_flow {
             net.push_excess(b as u32)?;
         }
     }
     for b in 0..bins {
-        while net.load[b] < net.sink_flow[b] {
+        while net.node[b].short() {
             net.pull_deficit(b as u32)?;
         }
     }
-    let sink_price = net.potential[bins];
-    net.potential.truncate(bins);
+    let sink_price = net.node[bins].potential;
     Ok(Solution {
         choice: net.choice,
-        prices: net.potential,
+        prices: net.node[..bins].iter().map(|n| n.potential).collect(),
         sink_price,
         stats: net.stats,
     })
