@@ -147,6 +147,30 @@ pub fn check_particles<const D: usize>(
     Ok(())
 }
 
+/// Checks the speed bound that every method's grid-to-particle transfer applies
+/// ([`crate::methods::FluidMethod::grid_to_particles`]): no particle faster than `max_speed`
+/// (cells per second), up to the rounding of scaling a faster velocity down to it (a relative
+/// [`SPEED_BOUND_ROUNDING`]).
+pub fn check_speed_bound<const D: usize>(
+    vel: &[Vector<D>],
+    max_speed: f64,
+) -> Result<(), InvariantViolation> {
+    let limit = max_speed * (1.0 + SPEED_BOUND_ROUNDING);
+    let too_fast = |v: &Vector<D>| v.norm_squared() > limit * limit;
+    match vel.par_iter().position_first(too_fast) {
+        None => Ok(()),
+        Some(j) => Err(InvariantViolation(format!(
+            "particle {j} moves at {} cells/s after the transfer to particles, above the bound \
+             max_speed = {max_speed}",
+            vel[j].norm()
+        ))),
+    }
+}
+
+/// The relative rounding allowed above `max_speed` by [`check_speed_bound`]: `v * (max / |v|)`
+/// takes a few roundings (the norm, the quotient, the products), each of 2^-53 relative.
+const SPEED_BOUND_ROUNDING: f64 = 1e-12;
+
 /// The guarantees of the correction step (paper eq. problem3, or eq. band_con_update with the
 /// band parameter `band_r`), checked from the final positions alone: every cell's count lies
 /// within its bounds ([`cell_bounds`]: at most `mu`, or what it held if that was more; inner
@@ -192,6 +216,35 @@ pub fn check_cell_counts<const D: usize>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn speed_bound_check_passes_bounded_speeds_and_names_a_faster_particle() {
+        fn check<const D: usize>(rng: &mut rand::rngs::StdRng) {
+            use rand::Rng;
+            let max_speed = 7.5;
+            // Speeds up to ten times the bound, many just around it, then bounded by the
+            // transfer's own scaling.
+            let mut vel: Vec<Vector<D>> = (0..20_000)
+                .map(|j| {
+                    let dir = Vector::<D>::from_fn(|_, _| rng.random_range(-1.0..1.0));
+                    let speed = if j % 2 == 0 {
+                        max_speed * (1.0 + rng.random_range(-1e-9..1e-9))
+                    } else {
+                        rng.random_range(0.0..10.0 * max_speed)
+                    };
+                    dir.normalize() * speed
+                })
+                .collect();
+            crate::sim::transfer::limit_speeds(&mut vel, max_speed);
+            assert_eq!(check_speed_bound(&vel, max_speed), Ok(()));
+            vel[1234] = vel[1234].normalize() * (max_speed * (1.0 + 1e-9));
+            let err = check_speed_bound(&vel, max_speed).unwrap_err();
+            assert!(err.0.starts_with("particle 1234 "), "{err}");
+        }
+        let mut rng = <rand::rngs::StdRng as rand::SeedableRng>::seed_from_u64(5);
+        check::<2>(&mut rng);
+        check::<3>(&mut rng);
+    }
 
     #[test]
     fn volume_counts_near_surface_cells_by_fill_and_deep_cells_as_full() {

@@ -227,7 +227,8 @@ pub trait FluidMethod<const D: usize>: Send {
     fn after_projection(&mut self, _s: &mut State<D>, _u: &mut MacField<D>) {}
 
     /// Alg. flip line 4: the grid velocity back to the particles (`u_old` is the field before
-    /// forces and projection), their speeds bounded by `max_speed`. Returns true when it wrote
+    /// forces and projection), their speeds bounded by `max_speed` (checked after every step's
+    /// transfer: [`crate::metrics::check_speed_bound`]). Returns true when it wrote
     /// `u(x_p)` per particle to `at` and the particles have not moved, for the advection (line
     /// 5) to use instead of interpolating `u` again at the same points.
     fn grid_to_particles(

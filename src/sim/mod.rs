@@ -240,6 +240,7 @@ impl<const D: usize> Simulation<D> {
         let have_at = rep.times.time(Stage::GridToParticles, || {
             m.grid_to_particles(s, &u, &u_old, u_at_particles)
         });
+        metrics::check_speed_bound(&s.particles.vel, s.config.max_speed)?;
         // Line 5: advection (and, with the band, of the grid velocity).
         m.before_advection(s);
         rep.times.time(Stage::Advect, || {
