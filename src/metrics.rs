@@ -157,7 +157,7 @@ pub fn check_speed_bound<const D: usize>(
 ) -> Result<(), InvariantViolation> {
     let limit = max_speed * (1.0 + SPEED_BOUND_ROUNDING);
     let too_fast = |v: &Vector<D>| v.norm_squared() > limit * limit;
-    match vel.par_iter().position_first(too_fast) {
+    match (vel.par_iter().with_min_len(PAR_GRAIN)).position_first(too_fast) {
         None => Ok(()),
         Some(j) => Err(InvariantViolation(format!(
             "particle {j} moves at {} cells/s after the transfer to particles, above the bound \
