@@ -639,9 +639,10 @@ fn priced_choice(p: &BoundedAssignment, prices: &[f64]) -> Vec<u32> {
 fn repair(mut net: Network<'_>) -> Result<Solution, Infeasible> {
     let p = net.p;
     let bins = p.bins();
-    let load = |net: &Network<'_>, b: usize| net.node[b].load;
-    net.stats.overfull_bins = (0..bins).filter(|&b| load(&net, b) > p.upper[b]).count();
-    net.stats.underfull_bins = (0..bins).filter(|&b| load(&net, b) < p.lower[b]).count();
+    let load = |b: usize| net.node[b].load;
+    let overfull = (0..bins).filter(|&b| load(b) > p.upper[b]).count();
+    let underfull = (0..bins).filter(|&b| load(b) < p.lower[b]).count();
+    (net.stats.overfull_bins, net.stats.underfull_bins) = (overfull, underfull);
     for b in 0..bins {
         while net.node[b].load > net.node[b].sink_flow {
             net.push_excess(b as u32)?;
