@@ -177,7 +177,8 @@ struct Node {
     dist: f64,
     stamp: u32,
     settled: bool,
-    /// Items in the bin.
+    /// Items in the bin: `bin_items[b].len()`, kept here too so that a search reads it in
+    /// the same cache line.
     load: u32,
     /// Flow on the arc bin -> t, kept within `[lower, upper]`.
     sink_flow: u32,
@@ -274,20 +275,21 @@ impl<'a> Network<'a> {
             bin_cands[fill[b as usize]] = k as u32;
             fill[b as usize] += 1;
         }
-        let mut load = vec![0u32; bins];
         let mut bin_items: Vec<Vec<u32>> = vec![vec![]; bins];
         let mut slot = vec![0u32; choice.len()];
         for (item, &k) in choice.iter().enumerate() {
             let b = p.cand_bin[k as usize] as usize;
-            load[b] += 1;
             slot[item] = bin_items[b].len() as u32;
             bin_items[b].push(item as u32);
         }
-        let mut node: Vec<Node> = (0..bins)
-            .map(|b| Node {
-                load: load[b],
-                sink_flow: load[b].clamp(p.lower[b], p.upper[b]),
-                ..Node::default()
+        let mut node: Vec<Node> = (bin_items.iter().enumerate())
+            .map(|(b, items)| {
+                let load = items.len() as u32;
+                Node {
+                    load,
+                    sink_flow: load.clamp(p.lower[b], p.upper[b]),
+                    ..Node::default()
+                }
             })
             .collect();
         node.push(Node::default());
