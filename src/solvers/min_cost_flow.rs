@@ -200,14 +200,85 @@ struct Link {
     cand: u32,
 }
 
-/// The cheapest way to move one item from a bin to bin `to`: the item's candidate `cand` in
-/// `to`, at `delta` = its cost there minus its cost now. Potentials are per bin, so this item
-/// also has the least reduced cost among the bin's items: a search needs only this arc.
+/// The cheapest way to move one item between a bin and bin `other` (out of the bin in its
+/// out-arcs, into it in its in-arcs): the item's candidate `cand` in the bin it moves to, at
+/// `delta` = its cost there minus its cost now. Potentials are per bin, so this item also has
+/// the least reduced cost among the items that could make the same move: a search needs only
+/// this arc.
 #[derive(Clone, Copy, Debug)]
-struct OutArc {
-    to: u32,
+struct BinArc {
+    other: u32,
     cand: u32,
     delta: f64,
+}
+
+/// Per bin, its cheapest move to (or from) each other bin, rebuilt when `stale`. Allocated at
+/// its first use: many solves run no reverse search, and never build their in-arcs.
+struct ArcCache {
+    bins: usize,
+    arcs: Vec<Vec<BinArc>>,
+    stale: Vec<bool>,
+}
+
+impl ArcCache {
+    fn new(bins: usize) -> Self {
+        Self {
+            bins,
+            arcs: vec![],
+            stale: vec![],
+        }
+    }
+
+    /// Marks bin `b`'s arcs for a rebuild at their next use.
+    #[inline]
+    fn invalidate(&mut self, b: u32) {
+        if let Some(s) = self.stale.get_mut(b as usize) {
+            *s = true;
+        }
+    }
+
+    /// Rebuilds bin `v`'s arcs if they are stale: `fill` offers every move, and the least
+    /// `delta` per other bin is kept (the first of equals). `arc_of` is scratch, all `NONE`
+    /// outside a rebuild.
+    #[inline]
+    fn refresh(&mut self, v: usize, arc_of: &mut [u32], fill: impl FnOnce(&mut ArcList<'_>)) {
+        if self.stale.is_empty() {
+            self.arcs = vec![vec![]; self.bins];
+            self.stale = vec![true; self.bins];
+        }
+        if !std::mem::take(&mut self.stale[v]) {
+            return;
+        }
+        let arcs = &mut self.arcs[v];
+        arcs.clear();
+        fill(&mut ArcList { arcs, arc_of });
+        for a in arcs.iter() {
+            arc_of[a.other as usize] = NONE;
+        }
+    }
+}
+
+/// A bin's arcs being rebuilt, with `arc_of`: per other bin, its arc's index in the list, so
+/// that a rebuild takes linear time in the moves offered.
+struct ArcList<'a> {
+    arcs: &'a mut Vec<BinArc>,
+    arc_of: &'a mut [u32],
+}
+
+impl ArcList<'_> {
+    /// Keeps `arc` if it is the first or the cheapest move so far to or from its other bin.
+    #[inline]
+    fn offer(&mut self, arc: BinArc) {
+        let o = arc.other as usize;
+        match self.arc_of[o] {
+            NONE => {
+                self.arc_of[o] = self.arcs.len() as u32;
+                self.arcs.push(arc);
+            }
+            at if arc.delta < self.arcs[at as usize].delta => self.arcs[at as usize] = arc,
+            _ => {}
+        }
+    }
 }
 
 /// Solver state: the current assignment, the sink flows and the node potentials.
@@ -225,11 +296,11 @@ struct Network<'a> {
     /// Items currently in each bin, and each item's place in its bin's list.
     bin_items: Vec<Vec<u32>>,
     slot: Vec<u32>,
-    /// Per bin, its cheapest move to each other bin (see [`OutArc`]); rebuilt when `stale`.
-    out_arcs: Vec<Vec<OutArc>>,
-    stale: Vec<bool>,
-    /// Scratch of [`Network::refresh_out_arcs`]: per bin, its arc's index in the list being
-    /// rebuilt (`NONE` outside a rebuild), so that a bin with many items rebuilds in linear time.
+    /// Per bin, the cheapest move of its items to each other bin (read by forward searches),
+    /// and the cheapest move into it from each other bin (read by reverse searches).
+    out_arcs: ArcCache,
+    in_arcs: ArcCache,
+    /// Scratch of [`ArcCache::refresh`].
     arc_of: Vec<u32>,
     /// The current search's stamp (see [`Node::stamp`]).
     search: u32,
@@ -303,8 +374,8 @@ impl<'a> Network<'a> {
             node,
             bin_items,
             slot,
-            out_arcs: vec![vec![]; bins],
-            stale: vec![true; bins],
+            out_arcs: ArcCache::new(bins),
+            in_arcs: ArcCache::new(bins),
             arc_of: vec![NONE; bins],
             search: 0,
             heap: BinaryHeap::new(),
@@ -384,13 +455,6 @@ impl<'a> Network<'a> {
         None
     }
 
-    /// The reduced cost of moving the item of candidate `from` to candidate `to`.
-    fn reduced(&self, from: usize, to: usize) -> f64 {
-        let p = self.p;
-        let (a, b) = (p.cand_bin[from] as usize, p.cand_bin[to] as usize);
-        self.reduced_delta(p.cand_cost[to] - p.cand_cost[from], a, b)
-    }
-
     /// The reduced cost of a move from bin `a` to bin `b` whose cost changes by `delta`.
     fn reduced_delta(&self, delta: f64, a: usize, b: usize) -> f64 {
         (delta - self.node[a].potential + self.node[b].potential).max(0.0)
@@ -428,11 +492,11 @@ impl<'a> Network<'a> {
             }
             // The cheapest item of `v` moving to each other bin.
             self.refresh_out_arcs(vi);
-            for j in 0..self.out_arcs[vi].len() {
-                let OutArc { to, cand, delta } = self.out_arcs[vi][j];
-                let rc = self.reduced_delta(delta, vi, to as usize);
-                let target = self.node[to as usize].short();
-                self.touch(to, d + rc, v, cand, target);
+            for j in 0..self.out_arcs.arcs[vi].len() {
+                let BinArc { other, cand, delta } = self.out_arcs.arcs[vi][j];
+                let rc = self.reduced_delta(delta, vi, other as usize);
+                let target = self.node[other as usize].short();
+                self.touch(other, d + rc, v, cand, target);
             }
             if self.node[vi].sink_flow < self.p.upper[vi] {
                 let rc = (self.node[t as usize].potential - self.node[vi].potential).max(0.0);
@@ -469,15 +533,12 @@ impl<'a> Network<'a> {
                 break r;
             }
             let vi = v as usize;
-            // Items elsewhere that have `v` as a candidate could move into it.
-            for idx in self.bin_start[vi]..self.bin_start[vi + 1] {
-                let k2 = self.bin_cands[idx] as usize;
-                let item = self.cand_item[k2] as usize;
-                let k = self.choice[item] as usize;
-                if k != k2 {
-                    let rc = self.reduced(k, k2);
-                    self.touch(self.p.cand_bin[k], r + rc, v, k2 as u32, false);
-                }
+            // The cheapest item of each other bin moving into `v`.
+            self.refresh_in_arcs(vi);
+            for j in 0..self.in_arcs.arcs[vi].len() {
+                let BinArc { other, cand, delta } = self.in_arcs.arcs[vi][j];
+                let rc = self.reduced_delta(delta, other as usize, vi);
+                self.touch(other, r + rc, v, cand, false);
             }
             if self.node[vi].sink_flow > self.p.lower[vi] {
                 let rc = (self.node[vi].potential - self.node[t as usize].potential).max(0.0);
@@ -499,42 +560,56 @@ impl<'a> Network<'a> {
 
     /// Rebuilds the cheapest move of bin `v`'s items to each other bin if they changed.
     fn refresh_out_arcs(&mut self, v: usize) {
-        if !self.stale[v] {
-            return;
-        }
-        self.stale[v] = false;
-        let p = self.p;
-        let arcs = &mut self.out_arcs[v];
-        arcs.clear();
-        for &item in &self.bin_items[v] {
-            let k = self.choice[item as usize] as usize;
-            for k2 in p.candidates(item as usize).filter(|&k2| k2 != k) {
-                let (to, delta) = (p.cand_bin[k2], p.cand_cost[k2] - p.cand_cost[k]);
-                let arc = OutArc {
-                    to,
-                    cand: k2 as u32,
-                    delta,
-                };
-                match self.arc_of[to as usize] {
-                    NONE => {
-                        self.arc_of[to as usize] = arcs.len() as u32;
-                        arcs.push(arc);
-                    }
-                    at if delta < arcs[at as usize].delta => arcs[at as usize] = arc,
-                    _ => {}
+        let (p, choice, items) = (self.p, &self.choice, &self.bin_items[v]);
+        self.out_arcs.refresh(v, &mut self.arc_of, |list| {
+            for &item in items {
+                let k = choice[item as usize] as usize;
+                for k2 in p.candidates(item as usize).filter(|&k2| k2 != k) {
+                    list.offer(BinArc {
+                        other: p.cand_bin[k2],
+                        cand: k2 as u32,
+                        delta: p.cand_cost[k2] - p.cand_cost[k],
+                    });
                 }
             }
-        }
-        for a in arcs.iter() {
-            self.arc_of[a.to as usize] = NONE;
-        }
+        });
     }
 
+    /// Rebuilds the cheapest move into bin `v` from each other bin if they changed: of the
+    /// items elsewhere that have `v` as a candidate.
+    fn refresh_in_arcs(&mut self, v: usize) {
+        let (p, choice, cand_item) = (self.p, &self.choice, &self.cand_item);
+        let cands = &self.bin_cands[self.bin_start[v]..self.bin_start[v + 1]];
+        self.in_arcs.refresh(v, &mut self.arc_of, |list| {
+            for &k2 in cands {
+                let k = choice[cand_item[k2 as usize] as usize] as usize;
+                if k != k2 as usize {
+                    list.offer(BinArc {
+                        other: p.cand_bin[k],
+                        cand: k2,
+                        delta: p.cand_cost[k2 as usize] - p.cand_cost[k],
+                    });
+                }
+            }
+        });
+    }
+
+    /// Moves the item of candidate `to_cand` from bin `from` to bin `to`. The out-arcs of both
+    /// bins change, and the in-arcs of every candidate bin of the item.
     fn move_item(&mut self, to_cand: usize, from: u32, to: u32) {
-        self.stale[from as usize] = true;
-        self.stale[to as usize] = true;
+        self.out_arcs.invalidate(from);
+        self.out_arcs.invalidate(to);
         let item = self.cand_item[to_cand] as usize;
-        debug_assert_eq!(self.p.cand_bin[self.choice[item] as usize], from);
+        if !self.in_arcs.stale.is_empty() {
+            for &b in &self.p.cand_bin[self.p.candidates(item)] {
+                self.in_arcs.invalidate(b);
+            }
+        }
+        // A stale cached arc would move an item that is no longer where the arc says.
+        assert_eq!(
+            self.p.cand_bin[self.choice[item] as usize], from,
+            "stale arc"
+        );
         debug_assert_eq!(self.p.cand_bin[to_cand], to);
         self.choice[item] = to_cand as u32;
         self.node[from as usize].load -= 1;
