@@ -7,6 +7,9 @@
 //! axes. Linear indices run with axis 0 fastest.
 
 use nalgebra::SVector;
+
+#[cfg(target_arch = "x86_64")]
+pub mod lanes;
 use rayon::prelude::*;
 
 /// A point or vector in grid units (cells).
