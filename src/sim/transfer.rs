@@ -259,7 +259,10 @@ pub fn grid_to_particles<const D: usize>(
     // A plain loop per chunk, so that the body is inlined into it and the grid's sizes are
     // read once per chunk rather than once per particle.
     chunks.for_each(|((vel, pos), at)| {
+        #[cfg(target_arch = "x86_64")]
         let done = lanes::blend(grid, new, old, blend, vel, pos, at);
+        #[cfg(not(target_arch = "x86_64"))]
+        let done = 0;
         for ((v, x), at) in vel[done..]
             .iter_mut()
             .zip(&pos[done..])
@@ -282,13 +285,13 @@ pub fn grid_to_particles<const D: usize>(
 
 /// [`grid_to_particles`] four particles at a time, one per lane (`grid::lanes`): the same
 /// operations per particle, so the same bits.
+#[cfg(target_arch = "x86_64")]
 mod lanes {
     use super::{limited, Blend, MacField};
     use crate::grid::{Grid, Vector};
 
     /// Blends the particles of whole groups of four and returns how many it did (none without
     /// AVX2); the caller does the rest one by one.
-    #[cfg(target_arch = "x86_64")]
     pub fn blend<const D: usize>(
         grid: &Grid<D>,
         new: &MacField<D>,
@@ -305,20 +308,6 @@ mod lanes {
         unsafe { blend_avx2(grid, new, old, blend, vel, pos, at) }
     }
 
-    #[cfg(not(target_arch = "x86_64"))]
-    pub fn blend<const D: usize>(
-        _: &Grid<D>,
-        _: &MacField<D>,
-        _: &MacField<D>,
-        _: Blend,
-        _: &mut [Vector<D>],
-        _: &[Vector<D>],
-        _: &mut [Vector<D>],
-    ) -> usize {
-        0
-    }
-
-    #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     fn blend_avx2<const D: usize>(
         grid: &Grid<D>,
@@ -423,8 +412,6 @@ mod tests {
         check([3, 4, 5]);
     }
 
-    /// The speed bound's comparison of squares gives, bit for bit, what comparing the norm
-    /// gives, also for speeds within a few roundings of the bound.
     /// Groups of four particles go through the four-lane code (AVX2), the rest one by one:
     /// both must give the same bits. Points in and beyond the domain, NaN coordinates, speeds
     /// above the bound, and an axis one cell thick (its faces along axis 0 are not neighbours
@@ -490,6 +477,8 @@ mod tests {
         check([5, 1, 3], &mut rng);
     }
 
+    /// The speed bound's comparison of squares gives, bit for bit, what comparing the norm
+    /// gives, also for speeds within a few roundings of the bound.
     #[test]
     fn speed_bound_matches_the_norm_comparison() {
         use rand::{Rng, SeedableRng};
