@@ -4,8 +4,8 @@
 //! [`FaceStencil`](super::FaceStencil) for its point, in the same order and with no fused
 //! multiply-add, so the results are the same bits as the one-point code: the lanes only share
 //! instructions. The two faces of a corner pair along axis 0 are neighbours in memory, so each
-//! point reads them with one 16-byte load (gathers, one per corner for four points, took twice as
-//! long). Used where the per-particle work is a few stencils and nothing else (grid to
+//! point reads them with one 16-byte load (gathers, one per corner for four points, took 1.8
+//! times as long). Used where the per-particle work is a few stencils and nothing else (grid to
 //! particles, paper sec. 3).
 //!
 //! Callers check [`available`] once and fall back to the one-point code otherwise.
