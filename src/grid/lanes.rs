@@ -14,11 +14,16 @@ use std::arch::x86_64::*;
 
 use super::{Grid, LayerRange, Vector};
 
-/// Whether this CPU runs the four-lane code (AVX2), checked at run time (cached by `std`).
+/// Whether this CPU has AVX2, checked at run time (cached by `std`).
+pub fn cpu_has_lanes() -> bool {
+    is_x86_feature_detected!("avx2")
+}
+
+/// Whether the four-lane code runs on `grid` here: AVX2, and face indices that fit the 32-bit
+/// lanes they travel in.
 pub fn available<const D: usize>(grid: &Grid<D>) -> bool {
-    // Face indices travel as 32-bit lanes.
     let fits = (0..D).all(|a| grid.num_faces(a) <= i32::MAX as usize);
-    fits && is_x86_feature_detected!("avx2")
+    fits && cpu_has_lanes()
 }
 
 /// [`super::AxisSplit`] of four coordinates.

@@ -85,10 +85,11 @@ pub fn markdown(
     let _ = writeln!(s, "# cellflip report\n");
     let _ = writeln!(
         s,
-        "{} of {} runs, {} threads; `cellflip {}`. Formulas of every figure: README, section \"Speed against error\". Plots: {}.\n",
+        "{} of {} runs, {} threads, {}; `cellflip {}`. Formulas of every figure: README, section \"Speed against error\". Plots: {}.\n",
         results.len(),
         specs.len(),
         rayon::current_num_threads(),
+        crate::sim::transfer::grid_to_particles_mode(),
         command,
         figures.iter().map(|f| format!("[{f}]({f})")).collect::<Vec<_>>().join(", ")
     );

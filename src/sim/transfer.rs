@@ -283,6 +283,16 @@ pub fn grid_to_particles<const D: usize>(
     });
 }
 
+/// How [`grid_to_particles`] runs on this machine, for the headers of `bench` and `report`
+/// (the four-lane code is about twice as fast).
+pub fn grid_to_particles_mode() -> &'static str {
+    #[cfg(target_arch = "x86_64")]
+    if crate::grid::lanes::cpu_has_lanes() {
+        return "grid to particles 4 particles at a time (AVX2)";
+    }
+    "grid to particles 1 particle at a time (no AVX2)"
+}
+
 /// [`grid_to_particles`] four particles at a time, one per lane (`grid::lanes`): the same
 /// operations per particle, so the same bits.
 #[cfg(target_arch = "x86_64")]
