@@ -260,7 +260,11 @@ pub fn grid_to_particles<const D: usize>(
     // read once per chunk rather than once per particle.
     chunks.for_each(|((vel, pos), at)| {
         #[cfg(target_arch = "x86_64")]
-        let done = lanes::blend(grid, new, old, blend, vel, pos, at);
+        let done = match crate::grid::lanes::available(grid) {
+            // SAFETY: the CPU has AVX2, checked just above.
+            true => unsafe { lanes::blend(grid, new, old, blend, vel, pos, at) },
+            false => 0,
+        };
         #[cfg(not(target_arch = "x86_64"))]
         let done = 0;
         for ((v, x), at) in vel[done..]
@@ -300,26 +304,13 @@ mod lanes {
     use super::{limited, Blend, MacField};
     use crate::grid::{Grid, Vector};
 
-    /// Blends the particles of whole groups of four and returns how many it did (none without
-    /// AVX2); the caller does the rest one by one.
-    pub fn blend<const D: usize>(
-        grid: &Grid<D>,
-        new: &MacField<D>,
-        old: &MacField<D>,
-        blend: Blend,
-        vel: &mut [Vector<D>],
-        pos: &[Vector<D>],
-        at: &mut [Vector<D>],
-    ) -> usize {
-        if !crate::grid::lanes::available(grid) {
-            return 0;
-        }
-        // SAFETY: the CPU has AVX2, checked just above.
-        unsafe { blend_avx2(grid, new, old, blend, vel, pos, at) }
-    }
-
+    /// Blends the particles of whole groups of four and returns how many it did; the caller
+    /// does the rest one by one.
+    ///
+    /// # Safety
+    /// Only on a CPU with AVX2 (see [`crate::grid::lanes::available`]).
     #[target_feature(enable = "avx2")]
-    fn blend_avx2<const D: usize>(
+    pub fn blend<const D: usize>(
         grid: &Grid<D>,
         new: &MacField<D>,
         old: &MacField<D>,

@@ -229,6 +229,11 @@ impl ArcCache {
         }
     }
 
+    /// Whether any arcs were built: before that there is nothing to invalidate.
+    fn built(&self) -> bool {
+        !self.stale.is_empty()
+    }
+
     /// Marks bin `b`'s arcs for a rebuild at their next use.
     #[inline]
     fn invalidate(&mut self, b: u32) {
@@ -242,7 +247,7 @@ impl ArcCache {
     /// outside a rebuild.
     #[inline]
     fn refresh(&mut self, v: usize, arc_of: &mut [u32], fill: impl FnOnce(&mut ArcList<'_>)) {
-        if self.stale.is_empty() {
+        if !self.built() {
             self.arcs = vec![vec![]; self.bins];
             self.stale = vec![true; self.bins];
         }
@@ -600,7 +605,7 @@ impl<'a> Network<'a> {
         self.out_arcs.invalidate(from);
         self.out_arcs.invalidate(to);
         let item = self.cand_item[to_cand] as usize;
-        if !self.in_arcs.stale.is_empty() {
+        if self.in_arcs.built() {
             for &b in &self.p.cand_bin[self.p.candidates(item)] {
                 self.in_arcs.invalidate(b);
             }
