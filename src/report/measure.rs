@@ -303,6 +303,7 @@ pub fn comparison_series(results: &[Measured]) -> Vec<ComparisonSeries<'_>> {
         .map(|m| ComparisonSeries {
             scene: &m.spec.label,
             method: m.spec.method.name(),
+            color: super::plots::method_rgb(m.spec.method),
             res: m.res,
             seed: m.seed,
             volume: &m.volume,
