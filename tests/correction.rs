@@ -59,7 +59,7 @@ fn random_instance<const D: usize>(
 
 fn agree_on_random_instances<const D: usize>(count: usize, seed: u64) {
     let mut rng = StdRng::seed_from_u64(seed);
-    let mut constrained = 0;
+    let (mut constrained, mut halved_instances) = (0, 0);
     for n in 0..count {
         let (g, x_bar, x_hat, solid, mu) = random_instance::<D>(&mut rng, n % 2 == 0);
         let prev = Markings::compute(&g, &x_bar, &solid);
@@ -93,12 +93,32 @@ fn agree_on_random_instances<const D: usize>(count: usize, seed: u64) {
             (ow - os).abs() <= 1e-9 * os.abs().max(1.0),
             "instance {n} ({D}D, mu {mu}): warm flow {ow} vs simplex {os}"
         );
+        // Halved (one or two levels, at any size), the same optimum again.
+        let halving = min_cost_flow::Halving {
+            levels: 1 + n as u32 % 2,
+            min_items: 0,
+        };
+        let halved = min_cost_flow::solve_halved(a, &prices, halving)
+            .unwrap_or_else(|e| panic!("instance {n}, halved: {e}"));
+        a.check(&halved.choice)
+            .unwrap_or_else(|e| panic!("instance {n}, halved: {e}"));
+        let oh = a.objective(&halved.choice);
+        assert!(
+            (oh - os).abs() <= 1e-9 * os.abs().max(1.0),
+            "instance {n} ({D}D, mu {mu}): halved {oh} vs simplex {os}"
+        );
         constrained += (stats.augmentations > 0) as usize;
+        halved_instances += (halved.stats.halvings > 0) as usize;
     }
-    // Most instances must actually exercise the repair, or the test proves little.
+    // Most instances must actually exercise the repair and the halving, or the test proves
+    // little.
     assert!(
         constrained > count / 2,
         "only {constrained} of {count} instances had conflicts"
+    );
+    assert!(
+        halved_instances > count / 2,
+        "only {halved_instances} of {count} instances were halved"
     );
 }
 
@@ -161,6 +181,19 @@ fn collapsing_column<const D: usize>(width: usize, height: usize, mu: u32) {
         "{D}D column: warm {:?} vs cold {stats:?}",
         warm.stats
     );
+    // Halved across the column's floor, where the excess starts, the optimum again.
+    let halving = min_cost_flow::Halving {
+        levels: 1,
+        min_items: 0,
+    };
+    let halved = min_cost_flow::solve_halved(a, &vec![0.0; a.bins()], halving).unwrap();
+    a.check(&halved.choice).unwrap();
+    let oh = a.objective(&halved.choice);
+    assert!(
+        (oh - os).abs() <= 1e-9 * os.abs().max(1.0),
+        "{D}D column: halved {oh} vs {os}"
+    );
+    assert_eq!(halved.stats.halvings, 1, "{D}D column: {:?}", halved.stats);
 }
 
 #[test]

@@ -20,6 +20,10 @@
 //! the conflicts, not with the number of items. Ties break by node index: results are
 //! deterministic.
 
+mod halving;
+
+pub use halving::{solve_halved, Halving, HALVING};
+use rayon::prelude::*;
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 use std::ops::Range;
@@ -129,6 +133,8 @@ pub struct FlowStats {
     pub overfull_bins: usize,
     /// Bins under their lower bound at the start.
     pub underfull_bins: usize,
+    /// Problems split in two by [`solve_halved`] (the whole one and any halves halved again).
+    pub halvings: usize,
 }
 
 /// The problem has no feasible assignment: a search from `bin` found no way to repair it.
@@ -708,6 +714,8 @@ pub fn solve_warm(p: &BoundedAssignment, prices: &[f64]) -> Result<Solution, Inf
 /// Every item's cheapest candidate under bin `prices` (cost plus price; ties go to the first).
 fn priced_choice(p: &BoundedAssignment, prices: &[f64]) -> Vec<u32> {
     (0..p.items())
+        .into_par_iter()
+        .with_min_len(4096)
         .map(|i| {
             let priced = |k: usize| p.cand_cost[k] + prices[p.cand_bin[k] as usize];
             p.candidates(i)

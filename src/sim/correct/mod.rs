@@ -51,9 +51,16 @@ impl Solver {
         warm: Option<&[f64]>,
     ) -> Result<Solved, String> {
         match self {
-            Solver::Flow => match warm {
-                Some(prices) => min_cost_flow::solve_warm(p, prices),
-                None => min_cost_flow::solve_priced(p),
+            Solver::Flow => {
+                let cold;
+                let prices = match warm {
+                    Some(prices) => prices,
+                    None => {
+                        cold = vec![0.0; p.bins()];
+                        &cold
+                    }
+                };
+                min_cost_flow::solve_halved(p, prices, min_cost_flow::HALVING)
             }
             .map(|s| Solved {
                 choice: s.choice,
