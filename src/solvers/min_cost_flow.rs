@@ -323,6 +323,81 @@ struct Network<'a> {
     stats: FlowStats,
 }
 
+/// Items per block when a loop over items is split between threads.
+const ITEM_BLOCK: usize = 4096;
+
+/// The item of every candidate, filled in parallel over blocks of items.
+fn item_of_candidates(p: &BoundedAssignment) -> Vec<u32> {
+    let mut cand_item = vec![0u32; p.cand_bin.len()];
+    let mut blocks = vec![];
+    let mut rest = cand_item.as_mut_slice();
+    for first in (0..p.items()).step_by(ITEM_BLOCK) {
+        let items = first..(first + ITEM_BLOCK).min(p.items());
+        let len = p.item_start[items.end] - p.item_start[first];
+        let (block, tail) = std::mem::take(&mut rest).split_at_mut(len);
+        blocks.push((items, block));
+        rest = tail;
+    }
+    blocks.into_par_iter().for_each(|(items, block)| {
+        let base = p.item_start[items.start];
+        for i in items {
+            let ks = p.candidates(i);
+            block[ks.start - base..ks.end - base].fill(i as u32);
+        }
+    });
+    cand_item
+}
+
+/// The candidates into each bin, in increasing order: `cands[start[b]..start[b + 1]]`. A
+/// counting sort, split between threads by ranges of bins: each reads every candidate and
+/// writes those of its own bins, so every output slice has one writer.
+fn candidates_by_bin(p: &BoundedAssignment) -> (Vec<usize>, Vec<u32>) {
+    let bins = p.bins();
+    let counts = (p.cand_bin.par_chunks(1 << 16))
+        .fold(
+            || vec![0usize; bins],
+            |mut n, chunk| {
+                chunk.iter().for_each(|&b| n[b as usize] += 1);
+                n
+            },
+        )
+        .reduce_with(|mut a, b| {
+            a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
+            a
+        })
+        .unwrap_or_else(|| vec![0; bins]);
+    let mut start = Vec::with_capacity(bins + 1);
+    start.push(0);
+    for n in counts {
+        start.push(start.last().unwrap() + n);
+    }
+    let mut cands = vec![0u32; p.cand_bin.len()];
+    let pieces = rayon::current_num_threads().clamp(1, bins.max(1));
+    let mut slices = vec![];
+    let mut rest = cands.as_mut_slice();
+    for j in 0..pieces {
+        let range = bins * j / pieces..bins * (j + 1) / pieces;
+        let len = start[range.end] - start[range.start];
+        let (slice, tail) = std::mem::take(&mut rest).split_at_mut(len);
+        slices.push((range, slice));
+        rest = tail;
+    }
+    slices.into_par_iter().for_each(|(range, slice)| {
+        let base = start[range.start];
+        let mut fill: Vec<usize> = start[range.clone()].iter().map(|s| s - base).collect();
+        for (k, &b) in p.cand_bin.iter().enumerate() {
+            if let Some(at) = (b as usize)
+                .checked_sub(range.start)
+                .and_then(|r| fill.get_mut(r))
+            {
+                slice[*at] = k as u32;
+                *at += 1;
+            }
+        }
+    });
+    (start, cands)
+}
+
 /// The cheapest candidate of every item (ties go to the first): optimal when bounds are ignored.
 fn cheapest_choice(p: &BoundedAssignment) -> Vec<u32> {
     (0..p.items())
@@ -338,25 +413,8 @@ impl<'a> Network<'a> {
     /// The network at assignment `choice`, with zero potentials.
     fn new(p: &'a BoundedAssignment, choice: Vec<u32>) -> Self {
         let bins = p.bins();
-        let mut cand_item = vec![0u32; p.cand_bin.len()];
-        for i in 0..p.items() {
-            cand_item[p.candidates(i)]
-                .iter_mut()
-                .for_each(|x| *x = i as u32);
-        }
-        let mut bin_start = vec![0usize; bins + 1];
-        for &b in &p.cand_bin {
-            bin_start[b as usize + 1] += 1;
-        }
-        for b in 0..bins {
-            bin_start[b + 1] += bin_start[b];
-        }
-        let mut fill = bin_start.clone();
-        let mut bin_cands = vec![0u32; p.cand_bin.len()];
-        for (k, &b) in p.cand_bin.iter().enumerate() {
-            bin_cands[fill[b as usize]] = k as u32;
-            fill[b as usize] += 1;
-        }
+        let cand_item = item_of_candidates(p);
+        let (bin_start, bin_cands) = candidates_by_bin(p);
         let mut bin_items: Vec<Vec<u32>> = vec![vec![]; bins];
         let mut slot = vec![0u32; choice.len()];
         for (item, &k) in choice.iter().enumerate() {
@@ -876,6 +934,26 @@ mod tests {
             "the tighter problem costs more"
         );
         assert!(min_reduced_cost(&q, &warm.choice, &warm.prices) >= -1e-12);
+    }
+
+    #[test]
+    fn candidate_lists_match_a_serial_count() {
+        // Enough items for several blocks, and bins in more ranges than threads.
+        let p = ring(3 * ITEM_BLOCK + 17, 97);
+        let mut items = vec![];
+        let mut by_bin = vec![vec![]; p.bins()];
+        for i in 0..p.items() {
+            for k in p.candidates(i) {
+                items.push(i as u32);
+                by_bin[p.cand_bin[k] as usize].push(k as u32);
+            }
+        }
+        assert_eq!(item_of_candidates(&p), items);
+        let (start, cands) = candidates_by_bin(&p);
+        for (b, list) in by_bin.iter().enumerate() {
+            assert_eq!(&cands[start[b]..start[b + 1]], list.as_slice(), "bin {b}");
+        }
+        assert_eq!(start[p.bins()], p.cand_bin.len());
     }
 
     #[test]
