@@ -773,14 +773,29 @@ pub fn solve_warm(p: &BoundedAssignment, prices: &[f64]) -> Result<Solution, Inf
 fn priced_choice(p: &BoundedAssignment, prices: &[f64]) -> Vec<u32> {
     (0..p.items())
         .into_par_iter()
-        .with_min_len(4096)
-        .map(|i| {
-            let priced = |k: usize| p.cand_cost[k] + prices[p.cand_bin[k] as usize];
-            p.candidates(i)
-                .min_by(|&a, &b| priced(a).total_cmp(&priced(b)).then(a.cmp(&b)))
-                .expect("every item has a candidate") as u32
-        })
+        .with_min_len(ITEM_BLOCK)
+        .map(|i| PricedCosts { p, prices }.cheapest(i) as u32)
         .collect()
+}
+
+/// Candidate costs plus their bins' prices.
+#[derive(Clone, Copy)]
+struct PricedCosts<'a> {
+    p: &'a BoundedAssignment,
+    prices: &'a [f64],
+}
+
+impl PricedCosts<'_> {
+    fn of(self, k: usize) -> f64 {
+        self.p.cand_cost[k] + self.prices[self.p.cand_bin[k] as usize]
+    }
+
+    /// Item `i`'s cheapest candidate (ties go to the first).
+    fn cheapest(self, i: usize) -> usize {
+        (self.p.candidates(i))
+            .min_by(|&a, &b| self.of(a).total_cmp(&self.of(b)).then(a.cmp(&b)))
+            .expect("every item has a candidate")
+    }
 }
 
 /// Successive shortest paths: sends every bin's excess away, then fills every bin's deficit.

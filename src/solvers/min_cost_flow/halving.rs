@@ -15,8 +15,8 @@
 //! the same on any machine. A half that is infeasible on its own (a bin with a lower bound
 //! that only items of the other half can fill) sends the problem to the whole solver.
 
-use super::PRICE_TIE;
 use super::{priced_choice, repair, solve_warm, BoundedAssignment, Infeasible, Network, Solution};
+use super::{PricedCosts, ITEM_BLOCK, PRICE_TIE};
 use rayon::prelude::*;
 use std::ops::Range;
 
@@ -192,17 +192,13 @@ impl Half {
 /// reduced cost: what the repair needs of its start. Within a half its prices already certify
 /// its choice; only items near the cut move.
 fn take_cheaper_candidates(p: &BoundedAssignment, choice: &mut [u32], prices: &[f64]) {
-    choice
-        .par_iter_mut()
-        .enumerate()
-        .with_min_len(4096)
-        .for_each(|(i, k0)| {
-            let priced = |k: usize| p.cand_cost[k] + prices[p.cand_bin[k] as usize];
-            let best = (p.candidates(i))
-                .min_by(|&a, &b| priced(a).total_cmp(&priced(b)).then(a.cmp(&b)))
-                .expect("every item has a candidate");
-            if priced(best) < priced(*k0 as usize) - PRICE_TIE {
-                *k0 = best as u32;
+    let priced = PricedCosts { p, prices };
+    (choice.par_iter_mut().enumerate())
+        .with_min_len(ITEM_BLOCK)
+        .for_each(|(i, k)| {
+            let best = priced.cheapest(i);
+            if priced.of(best) < priced.of(*k as usize) - PRICE_TIE {
+                *k = best as u32;
             }
         });
 }
