@@ -764,7 +764,17 @@ pub fn solve_from(p: &BoundedAssignment, start: Solution) -> Result<Solution, In
 /// valid; good ones leave little to repair.
 pub fn solve_warm(p: &BoundedAssignment, prices: &[f64]) -> Result<Solution, Infeasible> {
     assert_eq!(prices.len(), p.bins(), "one price per bin");
-    let mut net = Network::new(p, priced_choice(p, prices));
+    repair_from(p, priced_choice(p, prices), prices)
+}
+
+/// Repairs `start` under `prices` (one per bin, relative to the sink's), which must give every
+/// move of an item a non-negative reduced cost (as [`priced_choice`] does).
+fn repair_from(
+    p: &BoundedAssignment,
+    start: Vec<u32>,
+    prices: &[f64],
+) -> Result<Solution, Infeasible> {
+    let mut net = Network::new(p, start);
     net.set_prices(prices, 0.0);
     repair(net)
 }

@@ -15,7 +15,7 @@
 //! the same on any machine. A half that is infeasible on its own (a bin with a lower bound
 //! that only items of the other half can fill) sends the problem to the whole solver.
 
-use super::{priced_choice, repair, solve_warm, BoundedAssignment, Infeasible, Network, Solution};
+use super::{priced_choice, repair_from, solve_warm, BoundedAssignment, Infeasible, Solution};
 use super::{PricedCosts, ITEM_BLOCK, PRICE_TIE};
 use rayon::prelude::*;
 use std::ops::Range;
@@ -55,7 +55,7 @@ pub fn solve_halved(
     let start = priced_choice(p, prices);
     let conflicts = Conflicts::of(p, &start);
     let Some(cut) = conflicts.halved_at() else {
-        return solve_warm(p, prices);
+        return repair_from(p, start, prices);
     };
     let inner = Halving {
         levels: halving.levels - 1,
@@ -67,7 +67,7 @@ pub fn solve_halved(
         || Half::solve(p, &start, prices, ranges[1].clone(), inner),
     );
     let (Ok(low), Ok(high)) = (low, high) else {
-        return solve_warm(p, prices);
+        return repair_from(p, start, prices);
     };
     let mut choice = start;
     let mut merged = vec![0.0; p.bins()];
@@ -75,9 +75,7 @@ pub fn solve_halved(
         half.write(&mut choice, &mut merged);
     }
     take_cheaper_candidates(p, &mut choice, &merged);
-    let mut net = Network::new(p, choice);
-    net.set_prices(&merged, 0.0);
-    let mut solution = repair(net)?;
+    let mut solution = repair_from(p, choice, &merged)?;
     solution.stats.overfull_bins = conflicts.overfull_bins;
     solution.stats.underfull_bins = conflicts.underfull_bins;
     solution.stats.halvings += 1;
