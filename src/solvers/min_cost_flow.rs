@@ -79,12 +79,9 @@ impl BoundedAssignment {
 
     /// Bins whose bounds can bind: a lower bound, or more candidates than room.
     pub fn binding_bins(&self) -> Vec<bool> {
-        let mut arcs = vec![0u32; self.bins()];
-        for &b in &self.cand_bin {
-            arcs[b as usize] += 1;
-        }
+        let arcs = candidates_per_bin(self);
         (0..self.bins())
-            .map(|b| self.lower[b] > 0 || arcs[b] > self.upper[b])
+            .map(|b| self.lower[b] > 0 || arcs[b] > self.upper[b] as usize)
             .collect()
     }
 
@@ -348,12 +345,10 @@ fn item_of_candidates(p: &BoundedAssignment) -> Vec<u32> {
     cand_item
 }
 
-/// The candidates into each bin, in increasing order: `cands[start[b]..start[b + 1]]`. A
-/// counting sort, split between threads by ranges of bins: each reads every candidate and
-/// writes those of its own bins, so every output slice has one writer.
-fn candidates_by_bin(p: &BoundedAssignment) -> (Vec<usize>, Vec<u32>) {
+/// The number of candidates into each bin, counted in parallel over chunks of candidates.
+fn candidates_per_bin(p: &BoundedAssignment) -> Vec<usize> {
     let bins = p.bins();
-    let counts = (p.cand_bin.par_chunks(1 << 16))
+    (p.cand_bin.par_chunks(1 << 16))
         .fold(
             || vec![0usize; bins],
             |mut n, chunk| {
@@ -365,7 +360,15 @@ fn candidates_by_bin(p: &BoundedAssignment) -> (Vec<usize>, Vec<u32>) {
             a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
             a
         })
-        .unwrap_or_else(|| vec![0; bins]);
+        .unwrap_or_else(|| vec![0; bins])
+}
+
+/// The candidates into each bin, in increasing order: `cands[start[b]..start[b + 1]]`. A
+/// counting sort, split between threads by ranges of bins: each reads every candidate and
+/// writes those of its own bins, so every output slice has one writer.
+fn candidates_by_bin(p: &BoundedAssignment) -> (Vec<usize>, Vec<u32>) {
+    let bins = p.bins();
+    let counts = candidates_per_bin(p);
     let mut start = Vec::with_capacity(bins + 1);
     start.push(0);
     for n in counts {

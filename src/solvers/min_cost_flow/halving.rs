@@ -4,19 +4,19 @@
 //! bounds) are halved; the correction numbers its bins in cell order, last axis slowest, so a
 //! cut is a plane of cells across that axis (in dam-3d, across the column's width). Each range
 //! is solved on its own with the items that start in it, restricted to their candidates in the
-//! range, the two side by side (and each halved again, `levels` deep). The whole problem is then
-//! repaired from the halves' choices and prices by the solver's own successive shortest paths:
-//! an item that has a cheaper candidate across the cut under those prices first takes it, so
-//! every move starts at a non-negative reduced cost, and the result is exact whatever the
-//! halves found. The halves only make the start good; what is left to repair is what crosses
-//! the cut.
+//! range or in a bin that cannot bind (shared by both), the two side by side (and each halved
+//! again, `levels` deep). The whole problem is then repaired from the halves' choices and
+//! prices by the solver's own successive shortest paths: an item that has a cheaper candidate
+//! across the cut under those prices first takes it, so every move starts at a non-negative
+//! reduced cost, and the result is exact whatever the halves found. The halves only make the
+//! start good; what is left to repair is what crosses the cut.
 //!
 //! The split is fixed by the problem alone (not by the number of threads), so the result is
 //! the same on any machine. A half that is infeasible on its own (a bin with a lower bound
 //! that only items of the other half can fill) sends the problem to the whole solver.
 
 use super::{priced_choice, repair_from, solve_warm, BoundedAssignment, Infeasible, Solution};
-use super::{PricedCosts, ITEM_BLOCK, PRICE_TIE};
+use super::{PricedCosts, ITEM_BLOCK, NONE, PRICE_TIE};
 use rayon::prelude::*;
 use std::ops::Range;
 
@@ -62,9 +62,16 @@ pub fn solve_halved(
         ..halving
     };
     let ranges = [0..cut, cut..p.bins()];
+    let free = p.binding_bins().iter().map(|&b| !b).collect::<Vec<_>>();
+    let whole = Whole {
+        p,
+        start: &start,
+        prices,
+        free: &free,
+    };
     let (low, high) = rayon::join(
-        || Half::solve(p, &start, prices, ranges[0].clone(), inner),
-        || Half::solve(p, &start, prices, ranges[1].clone(), inner),
+        || Half::solve(whole, ranges[0].clone(), inner),
+        || Half::solve(whole, ranges[1].clone(), inner),
     );
     let (Ok(low), Ok(high)) = (low, high) else {
         return repair_from(p, start, prices);
@@ -123,6 +130,16 @@ impl Conflicts {
     }
 }
 
+/// What both halves read of the whole problem.
+#[derive(Clone, Copy)]
+struct Whole<'a> {
+    p: &'a BoundedAssignment,
+    start: &'a [u32],
+    prices: &'a [f64],
+    /// The bins that cannot bind ([`BoundedAssignment::binding_bins`]), which both halves share.
+    free: &'a [bool],
+}
+
 /// One range of bins solved on its own.
 struct Half {
     /// The range's bins.
@@ -135,35 +152,48 @@ struct Half {
 }
 
 impl Half {
-    /// Solves the items of `start` in bins `bins`, with their candidates in `bins`.
-    fn solve(
-        p: &BoundedAssignment,
-        start: &[u32],
-        prices: &[f64],
-        bins: Range<usize>,
-        halving: Halving,
-    ) -> Result<Self, Infeasible> {
-        let inside = |k: usize| bins.contains(&(p.cand_bin[k] as usize));
+    /// Solves the items that start in bins `bins`, with their candidates in `bins` or in a bin
+    /// that cannot bind. Such a bin has room for all its candidates, so the two halves can
+    /// share it without overfilling it, and a half keeps the room next to it across the cut.
+    /// (An exported problem read back numbers these bins after all the others, so without
+    /// them one half would lose its room.) The half's bins are the range's, then the shared
+    /// ones outside it as they are met.
+    fn solve(whole: Whole<'_>, bins: Range<usize>, halving: Halving) -> Result<Self, Infeasible> {
+        let Whole { p, start, .. } = whole;
+        let mut bin_of = vec![NONE; p.bins()];
+        bins.clone()
+            .for_each(|b| bin_of[b] = (b - bins.start) as u32);
         let mut q = BoundedAssignment {
             item_start: vec![0],
             lower: p.lower[bins.clone()].to_vec(),
             upper: p.upper[bins.clone()].to_vec(),
             ..Default::default()
         };
+        let mut q_prices = whole.prices[bins.clone()].to_vec();
         let (mut items, mut original) = (vec![], vec![]);
         for (i, &k) in start.iter().enumerate() {
-            if !inside(k as usize) {
+            if !bins.contains(&(p.cand_bin[k as usize] as usize)) {
                 continue;
             }
             items.push(i as u32);
-            for k in p.candidates(i).filter(|&k| inside(k)) {
-                q.cand_bin.push(p.cand_bin[k] - bins.start as u32);
+            for k in p.candidates(i) {
+                let b = p.cand_bin[k] as usize;
+                if bin_of[b] == NONE {
+                    if !whole.free[b] {
+                        continue;
+                    }
+                    bin_of[b] = q.lower.len() as u32;
+                    q.lower.push(p.lower[b]);
+                    q.upper.push(p.upper[b]);
+                    q_prices.push(whole.prices[b]);
+                }
+                q.cand_bin.push(bin_of[b]);
                 q.cand_cost.push(p.cand_cost[k]);
                 original.push(k as u32);
             }
             q.item_start.push(q.cand_bin.len());
         }
-        let solution = solve_halved(&q, &prices[bins.clone()], halving)?;
+        let solution = solve_halved(&q, &q_prices, halving)?;
         Ok(Self {
             bins,
             items,
@@ -172,8 +202,8 @@ impl Half {
         })
     }
 
-    /// Writes the half's choices into `choice` and its prices, relative to its sink's, into
-    /// `prices`.
+    /// Writes the half's choices into `choice` and the prices of its range, relative to its
+    /// sink's, into `prices`.
     fn write(&self, choice: &mut [u32], prices: &mut [f64]) {
         let s = &self.solution;
         for (&i, &k) in self.items.iter().zip(&s.choice) {
@@ -240,5 +270,30 @@ mod tests {
         assert_eq!(c.units, vec![2, 0, 2]);
         assert_eq!((c.overfull_bins, c.underfull_bins), (1, 1));
         assert_eq!(c.halved_at(), Some(1));
+    }
+
+    #[test]
+    fn both_halves_share_a_bin_that_cannot_bind() {
+        // Bins 0 and 2 (room for 1) each start with two items, so the cut falls after bin 0;
+        // bin 3 has room for every candidate into it, and is the only way out of both.
+        let p = BoundedAssignment {
+            item_start: vec![0, 2, 4, 6, 8],
+            cand_bin: vec![0, 3, 0, 3, 2, 3, 2, 3],
+            cand_cost: vec![0.0, 1.0, 0.0, 2.0, 0.0, 1.0, 0.0, 1.5],
+            lower: vec![0; 4],
+            upper: vec![1, 1, 1, 10],
+        };
+        let halving = Halving {
+            levels: 1,
+            min_items: 0,
+        };
+        let s = solve_halved(&p, &[0.0; 4], halving).unwrap();
+        assert_eq!(
+            s.stats.halvings, 1,
+            "the half before the cut is feasible with bin 3"
+        );
+        p.check(&s.choice).unwrap();
+        assert_eq!(p.objective(&s.choice), 2.0);
+        assert_eq!(s.choice, vec![1, 2, 5, 6]);
     }
 }
