@@ -803,11 +803,19 @@ impl PricedCosts<'_> {
         self.p.cand_cost[k] + self.prices[self.p.cand_bin[k] as usize]
     }
 
-    /// Item `i`'s cheapest candidate (ties go to the first).
+    /// Item `i`'s cheapest candidate (ties go to the first). One pass that prices each
+    /// candidate once (`min_by` priced both sides of every comparison).
     fn cheapest(self, i: usize) -> usize {
-        (self.p.candidates(i))
-            .min_by(|&a, &b| self.of(a).total_cmp(&self.of(b)).then(a.cmp(&b)))
-            .expect("every item has a candidate")
+        let ks = self.p.candidates(i);
+        assert!(!ks.is_empty(), "every item has a candidate");
+        let mut best = (self.of(ks.start), ks.start);
+        for k in ks.start + 1..ks.end {
+            let c = self.of(k);
+            if c.total_cmp(&best.0).is_lt() {
+                best = (c, k);
+            }
+        }
+        best.1
     }
 }
 

@@ -52,7 +52,20 @@ pub fn solve_halved(
     if halving.levels == 0 || p.items() < halving.min_items {
         return solve_warm(p, prices);
     }
-    let start = priced_choice(p, prices);
+    halve_from(p, priced_choice(p, prices), prices, halving)
+}
+
+/// Solves `p` from `start`, every item's cheapest candidate under `prices` ([`priced_choice`]),
+/// its repair split by `halving`.
+fn halve_from(
+    p: &BoundedAssignment,
+    start: Vec<u32>,
+    prices: &[f64],
+    halving: Halving,
+) -> Result<Solution, Infeasible> {
+    if halving.levels == 0 || p.items() < halving.min_items {
+        return repair_from(p, start, prices);
+    }
     let conflicts = Conflicts::of(p, &start);
     let Some(cut) = conflicts.halved_at() else {
         return repair_from(p, start, prices);
@@ -170,13 +183,16 @@ impl Half {
             ..Default::default()
         };
         let mut q_prices = whole.prices[bins.clone()].to_vec();
-        let (mut items, mut original) = (vec![], vec![]);
-        for (i, &k) in start.iter().enumerate() {
-            if !bins.contains(&(p.cand_bin[k as usize] as usize)) {
+        let (mut items, mut original, mut q_start) = (vec![], vec![], vec![]);
+        for (i, &k0) in start.iter().enumerate() {
+            if !bins.contains(&(p.cand_bin[k0 as usize] as usize)) {
                 continue;
             }
             items.push(i as u32);
             for k in p.candidates(i) {
+                if k == k0 as usize {
+                    q_start.push(q.cand_bin.len() as u32);
+                }
                 let b = p.cand_bin[k] as usize;
                 if bin_of[b] == NONE {
                     if !whole.free[b] {
@@ -193,7 +209,9 @@ impl Half {
             }
             q.item_start.push(q.cand_bin.len());
         }
-        let solution = solve_halved(&q, &q_prices, halving)?;
+        // The item's cheapest candidate under the prices is still its cheapest of those kept,
+        // and the first of equals: the half's start is the whole one's.
+        let solution = halve_from(&q, q_start, &q_prices, halving)?;
         Ok(Self {
             bins,
             items,
