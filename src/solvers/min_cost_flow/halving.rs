@@ -15,7 +15,7 @@
 //! the same on any machine. A half that is infeasible on its own (a bin with a lower bound
 //! that only items of the other half can fill) sends the problem to the whole solver.
 
-use super::{priced_choice, repair_from, solve_warm, BoundedAssignment, Infeasible, Solution};
+use super::{priced_choice, repair_from, BoundedAssignment, Infeasible, Solution};
 use super::{PricedCosts, ITEM_BLOCK, NONE, PRICE_TIE};
 use rayon::prelude::*;
 use std::ops::Range;
@@ -43,15 +43,12 @@ pub const HALVING: Halving = Halving {
     min_items: 100_000,
 };
 
-/// Solves `p` exactly from `prices` (as [`solve_warm`]), its repair split by `halving`.
+/// Solves `p` exactly from `prices` (as [`super::solve_warm`]), its repair split by `halving`.
 pub fn solve_halved(
     p: &BoundedAssignment,
     prices: &[f64],
     halving: Halving,
 ) -> Result<Solution, Infeasible> {
-    if halving.levels == 0 || p.items() < halving.min_items {
-        return solve_warm(p, prices);
-    }
     halve_from(p, priced_choice(p, prices), prices, halving)
 }
 
