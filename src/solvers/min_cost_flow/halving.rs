@@ -173,14 +173,20 @@ impl Half {
         let mut bin_of = vec![NONE; p.bins()];
         bins.clone()
             .for_each(|b| bin_of[b] = (b - bins.start) as u32);
+        // Room for every item and candidate of the whole problem, so that nothing is copied as
+        // the lists grow; the pages a half does not fill are never touched.
+        let (n_items, n_cands) = (p.items(), p.cand_bin.len());
         let mut q = BoundedAssignment {
-            item_start: vec![0],
+            item_start: Vec::with_capacity(n_items + 1),
+            cand_bin: Vec::with_capacity(n_cands),
+            cand_cost: Vec::with_capacity(n_cands),
             lower: p.lower[bins.clone()].to_vec(),
             upper: p.upper[bins.clone()].to_vec(),
-            ..Default::default()
         };
+        q.item_start.push(0);
         let mut q_prices = whole.prices[bins.clone()].to_vec();
-        let (mut items, mut original, mut q_start) = (vec![], vec![], vec![]);
+        let mut original = Vec::with_capacity(n_cands);
+        let (mut items, mut q_start) = (Vec::with_capacity(n_items), Vec::with_capacity(n_items));
         for (i, &k0) in start.iter().enumerate() {
             if !bins.contains(&(p.cand_bin[k0 as usize] as usize)) {
                 continue;
