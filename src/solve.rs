@@ -47,8 +47,14 @@ pub fn solve(args: &SolveArgs) -> Result<()> {
                     let work = match solver {
                         Solver::Flow => {
                             format!(
-                                "  {} augmentations, {} nodes settled",
-                                work.augmentations, work.nodes_settled
+                                "  {} augmentations, {} nodes settled{}",
+                                work.augmentations,
+                                work.nodes_settled,
+                                match work.halvings {
+                                    0 => String::new(),
+                                    1 => " (halved)".to_string(),
+                                    h => format!(" (halved: {h} splits)"),
+                                }
                             )
                         }
                         Solver::Simplex => String::new(),
