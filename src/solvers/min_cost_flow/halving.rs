@@ -34,6 +34,11 @@ pub struct Halving {
 /// solver medians, alternating runs): at 140^3 (1.19 M items) 3.1 s whole, 2.1 s halved; at
 /// 100^3 (432,000) 406-419 ms against 354-364 ms; at 64^3 (111,188) 105-107 against 100-102 ms;
 /// at 50^3 (54,000) 22-23 against 26-27 ms, where the copies cost more than the halves save.
+/// A threshold of 40,000, measured once halves reused the whole start (`bench --steps 10..20`,
+/// two alternating runs): dam-3d 50^3 no band 22.9/23.2 -> 24.4/23.0 ms, its band problems
+/// 15.7/15.2 -> 13.0/12.0 ms, but dam-2d at 300^2 (64,800) 134/129 -> 174/181 ms, where the
+/// last axis is the vertical and the cut crosses the climbing excess; so 100,000 stays (at
+/// 500^2, 180,000 particles, halved 684/666 against 706/715 ms whole).
 /// Two levels (four quarters, two at a time) took 3.8 s on the exported 100^3 step 8 (`cellflip
 /// solve`), against 0.54 s with one level and 0.80 s whole: slabs 8 cells thick across the
 /// column leave most of its excess to the repairs after them (32,718 augmentations against
