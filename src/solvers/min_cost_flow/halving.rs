@@ -38,7 +38,7 @@ pub struct Halving {
 /// two alternating runs): dam-3d 50^3 no band 22.9/23.2 -> 24.4/23.0 ms, its band problems
 /// 15.7/15.2 -> 13.0/12.0 ms, but dam-2d at 300^2 (64,800) 134/129 -> 174/181 ms, where the
 /// last axis is the vertical and the cut crosses the climbing excess; so 100,000 stays (at
-/// 500^2, 180,000 particles, halved 684/666 against 706/715 ms whole).
+/// 500^2, 180,000 particles, halved 684/666 ms against 706/715 ms for the binary before halving).
 /// Two levels (four quarters, two at a time) took 3.8 s on the exported 100^3 step 8 (`cellflip
 /// solve`), against 0.54 s with one level and 0.80 s whole: slabs 8 cells thick across the
 /// column leave most of its excess to the repairs after them (32,718 augmentations against
