@@ -404,12 +404,21 @@ fn candidates_by_bin(p: &BoundedAssignment) -> (Vec<usize>, Vec<u32>) {
 /// The cheapest candidate of every item (ties go to the first): optimal when bounds are ignored.
 fn cheapest_choice(p: &BoundedAssignment) -> Vec<u32> {
     (0..p.items())
-        .map(|i| {
-            p.candidates(i)
-                .min_by(|&a, &b| p.cand_cost[a].total_cmp(&p.cand_cost[b]).then(a.cmp(&b)))
-                .expect("every item has a candidate") as u32
-        })
+        .map(|i| first_cheapest(p.candidates(i), |k| p.cand_cost[k]) as u32)
         .collect()
+}
+
+/// The candidate of `ks` with the least `cost` (the first of equals), each priced once.
+fn first_cheapest(ks: Range<usize>, cost: impl Fn(usize) -> f64) -> usize {
+    assert!(!ks.is_empty(), "every item has a candidate");
+    let mut best = (cost(ks.start), ks.start);
+    for k in ks.start + 1..ks.end {
+        let c = cost(k);
+        if c.total_cmp(&best.0).is_lt() {
+            best = (c, k);
+        }
+    }
+    best.1
 }
 
 impl<'a> Network<'a> {
@@ -803,19 +812,9 @@ impl PricedCosts<'_> {
         self.p.cand_cost[k] + self.prices[self.p.cand_bin[k] as usize]
     }
 
-    /// Item `i`'s cheapest candidate (ties go to the first). One pass that prices each
-    /// candidate once (`min_by` priced both sides of every comparison).
+    /// Item `i`'s cheapest candidate (ties go to the first).
     fn cheapest(self, i: usize) -> usize {
-        let ks = self.p.candidates(i);
-        assert!(!ks.is_empty(), "every item has a candidate");
-        let mut best = (self.of(ks.start), ks.start);
-        for k in ks.start + 1..ks.end {
-            let c = self.of(k);
-            if c.total_cmp(&best.0).is_lt() {
-                best = (c, k);
-            }
-        }
-        best.1
+        first_cheapest(self.p.candidates(i), |k| self.of(k))
     }
 }
 
@@ -851,7 +850,11 @@ mod tests {
     use super::*;
 
     /// Builds a problem from per-item lists of (bin, cost).
-    fn problem(items: &[&[(u32, f64)]], lower: &[u32], upper: &[u32]) -> BoundedAssignment {
+    pub(super) fn problem(
+        items: &[&[(u32, f64)]],
+        lower: &[u32],
+        upper: &[u32],
+    ) -> BoundedAssignment {
         let mut p = BoundedAssignment {
             item_start: vec![0],
             lower: lower.to_vec(),

@@ -259,6 +259,7 @@ fn take_cheaper_candidates(p: &BoundedAssignment, choice: &mut [u32], prices: &[
 
 #[cfg(test)]
 mod tests {
+    use super::super::tests::problem;
     use super::*;
 
     fn conflicts(units: &[u32]) -> Conflicts {
@@ -285,13 +286,16 @@ mod tests {
     #[test]
     fn the_start_counts_units_over_and_under_the_bounds() {
         // Items 0-2 start in bin 0 (room for 1), item 3 in bin 1; bin 2 must hold 2.
-        let p = BoundedAssignment {
-            item_start: vec![0, 2, 4, 6, 8],
-            cand_bin: vec![0, 2, 0, 2, 0, 1, 1, 2],
-            cand_cost: vec![0.0, 1.0, 0.0, 1.0, 0.0, 1.0, 0.0, 1.0],
-            lower: vec![0, 0, 2],
-            upper: vec![1, 3, 2],
-        };
+        let p = problem(
+            &[
+                &[(0, 0.0), (2, 1.0)],
+                &[(0, 0.0), (2, 1.0)],
+                &[(0, 0.0), (1, 1.0)],
+                &[(1, 0.0), (2, 1.0)],
+            ],
+            &[0, 0, 2],
+            &[1, 3, 2],
+        );
         let c = Conflicts::of(&p, &[0, 2, 4, 6]);
         assert_eq!(c.units, vec![2, 0, 2]);
         assert_eq!((c.overfull_bins, c.underfull_bins), (1, 1));
@@ -302,13 +306,16 @@ mod tests {
     fn both_halves_share_a_bin_that_cannot_bind() {
         // Bins 0 and 2 (room for 1) each start with two items, so the cut falls after bin 0;
         // bin 3 has room for every candidate into it, and is the only way out of both.
-        let p = BoundedAssignment {
-            item_start: vec![0, 2, 4, 6, 8],
-            cand_bin: vec![0, 3, 0, 3, 2, 3, 2, 3],
-            cand_cost: vec![0.0, 1.0, 0.0, 2.0, 0.0, 1.0, 0.0, 1.5],
-            lower: vec![0; 4],
-            upper: vec![1, 1, 1, 10],
-        };
+        let p = problem(
+            &[
+                &[(0, 0.0), (3, 1.0)],
+                &[(0, 0.0), (3, 2.0)],
+                &[(2, 0.0), (3, 1.0)],
+                &[(2, 0.0), (3, 1.5)],
+            ],
+            &[0; 4],
+            &[1, 1, 1, 10],
+        );
         let halving = Halving {
             levels: 1,
             min_items: 0,
