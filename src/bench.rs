@@ -3,12 +3,12 @@
 //! pass/fail test.
 
 use crate::cli::BenchArgs;
+use crate::methods::ccp::BandMode;
 use crate::methods::MethodOption;
 use crate::metrics::{median, Stage};
 use crate::runner::{Limit, Runner};
 use crate::scene::{Overrides, Scene};
-use crate::sim::correct::band::BandMode;
-use crate::sim::Simulation;
+use crate::simulation::Simulation;
 use anyhow::{bail, Result};
 use std::time::Duration;
 
@@ -61,7 +61,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
                 2 => bench_dim::<2>(&scene, args)?,
                 _ => bench_dim::<3>(&scene, args)?,
             };
-            results.push((scene.method.band.name(), m));
+            results.push((scene.method.ccp.band.name(), m));
         }
         print_band_ratios(res, &results);
         scaling.extend(results.into_iter().next().map(|(_, m)| (res, m)));
@@ -82,9 +82,9 @@ struct Measured {
 }
 
 fn bench_dim<const D: usize>(scene: &Scene, args: &BenchArgs) -> Result<Measured> {
-    let mut config = scene.config::<D>();
-    config.method.cross_check = args.cross_check;
-    let mut runner = Runner::new(Simulation::<D>::new(config));
+    let mut method = scene.method.clone();
+    method.ccp.cross_check = args.cross_check;
+    let mut runner = Runner::new(Simulation::<D>::new(scene.config::<D>(), &method));
     runner.run(Limit::Steps(args.warmup), || false, |_, _| Ok(()))?;
     runner.reset_summary();
     runner.run(

@@ -1,10 +1,10 @@
 //! Command-line definitions (clap) and nothing else.
 
+use crate::methods::ccp::BandMode;
+use crate::methods::ccp::Directions;
+use crate::methods::ccp::Solver;
 use crate::methods::MethodKind;
 use crate::record::Moves;
-use crate::sim::correct::band::BandMode;
-use crate::sim::correct::problem::Directions;
-use crate::sim::correct::Solver;
 use crate::sim::solids::ObstacleMode;
 use clap::{Args, Parser, Subcommand};
 use std::path::PathBuf;

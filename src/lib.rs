@@ -14,6 +14,7 @@ pub const PAR_GRAIN_PARTICLES: usize = 1024;
 
 pub mod bench;
 pub mod cli;
+pub mod draw;
 pub mod grid;
 pub mod interrupt;
 pub mod methods;
@@ -26,6 +27,7 @@ pub mod run;
 pub mod runner;
 pub mod scene;
 pub mod sim;
+pub mod simulation;
 pub mod solve;
 pub mod solvers;
 pub mod validation;

@@ -7,7 +7,7 @@ use crate::methods::MethodOption;
 use crate::record::{Drawing, Recorder};
 use crate::runner::{Limit, Runner};
 use crate::scene::{Overrides, Scene};
-use crate::sim::Simulation;
+use crate::simulation::Simulation;
 use anyhow::{anyhow, bail, Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::path::{Path, PathBuf};
@@ -111,13 +111,13 @@ fn simulate<const D: usize>(
     out: Option<&Path>,
     args: &RunArgs,
 ) -> Result<(Runner<D>, Result<()>)> {
-    let mut config = scene.config::<D>();
-    config.method.export_lp = match args.export_lp {
+    let mut method = scene.method.clone();
+    method.ccp.export_lp = match args.export_lp {
         Some(n) => Some((n, mps_path(scene, out, n)?)),
         None => None,
     };
-    config.method.cross_check = args.cross_check;
-    let sim = Simulation::<D>::new(config);
+    method.ccp.cross_check = args.cross_check;
+    let sim = Simulation::<D>::new(scene.config::<D>(), &method);
     if let Some(r) = recorder {
         r.log_setup(&sim);
         r.log_step(&sim, None, true)?;

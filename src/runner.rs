@@ -3,7 +3,7 @@
 //! happened from one [`Summary`], printed in one place ([`Summary::print`]).
 
 use crate::metrics::{median, Stage, StageTimes};
-use crate::sim::{Simulation, StepReport};
+use crate::simulation::{Simulation, StepReport};
 use anyhow::Result;
 use std::time::{Duration, Instant};
 
@@ -89,7 +89,7 @@ impl Summary {
         for (o, ob) in self.obstacles.iter_mut().zip(&s.solids.obstacles) {
             o.1 = ob.bottom() * s.config.cell_size_m;
         }
-        self.method_lines = sim.method.summary();
+        self.method_lines = sim.summary.lines();
     }
 
     /// Total time of a stage over the run.
@@ -212,6 +212,6 @@ impl<const D: usize> Runner<D> {
     /// Forgets what was measured so far, the method's totals too (after a warm-up).
     pub fn reset_summary(&mut self) {
         self.summary = Summary::new(&self.sim);
-        self.sim.method.reset_summary();
+        self.sim.reset_summary();
     }
 }

@@ -3,9 +3,9 @@
 //! checked against the one the file records.
 
 use crate::cli::SolveArgs;
+use crate::methods::ccp::Solver;
 use crate::metrics::median;
 use crate::outln;
-use crate::sim::correct::Solver;
 use crate::solvers::mps;
 use anyhow::{Context, Result};
 use std::time::Instant;
@@ -34,7 +34,7 @@ pub fn solve(args: &SolveArgs) -> Result<()> {
             }
             let ms = median(&times).expect("at least one solve");
             match last.expect("at least one solve") {
-                Ok(crate::sim::correct::Solved { choice, work, .. }) => {
+                Ok(crate::methods::ccp::correct::Solved { choice, work, .. }) => {
                     p.check(&choice)
                         .map_err(anyhow::Error::msg)
                         .with_context(|| format!("{}: {} solver", path.display(), solver.name()))?;

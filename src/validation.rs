@@ -4,7 +4,7 @@
 
 use crate::runner::{Limit, Runner};
 use crate::scene::{Overrides, Scene};
-use crate::sim::Simulation;
+use crate::simulation::Simulation;
 use anyhow::{anyhow, Context, Result};
 
 /// Surge front, `T = t sqrt(2 g / a)`, `Z = x / a` (Martin & Moyce 1952, table 2).
@@ -164,7 +164,7 @@ impl MartinMoyceProbe {
 /// it with experiment ([`MartinMoyceProbe`]).
 pub fn martin_moyce(overrides: &Overrides, shift_t: f64) -> Result<MartinMoyce> {
     let scene = Scene::load("martin-moyce-2d", overrides)?;
-    let sim = Simulation::<2>::new(scene.config::<2>());
+    let sim = Simulation::<2>::new(scene.config::<2>(), &scene.method);
     let mut probe = MartinMoyceProbe::default();
     probe.observe(&sim);
     let mut runner = Runner::new(sim);
@@ -194,7 +194,7 @@ pub struct Hydrostatic {
 
 pub fn hydrostatic(steps: u64) -> Result<Hydrostatic> {
     let scene = Scene::load("hydrostatic-2d", &Overrides::default())?;
-    let mut runner = Runner::new(Simulation::<2>::new(scene.config::<2>()));
+    let mut runner = Runner::new(Simulation::<2>::new(scene.config::<2>(), &scene.method));
     let s = &runner.sim.state;
     let top = s.particles.pos.iter().map(|x| x[1]).fold(0.0, f64::max);
     let depth_m = top.ceil() * s.config.cell_size_m;

@@ -7,8 +7,8 @@
 //! plane under `slice/` (issue 15, item 5): a 2D image of the classes with the particles, moves
 //! and paths that lie in that layer, so what happens inside the fluid can be seen.
 
-use super::legend::MOVE_COLOR;
-use super::{Layer, Log, Style};
+use crate::draw::legend::MOVE_COLOR;
+use crate::draw::{Layer, Log, Style};
 use crate::grid::{Grid, Vector};
 use rerun::RecordingStream;
 

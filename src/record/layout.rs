@@ -15,45 +15,13 @@
 //! `view/<id>/<property archetype>`, `view/<id>/ViewContents/overrides/<entity>/visualizers`.
 
 use super::Plane;
+use crate::draw::{LayerView, Needs, Panel};
 use crate::methods::MethodInfo;
 use rerun::external::re_log_types::external::re_tuid::Tuid;
 use rerun::external::re_log_types::{BlueprintActivationCommand, LogMsg, RecordingId};
 use rerun::external::re_sdk_types::blueprint::{archetypes as bp, components as bpc};
 use rerun::external::re_sdk_types::datatypes::Uuid;
 use rerun::{RecordingStream, RecordingStreamBuilder, RecordingStreamResult};
-
-/// When a panel or view belongs in the layout.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Needs {
-    Always,
-    /// The band method (ccp `--band`).
-    Band,
-    /// `--cross-check`.
-    CrossCheck,
-    /// The scene has obstacles.
-    Obstacles,
-}
-
-/// A time-series panel: one quantity family on one axis.
-#[derive(Debug)]
-pub struct Panel {
-    pub title: &'static str,
-    /// The scalar entities it plots (`/**` for all below).
-    pub series: &'static [&'static str],
-    pub needs: Needs,
-}
-
-/// A spatial view of cell layers the world view leaves out (they would hide or blend with the
-/// particles): its title, origin, the layers, and the marks drawn over them here as in the
-/// world view.
-#[derive(Debug)]
-pub struct LayerView {
-    pub title: &'static str,
-    pub origin: &'static str,
-    pub layers: &'static [&'static str],
-    pub marks: &'static [&'static str],
-    pub needs: Needs,
-}
 
 /// What a run has, which decides the layout.
 #[derive(Debug)]

@@ -4,85 +4,33 @@
 //! properties), its default layout ([`layout`]), its legend ([`legend`]) and, step by step, what
 //! the [`Canvas`] draws. Entity paths are listed in the README.
 //!
-//! Methods log their own reports through the [`Log`] trait, which names no rerun type.
+//! Methods log their own reports through the drawing vocabulary's [`Log`] trait
+//! ([`crate::draw`]), which the [`Canvas`] implements.
 
 mod canvas;
 mod file;
 pub mod layout;
-pub mod legend;
 
 pub use canvas::{Canvas, Plane};
 pub use file::RrdFile;
-pub use legend::depth_level_classes;
 
+use crate::draw::legend::{self, speed_color, NEW_SOLID_COLOR, OBSTACLE_COLOR};
+use crate::draw::{Layer, Log};
 use crate::grid::Vector;
+use crate::methods::ccp::BandMode;
 use crate::metrics::Stage;
 use crate::particles::Region;
 use crate::scene::Scene;
-use crate::sim::correct::band::BandMode;
 use crate::sim::markings::MarkingClass;
-use crate::sim::{Simulation, StepReport};
+use crate::simulation::{Simulation, StepReport};
 use anyhow::{anyhow, Result};
 use canvas::PointLook;
 use layout::RunFacts;
-use legend::{speed_color, NEW_SOLID_COLOR, OBSTACLE_COLOR};
 use rerun::blueprint::{Blueprint, Tabs, TimeSeriesView, Vertical};
 use rerun::RecordingStream;
 use std::cell::{Cell, RefCell};
 use std::path::Path;
 use std::time::{Duration, Instant};
-
-/// What a method may log and draw, in grid units; implemented by the recorder's [`Canvas`].
-pub trait Log<const D: usize> {
-    /// A scalar time series, every step.
-    fn scalar(&mut self, path: &str, value: f64);
-    /// A warning in the log, prefixed with the step.
-    fn warn(&mut self, message: &str);
-    /// Class ids with their labels and colours (RGBA) for `path` and below, logged once.
-    fn classes(&mut self, path: &str, classes: &[(u16, &'static str, [u8; 4])]);
-    /// One class id per cell: in 2D an image over the grid, in 3D points at the centres of the
-    /// cells whose class is not in `hidden_3d` (and the image of the slice).
-    fn cell_classes(
-        &mut self,
-        path: &str,
-        class: &dyn Fn(usize) -> u8,
-        hidden_3d: &[u8],
-        layer: Layer,
-    );
-    /// A `[width, height]` image of values in `range`, row 0 at the bottom (grid order), drawn
-    /// with a colour map in its own 2D view ([`crate::methods::MethodInfo::layer_views`]).
-    fn image(&mut self, path: &str, size: [usize; 2], values: &[f32], range: [f32; 2]);
-    /// Arrows from the first point to the second of each pair (an empty batch clears).
-    fn arrows(&mut self, path: &str, from_to: &[(Vector<D>, Vector<D>)], style: Style);
-    /// Line strips through points, each with its colour and label (an empty batch clears).
-    fn strips(
-        &mut self,
-        path: &str,
-        strips: &[Vec<Vector<D>>],
-        colors: &[[u8; 3]],
-        labels: Vec<String>,
-        style: Style,
-    );
-    /// The correction's moves `(x_hat, x)`: one arrow each under `world/corrector/moves`
-    /// (from `x_hat` to `x`, or with `--moves hops` from the centre of `x_hat`'s cell to the
-    /// centre of `x`'s), and the moved particles highlighted under `world/corrector/moved`.
-    fn moves(&mut self, from_to: &[(Vector<D>, Vector<D>)]);
-}
-
-/// How a drawing looks: its colour, radius (cells) and, in 2D, its draw order.
-#[derive(Clone, Copy, Debug)]
-pub struct Style {
-    pub color: [u8; 3],
-    pub radius: f32,
-    pub order: f32,
-}
-
-/// How a layer of cells is drawn: its draw order in 2D, its points' radius in 3D (cells).
-#[derive(Clone, Copy, Debug)]
-pub struct Layer {
-    pub order: f32,
-    pub radius_3d: f32,
-}
 
 /// How the correction's moves are drawn (`--moves`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
@@ -132,7 +80,7 @@ impl Recorder {
         let facts = RunFacts {
             dims: scene.dims.clone(),
             method: scene.method.kind.info(),
-            band: scene.method.band != BandMode::None,
+            band: scene.method.ccp.band != BandMode::None,
             cross_check,
             obstacles: scene.file.obstacle.iter().map(|o| o.name.clone()).collect(),
             slice_axis: drawing.slice.0,
@@ -456,7 +404,7 @@ fn run_properties(scene: &Scene) -> rerun::AnyValues {
     [
         ("scene", scene.name().to_string()),
         ("method", scene.method.kind.name().to_string()),
-        ("band", scene.method.band.name().to_string()),
+        ("band", scene.method.ccp.band.name().to_string()),
         ("cells", cells.join("x")),
         ("ppc", sim.ppc.to_string()),
         ("seed", sim.seed.to_string()),

@@ -9,7 +9,7 @@ use crate::metrics::{median, Stage};
 use crate::record::ComparisonSeries;
 use crate::runner::{Limit, Runner};
 use crate::scene::Scene;
-use crate::sim::{Simulation, StepReport};
+use crate::simulation::{Simulation, StepReport};
 use crate::validation::{MartinMoyceProbe, COLUMN_WIDTH_M};
 use std::collections::BTreeMap;
 
@@ -129,7 +129,7 @@ struct Gathered {
 
 fn measure<const D: usize>(scene: &Scene, stop: &dyn Fn() -> bool, m: &mut Measured) {
     reset_peak_memory();
-    let sim = Simulation::<D>::new(scene.config::<D>());
+    let sim = Simulation::<D>::new(scene.config::<D>(), &scene.method);
     let h = sim.state.config.cell_size_m;
     let mu = sim.state.config.mu() as f64;
     let mut g = Gathered {
@@ -303,7 +303,7 @@ pub fn comparison_series(results: &[Measured]) -> Vec<ComparisonSeries<'_>> {
         .map(|m| ComparisonSeries {
             scene: &m.spec.label,
             method: m.spec.method.name(),
-            color: super::plots::method_rgb(m.spec.method),
+            color: m.spec.method.rgb(),
             res: m.res,
             seed: m.seed,
             volume: &m.volume,

@@ -37,23 +37,8 @@ pub struct Chart {
     pub legend: SeriesLabelPosition,
 }
 
-/// A method's colour (RGB), by its place in the registry: the same in the plots and in the
-/// report's recording.
-pub fn method_rgb(k: MethodKind) -> [u8; 3] {
-    const PALETTE: [[u8; 3]; 6] = [
-        [31, 119, 180],
-        [214, 39, 40],
-        [44, 160, 44],
-        [148, 103, 189],
-        [255, 127, 14],
-        [23, 190, 207],
-    ];
-    let i = MethodKind::ALL.iter().position(|m| *m == k).unwrap_or(0);
-    PALETTE[i % PALETTE.len()]
-}
-
 fn color(k: MethodKind) -> RGBColor {
-    let [r, g, b] = method_rgb(k);
+    let [r, g, b] = k.rgb();
     RGBColor(r, g, b)
 }
 

@@ -6,11 +6,11 @@ use super::{
     EmitterFile, MotionKind, ObstacleFile, RegionFile, Scene, SceneFile, Shape, SimulationFile,
 };
 use crate::grid::Grid;
+use crate::methods::ccp::BandMode;
+use crate::methods::ccp::Directions;
 use crate::methods::powerpic::PowerPicSettings;
 use crate::methods::MethodSettings;
 use crate::particles;
-use crate::sim::correct::band::BandMode;
-use crate::sim::correct::problem::Directions;
 use std::collections::BTreeSet;
 
 /// What is wrong with a scene, broadly: tests match on it, people read the reason.
@@ -480,17 +480,15 @@ fn simulation(ch: &Checker, s: &SimulationFile) -> Checked<MethodSettings> {
     )?;
     step_count(ch, s)?;
     powerpic(ch, &s.powerpic, ppc_per_axis(s.ppc, dim).unwrap_or(1))?;
-    Ok(MethodSettings {
-        kind: s.method,
-        solver: s.solver,
-        directions: s.directions,
-        band: s.band,
-        band_r: s.band_r,
-        cross_check: false,
-        export_lp: None,
-        idp_resample: s.idp_resample,
-        powerpic: s.powerpic,
-    })
+    let mut m = MethodSettings::new(s.method);
+    m.ccp.solver = s.solver;
+    m.ccp.directions = s.directions;
+    m.ccp.band = s.band;
+    m.ccp.band_r = s.band_r;
+    m.nbflip.band_r = s.band_r;
+    m.idp.resample = s.idp_resample;
+    m.powerpic = s.powerpic;
+    Ok(m)
 }
 
 /// The run ends in about [`MAX_STEPS`] steps at most, however the fluid moves: a step is

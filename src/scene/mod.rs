@@ -10,12 +10,12 @@ mod memory;
 pub use check::{ErrorKind, SceneError};
 
 use crate::grid::Vector;
+use crate::methods::ccp::BandMode;
+use crate::methods::ccp::Directions;
+use crate::methods::ccp::Solver;
 use crate::methods::powerpic::PowerPicSettings;
 use crate::methods::{MethodKind, MethodSettings};
 use crate::particles::{Region, SpiralBlock};
-use crate::sim::correct::band::BandMode;
-use crate::sim::correct::problem::Directions;
-use crate::sim::correct::Solver;
 use crate::sim::emit::Emitter;
 use crate::sim::solids::{Motion, Obstacle, ObstacleMode};
 use crate::sim::SimConfig;
@@ -353,9 +353,9 @@ impl Scene {
     /// 50x50x50 ppc8 seed1`. Names recordings and exported problems.
     pub fn run_tags(&self) -> Vec<String> {
         let mut tags = vec![self.name().to_string(), self.method.kind.name().to_string()];
-        if self.method.band != BandMode::None {
-            tags.push(format!("band-{}", self.method.band.name()));
-            tags.push(format!("r{}", self.method.band_r));
+        if self.method.ccp.band != BandMode::None {
+            tags.push(format!("band-{}", self.method.ccp.band.name()));
+            tags.push(format!("r{}", self.method.ccp.band_r));
         }
         let cells: Vec<String> = self.dims.iter().map(usize::to_string).collect();
         tags.push(cells.join("x"));
@@ -430,7 +430,6 @@ impl Scene {
         SimConfig {
             dims,
             cell_size_m: h,
-            method: self.method.clone(),
             per_axis,
             jitter: s.jitter,
             gravity: vec(s.gravity.as_deref().unwrap()),

@@ -4,13 +4,16 @@
 //! velocity combination of alg. band line 1 and the advection of the grid velocity of line 5.
 //!
 //! What the deep holds is a method's business: method ccp counts its imaginary particles in
-//! `n_deep` ([`crate::sim::correct::deep`]).
+//! `n_deep`; narrow-band FLIP keeps the deep as a level set.
 
 use crate::grid::{Grid, MacField, Vector};
-use crate::methods::Known;
 use crate::sim::advect;
 use crate::sim::markings::{DepthLevel, Markings};
+use crate::sim::transfer::Known;
 use rayon::prelude::*;
+
+/// `R` when a scene file does not say (the paper: 3, and 6 for the dam scenes).
+pub const DEFAULT_BAND_R: u32 = 3;
 
 /// A band `R + 1` cells thick: the interface is at depth `-R`, the deep below it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -2,19 +2,17 @@
 //! over a time interval, until a total particle count is reached.
 
 use crate::grid::{Grid, Vector};
-use crate::methods::FluidMethod;
 use crate::particles::{stratified_samples, Particles, Region};
 use crate::sim::State;
 use rand::Rng;
 
-/// The emission stage: every emitter tops up its cells (the counts the method says emitters
-/// see, the markings' by default), and the particle total and `V*` grow with what was added.
-/// Returns how many particles were added.
-pub fn emit<const D: usize>(s: &mut State<D>, m: &dyn FluidMethod<D>) -> usize {
+/// The emission stage: every emitter tops up its cells to `mu` (by `counts`, the particle
+/// count per cell the method says emitters see, or the markings' when `None`), and the particle
+/// total and `V*` grow with what was added. Returns how many particles were added.
+pub fn emit<const D: usize>(s: &mut State<D>, counts: Option<Vec<u32>>) -> usize {
     if s.config.emitters.is_empty() {
         return 0;
     }
-    let counts = m.emitter_counts(s);
     let count = counts.as_deref().unwrap_or(&s.markings.count);
     let c = &s.config;
     let mut added = 0;

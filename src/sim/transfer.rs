@@ -8,6 +8,10 @@ use crate::particles::Particles;
 use crate::{PAR_GRAIN, PAR_GRAIN_PARTICLES};
 use rayon::prelude::*;
 
+/// Per face component, whether a face holds a value (from particles, the projection or the
+/// grid) or still needs one from extrapolation.
+pub type Known<const D: usize> = [Vec<bool>; D];
+
 /// Transfers particle velocities to faces: `u_f = sum_p w_fp v_p / sum_p w_fp` with the
 /// multilinear tent weights `w_fp`. Returns the field and, per component, whether a face
 /// received any weight.

@@ -28,6 +28,7 @@ use std::collections::BinaryHeap;
 use std::time::{Duration, Instant};
 
 use super::exact_paths::SecondStep;
+use super::paths::{BandPath, PathDirection};
 use super::problem::CorrectionProblem;
 use super::Solved;
 
@@ -38,43 +39,6 @@ pub enum BandVariant {
     OneWay,
     Paths,
     ExactPaths,
-}
-
-/// The band setting of method ccp (`simulation.band`, `--band`): no band, or the band with the
-/// variant that keeps its count.
-#[derive(
-    Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum,
-)]
-#[serde(rename_all = "kebab-case")]
-pub enum BandMode {
-    /// No band: particles fill the whole fluid.
-    None,
-    /// The paper's choice: push particles along grid paths (sec. push_part).
-    Paths,
-    /// A second solve with the one-way constraint (sec. band_con2), an integer program.
-    OneWay,
-    /// Eq. problem3 with eq. band_con as one integer program: small grids only.
-    Full,
-    /// Beyond the paper: the problem `paths` solves greedily (move `n_move` particles from
-    /// sources to sinks, other cells keeping their count), solved exactly as a min-cost flow.
-    ExactPaths,
-}
-
-impl BandMode {
-    /// The band variant, when there is a band.
-    pub fn variant(self) -> Option<BandVariant> {
-        match self {
-            BandMode::None => None,
-            BandMode::Paths => Some(BandVariant::Paths),
-            BandMode::OneWay => Some(BandVariant::OneWay),
-            BandMode::Full => Some(BandVariant::Full),
-            BandMode::ExactPaths => Some(BandVariant::ExactPaths),
-        }
-    }
-
-    pub fn name(self) -> &'static str {
-        self.variant().map_or("none", BandVariant::name)
-    }
 }
 
 impl BandVariant {
@@ -109,15 +73,6 @@ pub struct BandContext {
     /// `n_deep`: the imaginary particles of the deep.
     pub n_deep: usize,
     pub variant: BandVariant,
-}
-
-/// One path of alg. find that alg. update applied: cell centres from source to sink.
-#[derive(Clone, Debug, Default)]
-pub struct BandPath<const D: usize> {
-    pub cells: Vec<Vector<D>>,
-    /// Sum of `sigma_edge` along the path (eq. edge); negative when the path lowers the
-    /// objective.
-    pub cost: f64,
 }
 
 /// What the band part of one correction did.
@@ -353,46 +308,6 @@ pub fn solve_one_way<const D: usize>(
     };
     let choice = lp::solve_with(&reduced, &[side]).map_err(|e| e.to_string())?;
     Ok(choice.iter().map(|&k| original[k as usize]).collect())
-}
-
-/// The direction of the paths (sec. push_part).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum PathDirection {
-    /// `s_out < 0`: from surface cells into the band interface and the deep.
-    In,
-    /// `s_in < 0`: from band interface cells to the rest of the band and empty cells.
-    Out,
-}
-
-impl PathDirection {
-    /// The direction that undoes `b*`'s imbalance: out of `C_<=-R` when too many went in.
-    pub fn of(s_in: i64) -> Self {
-        if s_in < 0 {
-            PathDirection::Out
-        } else {
-            PathDirection::In
-        }
-    }
-
-    /// Whether a path may start in cell `c` (if it holds a particle): a surface cell for paths
-    /// in, a band interface cell for paths out (of the previous markings).
-    pub fn is_source(self, previous: &Markings, r: u32, c: usize) -> bool {
-        previous.kind[c] == CellKind::Fluid
-            && match self {
-                PathDirection::In => previous.surface[c],
-                PathDirection::Out => previous.level(c, r) == DepthLevel::Interface,
-            }
-    }
-
-    /// Whether a path may end in the non-solid cell `c` (if it has room): a cell of
-    /// `C_<=-R` for paths in, any other cell for paths out.
-    pub fn is_sink(self, previous: &Markings, r: u32, c: usize) -> bool {
-        let low = previous.at_or_below_interface(c, r);
-        match self {
-            PathDirection::In => low,
-            PathDirection::Out => !low,
-        }
-    }
 }
 
 /// What pushing particles along paths did.

@@ -7,8 +7,9 @@
 //! band method (sec. band_method) one of the band variants of [`band`] finishes the step.
 
 pub mod band;
-pub mod deep;
 pub mod exact_paths;
+pub mod guarantees;
+pub mod paths;
 pub mod problem;
 
 use crate::grid::{Grid, Vector};
@@ -22,11 +23,20 @@ use std::time::{Duration, Instant};
 
 /// Which solver corrects the positions.
 #[derive(
-    Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum,
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    serde::Serialize,
+    serde::Deserialize,
+    clap::ValueEnum,
 )]
 #[serde(rename_all = "kebab-case")]
 pub enum Solver {
     /// Exact min-cost flow by successive shortest paths (solvers/min_cost_flow.rs).
+    #[default]
     Flow,
     /// The LP relaxation by microlp's simplex (solvers/lp.rs): the reference, slow on large
     /// problems.

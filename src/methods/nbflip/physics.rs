@@ -1,46 +1,16 @@
-//! Method nbflip: narrow-band FLIP (Ferstl, Ando, Wojtan, Westermann, Thuerey, "Narrow Band
-//! FLIP for Liquid Simulations", CGF 35(2), 2016), as MantaFlow's reference scene
-//! `scenes/flip05_nbflip.py` runs it.
-//!
-//! The liquid is a level set ([`crate::sim::levelset`]); particles live only in a band of `R`
-//! cells below its surface, and the grid velocity, advected semi-Lagrangian, carries the
-//! interior. Per step, in this code's order (alg. flip with the band's hooks):
-//!
-//! 1. particles to grid, then the velocity combination: faces with particle weight and
-//!    `phi >= -r` (`r = R - 1`, the combine band) take the particles' velocity, all others the
-//!    advected grid velocity;
-//! 2. forces, projection and the FLIP update as in flip;
-//! 3. particles advected; the level set advected with the same velocity, the grid velocity
-//!    advected by itself;
-//! 4. the level set rebuilt: the advected one shrunk by a cell and united with the particles'
-//!    spheres, then re-marched `R + 2` layers in and 3 out;
-//! 5. resampling against it: particles outside the liquid or deeper than `R` are deleted, and
-//!    crowded cells thinned; band cells below the surface layer short of `mu` particles get
-//!    new ones, with the grid's velocity;
-//! 6. markings: the level set's inside is fluid, with or without particles.
-//!
-//! MantaFlow resamples right after the FLIP update, against the level set built before the
-//! particles moved; here the level set is rebuilt first, so the particles a step starts with
-//! lie in the band of the level set the step uses. The pressure solve and the advection are
-//! those of the other methods (first-order free surface, forward Euler), so that the band is
-//! the only difference to flip; MantaFlow's scene uses a ghost-fluid surface, RK4 for the
-//! particles and MacCormack for the grid velocity.
+//! Method nbflip's step: the hooks it implements (see the module doc of `super`).
 
-use super::{
-    FluidMethod, Known, MethodInfo, MethodOption, MethodReport, MethodSettings, MethodType,
-};
+use super::levelset::{particle_radius, LevelSet, Side};
+use crate::draw::{depth_level_classes, Log};
 use crate::grid::{Grid, MacField, Vector};
-use crate::metrics::{median, InvariantViolation};
+use crate::methods::seam::{FluidMethod, MethodRecording, MethodReport};
+use crate::metrics::InvariantViolation;
 use crate::particles::Particles;
-use crate::record::layout::{LayerView, Needs, Panel};
-use crate::record::{depth_level_classes, Layer, Log};
 use crate::sim::band::{combine_velocities, counts_with_full_deep, Band};
-use crate::sim::levelset::{particle_radius, LevelSet, Side};
 use crate::sim::markings::{DepthLevel, Markings};
-use crate::sim::solids::ObstacleMode;
-use crate::sim::{transfer, State};
+use crate::sim::transfer::{self, Known};
+use crate::sim::State;
 use rand::Rng;
-use std::any::Any;
 
 /// Layers the level set is re-marched into the liquid beyond the band: `R + 2`
 /// (`extrapolateLsSimple(distance = narrowBandWidth + 2, inside = True)` in flip05_nbflip.py).
@@ -50,9 +20,6 @@ const OUTSIDE_LAYERS: u32 = 3;
 /// A cell holds at most this many times `mu` particles away from the surface
 /// (`maxParticles = 2 minParticles`, ibid.).
 const MAX_PER_MU: u32 = 2;
-
-/// Narrow-band FLIP, as registered.
-pub struct Nbflip;
 
 /// Narrow-band FLIP in a running simulation.
 pub struct NbflipSim<const D: usize> {
@@ -68,51 +35,20 @@ pub struct NbflipSim<const D: usize> {
     /// The first particle seeded by the last resampling (those before it passed its test).
     first_seed: usize,
     step: NbflipReport,
-    totals: Vec<NbflipReport>,
 }
 
-impl MethodType for Nbflip {
-    const INFO: MethodInfo = MethodInfo {
-        name: "nbflip",
-        about: "narrow-band FLIP: particles only in a band below a level set surface (Ferstl et al. 2016)",
-        options: &[MethodOption::BandR],
-        obstacle_modes: &[ObstacleMode::Naive, ObstacleMode::Ignore],
-        panels: &[
-            Panel {
-                title: "narrow band: particles held",
-                series: &["metrics/nbflip/particles"],
-                needs: Needs::Always,
-            },
-            Panel {
-                title: "narrow band: resampling",
-                series: &["metrics/nbflip/seeded", "metrics/nbflip/deleted"],
-                needs: Needs::Always,
-            },
-        ],
-        layer_views: &[LayerView {
-            title: "band levels",
-            origin: "world",
-            layers: &["world/grid/depth"],
-            marks: &[],
-            needs: Needs::Always,
-        }],
-        figures: &["nbflip_seeded", "nbflip_deleted"],
-    };
-
-    fn build<const D: usize>(s: &MethodSettings) -> Box<dyn FluidMethod<D>> {
-        Box::new(NbflipSim::<D> {
-            band: Band { r: s.band_r },
+impl<const D: usize> NbflipSim<D> {
+    pub fn new(band_r: u32) -> Self {
+        NbflipSim {
+            band: Band { r: band_r },
             phi: LevelSet::default(),
             advected: None,
             not_held: 0,
             first_seed: 0,
             step: NbflipReport::default(),
-            totals: vec![],
-        })
+        }
     }
-}
 
-impl<const D: usize> NbflipSim<D> {
     /// `R` as a level-set value.
     fn r(&self) -> f64 {
         self.band.r as f64
@@ -289,13 +225,11 @@ impl<const D: usize> FluidMethod<D> for NbflipSim<D> {
         rep.particles = s.particles.len();
         rep.band_r = self.band.r;
         rep.phi = self.phi.clone();
-        self.totals.push(NbflipReport {
-            phi: LevelSet::default(),
-            ..rep.clone()
-        });
         Box::new(rep)
     }
+}
 
+impl<const D: usize> MethodRecording<D> for NbflipSim<D> {
     fn record_setup(&self, log: &mut dyn Log<D>) {
         log.classes("world/grid/depth", &depth_level_classes());
     }
@@ -305,27 +239,6 @@ impl<const D: usize> FluidMethod<D> for NbflipSim<D> {
         !phi.phi.is_empty()
             && s.markings.is_fluid(c)
             && level::<D>(phi, solid, self.r(), c) == DepthLevel::Deep
-    }
-
-    fn reset_summary(&mut self) {
-        self.totals.clear();
-    }
-
-    fn summary(&self) -> Vec<String> {
-        let (lo, hi) = self.totals.iter().fold((usize::MAX, 0), |(lo, hi), r| {
-            (lo.min(r.particles), hi.max(r.particles))
-        });
-        let sum = |f: fn(&NbflipReport) -> usize| self.totals.iter().map(f).sum::<usize>();
-        let seeded: Vec<usize> = self.totals.iter().map(|r| r.seeded).collect();
-        vec![format!(
-            "narrow band (R = {}): {lo} .. {hi} particles after a step; resampling seeded {} (median {} a step) and deleted {} outside the liquid, {} below the band, {} in crowded cells",
-            self.band.r,
-            sum(|r| r.seeded),
-            median(&seeded).unwrap_or(0),
-            sum(|r| r.outside),
-            sum(|r| r.below),
-            sum(|r| r.crowded),
-        )]
     }
 }
 
@@ -411,39 +324,10 @@ impl NbflipReport {
     }
 
     /// Adds another resampling of the same step (after emission and at the end).
-    fn add(&mut self, other: &NbflipReport) {
+    pub(super) fn add(&mut self, other: &NbflipReport) {
         self.seeded += other.seeded;
         self.outside += other.outside;
         self.below += other.below;
         self.crowded += other.crowded;
-    }
-}
-
-impl<const D: usize> MethodReport<D> for NbflipReport {
-    fn record(&self, s: &State<D>, log: &mut dyn Log<D>, full: bool) {
-        log.scalar("metrics/nbflip/particles", self.particles as f64);
-        log.scalar("metrics/nbflip/seeded", self.seeded as f64);
-        log.scalar("metrics/nbflip/deleted", self.deleted() as f64);
-        if full {
-            let layer = Layer {
-                order: 1.0,
-                radius_3d: 0.2,
-            };
-            let hidden = [DepthLevel::NotFluid as u8, DepthLevel::Deep as u8];
-            let (phi, solid, r) = (&self.phi, &s.solids.solid, self.band_r as f64);
-            let class = |c| level::<D>(phi, solid, r, c) as u8;
-            log.cell_classes("world/grid/depth", &class, &hidden, layer);
-        }
-    }
-
-    fn figures(&self) -> Vec<(&'static str, f64)> {
-        vec![
-            ("nbflip_seeded", self.seeded as f64),
-            ("nbflip_deleted", self.deleted() as f64),
-        ]
-    }
-
-    fn as_any(&self) -> &dyn Any {
-        self
     }
 }

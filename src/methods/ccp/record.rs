@@ -1,54 +1,23 @@
-//! Method ccp: cell-constrained particles (Z. Levi), FLIP plus the paper's correction step
-//! (sec. 4-5, alg. flip line 6), with the band method of sec. band_method (alg. band) and the
-//! coupling with moving obstacles of sec. 7.
-//!
-//! The correction internals live in [`crate::sim::correct`]: eq. problem3 built as data
-//! ([`crate::sim::correct::problem`]), the band variants ([`crate::sim::correct::band`]) and
-//! the deep's bookkeeping ([`crate::sim::correct::deep`]). The band's geometry (levels,
-//! velocity combination, advection of the grid velocity) is [`crate::sim::band`].
+//! What method ccp records and sums up: its panels, its step report's scalars and drawings
+//! (the correction's moves, the band's paths, the depth levels), and the run's totals.
 
-use super::{
-    FluidMethod, Known, MethodInfo, MethodOption, MethodReport, MethodSettings, MethodType,
-};
-use crate::grid::{MacField, Vector};
-use crate::metrics::{self, median, InvariantViolation};
-use crate::record::layout::{LayerView, Needs, Panel};
-use crate::record::{depth_level_classes, Layer, Log, Style};
+use super::correct::band::{BandCorrection, BandVariant};
+use super::correct::CorrectionReport;
+use super::deep::DeepExchange;
+use super::settings::{CcpSettings, Solver};
+use crate::draw::{Layer, Log, Needs, Panel, Style};
+use crate::grid::Vector;
+use crate::methods::seam::{MethodReport, MethodSummary};
+use crate::metrics::median;
 use crate::sim::band::Band;
-use crate::sim::correct::band::{BandContext, BandCorrection, BandVariant};
-use crate::sim::correct::deep::{exchange_with_deep, DeepExchange};
-use crate::sim::correct::{self, CorrectionReport, CorrectionSettings};
-use crate::sim::markings::{DepthLevel, Markings};
-use crate::sim::solids::ObstacleMode;
-use crate::sim::{transfer, State};
-use anyhow::Context;
+use crate::sim::markings::DepthLevel;
+use crate::sim::State;
 use std::any::Any;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Duration;
 
-/// The paper's method, as registered.
-pub struct Ccp;
-
-/// The paper's method in a running simulation.
-pub struct CcpSim<const D: usize> {
-    correction: CorrectionSettings,
-    /// The band and the variant that keeps its count, with the band method.
-    band: Option<(Band, BandVariant)>,
-    /// `n_deep`: the deep's imaginary particles.
-    n_deep: usize,
-    /// `x_bar`: the positions before advection.
-    x_bar: Vec<Vector<D>>,
-    /// Write this step's correction problem as MPS to this path.
-    export_lp: Option<(u64, PathBuf)>,
-    /// This step's report, filled by the hooks.
-    step: CcpReport<D>,
-    totals: Totals,
-    /// The last correction's prices, the next one's warm start.
-    prices: correct::PriceMemory,
-}
-
 /// The correction's and the band's panels: counts, objectives, penalties and times apart.
-const PANELS: &[Panel] = &[
+pub(super) const PANELS: &[Panel] = &[
     Panel {
         title: "correction: particles moved",
         series: &["metrics/correction/moved"],
@@ -131,210 +100,6 @@ const PANELS: &[Panel] = &[
     },
 ];
 
-impl MethodType for Ccp {
-    const INFO: MethodInfo = MethodInfo {
-        name: "ccp",
-        about: "cell-constrained particles: FLIP plus the paper's correction (sec. 4-7)",
-        options: &[
-            MethodOption::Band,
-            MethodOption::BandR,
-            MethodOption::Solver,
-            MethodOption::Directions,
-            MethodOption::CrossCheck,
-            MethodOption::ExportLp,
-        ],
-        obstacle_modes: &[ObstacleMode::Couple],
-        panels: PANELS,
-        layer_views: &[LayerView {
-            title: "band levels",
-            origin: "world",
-            layers: &["world/grid/depth"],
-            marks: &["world/corrector/paths"],
-            needs: Needs::Band,
-        }],
-        figures: &["ccp_augmentations", "ccp_moved", "ccp_solver_ms"],
-    };
-
-    fn build<const D: usize>(s: &MethodSettings) -> Box<dyn FluidMethod<D>> {
-        Box::new(CcpSim::<D> {
-            correction: CorrectionSettings {
-                solver: s.solver,
-                directions: s.directions,
-                cross_check: s.cross_check,
-            },
-            band: s.band.variant().map(|v| (Band { r: s.band_r }, v)),
-            n_deep: 0,
-            x_bar: vec![],
-            export_lp: s.export_lp.clone(),
-            step: CcpReport::default(),
-            totals: Totals::default(),
-            prices: Default::default(),
-        })
-    }
-}
-
-impl<const D: usize> CcpSim<D> {
-    fn band(&self) -> Option<Band> {
-        self.band.map(|(b, _)| b)
-    }
-
-    /// Alg. band line 9: the exchange with the deep after new markings.
-    fn exchange(&mut self, s: &mut State<D>, was_low: Option<&[bool]>) -> Option<DeepExchange> {
-        let band = self.band()?;
-        Some(exchange_with_deep(
-            &s.grid,
-            &mut s.particles,
-            &mut s.markings,
-            was_low,
-            band,
-            s.config.mu(),
-            &mut self.n_deep,
-            &s.velocity,
-            &mut s.rng,
-        ))
-    }
-}
-
-impl<const D: usize> FluidMethod<D> for CcpSim<D> {
-    fn start(&mut self, s: &mut State<D>) {
-        self.exchange(s, None);
-    }
-
-    fn emitter_counts(&self, s: &State<D>) -> Option<Vec<u32>> {
-        Some(self.band()?.emitter_counts(&s.markings, s.config.mu()))
-    }
-
-    fn particles_not_held(&self) -> isize {
-        self.n_deep as isize
-    }
-
-    fn particles_to_grid(&mut self, s: &State<D>) -> anyhow::Result<(MacField<D>, Known<D>)> {
-        let (mut u, mut known) =
-            transfer::particles_to_grid(&s.grid, &s.particles.pos, &s.particles.vel);
-        if let Some(b) = self.band() {
-            b.combine_with_grid(&s.grid, &mut u, &mut known, &s.velocity, &s.markings);
-        }
-        Ok((u, known))
-    }
-
-    fn before_advection(&mut self, s: &State<D>) {
-        self.x_bar.clone_from(&s.particles.pos);
-    }
-
-    fn next_grid_velocity(&mut self, s: &State<D>, u: MacField<D>, dt: f64) -> MacField<D> {
-        match self.band() {
-            Some(_) => Band::advect_grid_velocity(&s.grid, &u, dt, &s.markings),
-            None => u,
-        }
-    }
-
-    fn correct_positions(
-        &mut self,
-        s: &mut State<D>,
-        penalty: Option<&[f64]>,
-    ) -> anyhow::Result<()> {
-        let export = self.export_lp.as_ref().filter(|(n, _)| *n == s.steps + 1);
-        let mu = s.config.mu();
-        let ctx = self.band.map(|(b, variant)| BandContext {
-            r: b.r,
-            n_deep: self.n_deep,
-            variant,
-        });
-        let solid = &s.solids.solid;
-        let pos = &mut s.particles.pos;
-        let mut rep = correct::correct(
-            &s.grid,
-            &self.x_bar,
-            pos,
-            &s.markings,
-            solid,
-            mu,
-            &self.correction,
-            ctx,
-            penalty,
-            export.is_some(),
-            &mut self.prices,
-        )
-        .map_err(|e| InvariantViolation(format!("correction problem: {e}")))?;
-        metrics::check_cell_counts(&s.grid, pos, &s.markings, solid, mu, ctx.map(|b| b.r))?;
-        if let (Some(mps), Some((step, path))) = (rep.mps.take(), export) {
-            std::fs::write(path, mps)
-                .with_context(|| format!("cannot write '{}'", path.display()))?;
-            self.totals.exported = Some((*step, path.clone()));
-        }
-        if let (Some(mps), Some((_, path))) = (rep.second_mps.take(), export) {
-            let second = second_step_path(path);
-            std::fs::write(&second, mps)
-                .with_context(|| format!("cannot write '{}'", second.display()))?;
-            self.totals.exported_second = Some(second);
-        }
-        self.step.correction = rep;
-        Ok(())
-    }
-
-    fn before_markings(&mut self, s: &mut State<D>) -> Option<Vec<bool>> {
-        self.band().map(|_| Band::kept_cells(&s.markings))
-    }
-
-    fn after_markings(&mut self, s: &mut State<D>, previous: &Markings) {
-        let Some(band) = self.band() else { return };
-        let was_low = band.at_or_below_interface(previous);
-        let x = self.exchange(s, Some(&was_low)).expect("a band");
-        self.step.deep = Some(x.merged(self.step.deep));
-    }
-
-    /// With the band: every cell holds at most `mu` after the exchange, and no real particle
-    /// is left in the deep. (The correction's own guarantees are checked right after it.)
-    fn check_invariants(&self, s: &State<D>) -> Result<(), InvariantViolation> {
-        let Some(band) = self.band() else {
-            return Ok(());
-        };
-        let mu = s.config.mu();
-        if let Some(c) = (0..s.grid.num_cells()).find(|&c| s.markings.count[c] > mu) {
-            return Err(InvariantViolation(format!(
-                "cell {:?} holds {} particles after the exchange with the deep (mu = {mu})",
-                s.grid.cell_coords(c),
-                s.markings.count[c]
-            )));
-        }
-        match band.particle_in_deep(&s.grid, &s.markings, &s.particles.pos) {
-            Some(x) => Err(InvariantViolation(format!(
-                "a particle at {:?} is in the deep after the exchange",
-                x.as_slice()
-            ))),
-            None => Ok(()),
-        }
-    }
-
-    fn finish_step(&mut self, s: &State<D>) -> Box<dyn MethodReport<D>> {
-        let mut rep = std::mem::take(&mut self.step);
-        rep.band = self.band();
-        rep.n_deep = self.n_deep;
-        self.totals.add(&rep, s.particles.len());
-        Box::new(rep)
-    }
-
-    fn record_setup(&self, log: &mut dyn Log<D>) {
-        if self.band.is_some() {
-            log.classes("world/grid/depth", &depth_level_classes());
-        }
-    }
-
-    fn is_deep(&self, s: &State<D>, c: usize) -> bool {
-        self.band
-            .is_some_and(|(b, _)| b.level(&s.markings, c) == DepthLevel::Deep)
-    }
-
-    fn reset_summary(&mut self) {
-        self.totals = Totals::default();
-    }
-
-    fn summary(&self) -> Vec<String> {
-        let variant = self.band.map(|(b, v)| (v.name(), b.r));
-        self.totals.lines(&self.correction, variant, self.n_deep)
-    }
-}
-
 /// What ccp did in one step.
 #[derive(Clone, Debug, Default)]
 pub struct CcpReport<const D: usize> {
@@ -345,6 +110,10 @@ pub struct CcpReport<const D: usize> {
     /// The band, and `n_deep` after the step.
     pub band: Option<Band>,
     pub n_deep: usize,
+    /// The correction problem written this step (`--export-lp`), and its exact-paths second
+    /// step.
+    pub exported: Option<(u64, PathBuf)>,
+    pub exported_second: Option<PathBuf>,
 }
 
 impl<const D: usize> MethodReport<D> for CcpReport<D> {
@@ -484,7 +253,12 @@ fn cost_color(cost: f64, scale: f64) -> [u8; 3] {
 
 /// What ccp did over a run, for the summary.
 #[derive(Clone, Debug, Default)]
-struct Totals {
+pub(super) struct Totals {
+    /// The settings it was run with: the solver, and the band's variant and `R`.
+    solver: Solver,
+    band: Option<(&'static str, u32)>,
+    /// `n_deep` after the last step.
+    n_deep: usize,
     corrections: u64,
     moved: u64,
     overfull_max: usize,
@@ -506,8 +280,34 @@ struct Totals {
     exported_second: Option<PathBuf>,
 }
 
+impl<const D: usize> MethodSummary<D> for Totals {
+    fn add(&mut self, report: &dyn MethodReport<D>, s: &State<D>) {
+        let rep = report.as_any().downcast_ref::<CcpReport<D>>();
+        self.add_report(rep.expect("a ccp report"), s.particles.len());
+    }
+
+    fn lines(&self) -> Vec<String> {
+        self.summary_lines()
+    }
+}
+
 impl Totals {
-    fn add<const D: usize>(&mut self, rep: &CcpReport<D>, particles: usize) {
+    pub(super) fn new(s: &CcpSettings) -> Self {
+        Self {
+            solver: s.solver,
+            band: s.band.variant().map(|v| (v.name(), s.band_r)),
+            ..Self::default()
+        }
+    }
+
+    fn add_report<const D: usize>(&mut self, rep: &CcpReport<D>, particles: usize) {
+        self.n_deep = rep.n_deep;
+        if rep.exported.is_some() {
+            self.exported.clone_from(&rep.exported);
+        }
+        if rep.exported_second.is_some() {
+            self.exported_second.clone_from(&rep.exported_second);
+        }
         let c = &rep.correction;
         self.corrections += 1;
         self.moved += c.moves.len() as u64;
@@ -546,19 +346,15 @@ impl Totals {
         }
     }
 
-    fn lines(
-        &self,
-        s: &CorrectionSettings,
-        band: Option<(&str, u32)>,
-        n_deep: usize,
-    ) -> Vec<String> {
+    /// The summary's lines.
+    fn summary_lines(&self) -> Vec<String> {
         let ms = |d: Option<Duration>| d.map_or(0.0, |d| d.as_secs_f64() * 1e3);
         let mut out = vec![format!(
             "correction: {} particles sent to another cell in all; up to {} over-full cells before one correction; {} solver fallbacks; {} solver median {:.2} ms",
             self.moved,
             self.overfull_max,
             self.fallbacks,
-            s.solver.name(),
+            self.solver.name(),
             ms(median(&self.solver_times))
         )];
         if let Some(d) = self.cross_check_max {
@@ -568,7 +364,7 @@ impl Totals {
                 .zip(&self.solver_times)
                 .map(|(o, t)| o.as_secs_f64() / t.as_secs_f64().max(1e-9))
                 .collect();
-            let what = match band {
+            let what = match self.band {
                 Some((v, _)) if v == BandVariant::ExactPaths.name() => {
                     "the simplex on exact-paths' second steps"
                 }
@@ -582,8 +378,8 @@ impl Totals {
                 ratios.iter().cloned().fold(0.0, f64::max),
             ));
         }
-        if let Some((variant, r)) = band {
-            out.extend(self.band_lines(variant, r, n_deep));
+        if let Some((variant, r)) = self.band {
+            out.extend(self.band_lines(variant, r, self.n_deep));
         }
         if let Some((step, path)) = &self.exported {
             out.push(format!(
@@ -627,13 +423,4 @@ impl Totals {
         }
         out
     }
-}
-
-/// Where `exact-paths` writes its second-step problem: next to the exported problem,
-/// `...-step3.mps` -> `...-step3-second.mps`.
-fn second_step_path(path: &Path) -> PathBuf {
-    let stem = path
-        .file_stem()
-        .map_or_else(Default::default, |s| s.to_string_lossy());
-    path.with_file_name(format!("{stem}-second.mps"))
 }

@@ -1,76 +1,16 @@
-//! Method idp: implicit density projection (Kugelstadt, Longva, Thuerey, Bender, "Implicit
-//! Density Projection for Volume Conserving Liquids", IEEE TVCG 27(4), 2021), after its
-//! official implementation (thunil/mantaflow, `source/plugin/implicitdensityprojection.cpp`,
-//! "the reference" below; `scenes/idp_apic0{1,2}*.py`). FLIP, plus after the particle
-//! advection (where the reference scenes and Levi's driver run it, the slot of alg. flip
-//! line 6) a second Poisson solve whose right-hand side is the density error, and a
-//! position-only correction that moves particles out of over-dense cells. Velocities are not
-//! changed (except for resampled particles).
-//!
-//! Each step ([`project_density`]), in grid units (unit cells, rest density 1 per cell):
-//!
-//! 1. **Fluid cells**: non-solid cells holding a particle after advection.
-//! 2. **Push-out** of particles inside solid cells (only an obstacle under `ignore` can cover
-//!    particles; static solids never hold any): the displacement that takes the particle out of
-//!    the solid by the nearest exit, [`PUSH_MARGIN`] beyond it, at most one cell per step
-//!    ([`push_out`]); written onto the solid cell's two faces on that axis, the largest magnitude
-//!    winning (reference: `markFluidAndBoundaryCells`).
-//! 3. **Density error** of each fluid cell, `s = 1 - sum_p w_c(x_p) / mu` with the tent weight
-//!    `w_c` at the cell centre (particle mass `1/mu`, rest density 1: reference `knMapLinear`,
-//!    `knComputeDensity`); minus what the wall and solid neighbours would contribute if they
-//!    were sampled like the fluid ([`SolidShare`]); plus the divergence of the push-out field.
-//! 4. **Surface rule**: a fluid cell with a face neighbour that is empty (neither fluid nor
-//!    solid) and `s > 0` (under-dense) leaves the solve as a Dirichlet cell, `s = 0`.
-//! 5. **Clamp** `s` to `[-CLAMP, CLAMP]` ([`CLAMP`] = 0.5: at most half a cell of correction
-//!    per step).
-//! 6. **Second solve** `A phi = s` with the projection's matrix and solver
-//!    ([`crate::sim::pressure::Poisson`]: MIC(0)-PCG, the scene's pressure tolerance).
-//! 7. **Displacement**: on faces between two non-solid cells `D_f = phi_R - phi_L`, on faces
-//!    touching a solid or the walls the push-out value (or 0); each particle moves by `D`
-//!    interpolated at its position, clamped into the domain and never into a solid
-//!    ([`crate::sim::advect::displace`]).
-//!
-//! Over-dense cells (`s < 0`) get a local minimum of `phi`, so `D` points away from them, and
-//! `div D = -s`: the linearised correction of the density. The reference divides `s` by `dt`
-//! and moves particles by `dt * grad(lambda)`, which cancels; we solve for `phi = dt lambda`
-//! directly.
-//!
-//! Where we depart from the reference's code (each a place where it departs from its own
-//! stated intent; the notes of the team list them):
-//! - The wall and solid contribution is the exact share of a regularly sampled neighbour for
-//!   any `mu`, in 2D and 3D ([`SolidShare`]). The reference adds it in 3D only, assumes 8 ppc,
-//!   counts empty neighbours as full too, and its face/edge test reads the cell's z index
-//!   where the loop variable was meant, so x and y faces get half their share.
-//! - Weights of cells outside the domain are dropped, not clamped onto the wall cells, so the
-//!   wall share is counted once.
-//! - The push-out goes `PUSH_MARGIN` beyond the surface (the reference stops 0.01 inside it:
-//!   `-(dist + 0.01) grad phi`), along the nearest face exit of the rasterised solid (we have
-//!   no obstacle level set); it is a displacement, not scaled by `dt` (the reference multiplies
-//!   it by `dt` in the move but not in the density, consistent only at `dt = 1`).
-//! - A fluid region with no free surface has a singular system: the mean of `s` over it is
-//!   removed (its particle count cannot change; the reference's CG runs to its iteration cap).
-//!
-//! Optional resampling of degenerate cells (`simulation.idp_resample`, default off as in the
-//! reference's 3D scene and Levi's driver; its 2D scene turns it on): cells with `s <`
-//! [`RESAMPLE_BELOW`] (more than twice the rest density) get their particles spread over a
-//! `q^D` sub-grid (`q = ceil(n^(1/D))`, distinct sub-cells in seeded random order), with the
-//! grid velocity, and keep `s = RESAMPLE_BELOW` instead of the clamp (reference
-//! `resampeOverfullCells`).
+//! Method idp's step: the hooks it implements (see the module doc of `super`).
 
-use super::{FluidMethod, MethodInfo, MethodReport, MethodSettings, MethodType};
+use crate::draw::Log;
 use crate::grid::{for_each_cell_weight, Grid, MacField, Vector};
-use crate::metrics::median;
-use crate::record::layout::{LayerView, Needs, Panel};
-use crate::record::{Layer, Log, Style};
+use crate::methods::seam::{FluidMethod, MethodRecording, MethodReport};
 use crate::sim::advect::{displace, CELL_MARGIN};
 use crate::sim::pressure::Poisson;
-use crate::sim::solids::{clearing_distance, ObstacleMode};
+use crate::sim::solids::clearing_distance;
 use crate::sim::State;
 use crate::solvers::pcg::{PcgSettings, PcgStats};
 use rand::seq::SliceRandom;
 use rand::Rng;
 use rayon::prelude::*;
-use std::any::Any;
 
 /// Bound on the density error per step, `|s| <= 0.5` (reference `knComputeDensity`; "as
 /// suggested in the paper to avoid displacement of more than half a cell at a time", Blub).
@@ -87,70 +27,19 @@ pub const RESAMPLE_BELOW: f64 = -1.0;
 /// Most arrows a step records (every k-th particle beyond that).
 const MAX_ARROWS: usize = 4000;
 
-/// Implicit density projection, as registered.
-pub struct Idp;
-
 /// Implicit density projection in a running simulation.
 pub struct IdpSim<const D: usize> {
     resample: bool,
     /// This step's report, until the step ends.
     step: Option<IdpReport<D>>,
-    totals: Totals,
 }
 
-impl MethodType for Idp {
-    const INFO: MethodInfo = MethodInfo {
-        name: "idp",
-        about: "FLIP plus implicit density projection: a second Poisson solve moves particles out of over-dense cells (Kugelstadt et al. 2021)",
-        options: &[],
-        obstacle_modes: &[ObstacleMode::Naive, ObstacleMode::Ignore],
-        panels: &[
-            Panel {
-                title: "idp: PCG iterations",
-                series: &["metrics/idp/iterations"],
-                needs: Needs::Always,
-            },
-            Panel {
-                title: "idp: PCG residual",
-                series: &["metrics/idp/residual"],
-                needs: Needs::Always,
-            },
-            Panel {
-                title: "idp: largest move (cells)",
-                series: &["metrics/idp/max_displacement"],
-                needs: Needs::Always,
-            },
-            Panel {
-                title: "idp: cells",
-                series: &[
-                    "metrics/idp/overdense_cells",
-                    "metrics/idp/clamped_cells",
-                    "metrics/idp/resampled",
-                ],
-                needs: Needs::Always,
-            },
-            Panel {
-                title: "idp: particles pushed out of solids",
-                series: &["metrics/idp/pushed"],
-                needs: Needs::Always,
-            },
-        ],
-        layer_views: &[LayerView {
-            title: "density error",
-            origin: "world",
-            layers: &["world/idp/density_error"],
-            marks: &["world/idp/displacement"],
-            needs: Needs::Always,
-        }],
-        figures: &["idp_iterations", "idp_max_displacement"],
-    };
-
-    fn build<const D: usize>(s: &MethodSettings) -> Box<dyn FluidMethod<D>> {
-        Box::new(IdpSim::<D> {
-            resample: s.idp_resample,
+impl<const D: usize> IdpSim<D> {
+    pub fn new(resample: bool) -> Self {
+        IdpSim {
+            resample,
             step: None,
-            totals: Totals::default(),
-        })
+        }
     }
 }
 
@@ -177,7 +66,6 @@ impl<const D: usize> FluidMethod<D> for IdpSim<D> {
         });
         let p = &mut s.particles;
         let rep = project_density(&inputs, &mut p.pos, &mut p.vel, resample);
-        self.totals.add(&rep);
         self.step = Some(rep);
         Ok(())
     }
@@ -185,17 +73,11 @@ impl<const D: usize> FluidMethod<D> for IdpSim<D> {
     fn finish_step(&mut self, _s: &State<D>) -> Box<dyn MethodReport<D>> {
         Box::new(self.step.take().expect("idp projected this step"))
     }
+}
 
+impl<const D: usize> MethodRecording<D> for IdpSim<D> {
     fn record_setup(&self, log: &mut dyn Log<D>) {
         log.classes("world/idp/density_error", &ErrorClass::table());
-    }
-
-    fn summary(&self) -> Vec<String> {
-        self.totals.lines()
-    }
-
-    fn reset_summary(&mut self) {
-        self.totals = Totals::default();
     }
 }
 
@@ -649,92 +531,5 @@ impl ErrorClass {
             (5, "under-dense (0.05 < s < 0.5)", [110, 150, 240, 160]),
             (6, "under-dense, clamped (s >= 0.5)", [30, 60, 200, 200]),
         ]
-    }
-}
-
-impl<const D: usize> MethodReport<D> for IdpReport<D> {
-    fn record(&self, _s: &State<D>, log: &mut dyn Log<D>, full: bool) {
-        log.scalar("metrics/idp/iterations", self.pcg.iterations as f64);
-        log.scalar("metrics/idp/residual", self.pcg.residual);
-        log.scalar("metrics/idp/max_displacement", self.max_displacement);
-        log.scalar("metrics/idp/overdense_cells", self.overdense as f64);
-        log.scalar("metrics/idp/clamped_cells", self.clamped as f64);
-        log.scalar("metrics/idp/pushed", self.pushed as f64);
-        log.scalar("metrics/idp/resampled", self.resampled as f64);
-        if !self.pcg.converged {
-            log.warn(&format!(
-                "idp: the second solve did not converge ({:?})",
-                self.pcg
-            ));
-        }
-        if full {
-            let class = |c: usize| self.class[c];
-            let hidden = [ErrorClass::NotFluid as u8, ErrorClass::Rest as u8];
-            let layer = Layer {
-                order: 1.0,
-                radius_3d: 0.25,
-            };
-            log.cell_classes("world/idp/density_error", &class, &hidden, layer);
-            let style = Style {
-                color: [255, 170, 0],
-                radius: 0.04,
-                order: 20.0,
-            };
-            log.arrows("world/idp/displacement", &self.moves, style);
-        }
-    }
-
-    fn figures(&self) -> Vec<(&'static str, f64)> {
-        vec![
-            ("idp_iterations", self.pcg.iterations as f64),
-            ("idp_max_displacement", self.max_displacement),
-        ]
-    }
-
-    fn as_any(&self) -> &dyn Any {
-        self
-    }
-}
-
-/// What idp did over a run.
-#[derive(Clone, Debug, Default)]
-struct Totals {
-    iterations: Vec<usize>,
-    not_converged: u64,
-    max_displacement: f64,
-    overdense_max: usize,
-    clamped_max: usize,
-    pushed: u64,
-    resampled: u64,
-}
-
-impl Totals {
-    fn add<const D: usize>(&mut self, r: &IdpReport<D>) {
-        self.iterations.push(r.pcg.iterations);
-        self.not_converged += !r.pcg.converged as u64;
-        self.max_displacement = self.max_displacement.max(r.max_displacement);
-        self.overdense_max = self.overdense_max.max(r.overdense);
-        self.clamped_max = self.clamped_max.max(r.clamped);
-        self.pushed += r.pushed as u64;
-        self.resampled += r.resampled as u64;
-    }
-
-    fn lines(&self) -> Vec<String> {
-        let mut out = vec![format!(
-            "idp: second solve median {} PCG iterations (max {}), did not converge on {} steps; largest particle displacement {:.3} cells; up to {} over-dense and {} clamped cells in a step",
-            median(&self.iterations).unwrap_or(0),
-            self.iterations.iter().max().unwrap_or(&0),
-            self.not_converged,
-            self.max_displacement,
-            self.overdense_max,
-            self.clamped_max
-        )];
-        if self.pushed > 0 || self.resampled > 0 {
-            out.push(format!(
-                "  {} particles pushed out of solids, {} cells resampled in all",
-                self.pushed, self.resampled
-            ));
-        }
-        out
     }
 }

@@ -1,8 +1,9 @@
 //! PIC/FLIP (Zhu and Bridson 2005) on a MAC grid, as the paper's alg. flip runs it without the
 //! correction (line 6): the baseline every other method extends. Every hook of
-//! [`FluidMethod`] keeps its default.
+//! [`FluidMethod`] and [`MethodRecording`] keeps its default, so the whole method is its
+//! registration.
 
-use super::{FluidMethod, MethodInfo, MethodSettings, MethodType};
+use super::seam::{FluidMethod, MethodInfo, MethodRecording, MethodSummary, MethodType, NoSummary};
 use crate::sim::solids::ObstacleMode;
 
 /// Plain FLIP.
@@ -19,9 +20,18 @@ impl MethodType for Flip {
         figures: &[],
     };
 
-    fn build<const D: usize>(_settings: &MethodSettings) -> Box<dyn FluidMethod<D>> {
+    /// Flip has no settings of its own.
+    type Settings = ();
+
+    fn build<const D: usize>(_settings: &()) -> Box<dyn FluidMethod<D>> {
         Box::new(Flip)
+    }
+
+    fn summary<const D: usize>(_settings: &()) -> Box<dyn MethodSummary<D>> {
+        Box::new(NoSummary)
     }
 }
 
 impl<const D: usize> FluidMethod<D> for Flip {}
+
+impl<const D: usize> MethodRecording<D> for Flip {}

@@ -1,174 +1,14 @@
-//! Method powerpic: the Power Particle-in-Cell method (Qu, Li, de Goes, Jiang, "The Power
-//! Particle-in-Cell Method", ACM TOG 41(4), art. 118, 2022), with a free surface.
-//!
-//! Every particle has a volume-constrained density kernel: its row of the entropic transport
-//! plan `T` between the particles and a transportation grid finer than the simulation grid
-//! ([`crate::solvers::sinkhorn`]). Per step (alg. flip with these hooks):
-//!
-//! 1. the plan for the particles' positions, by Sinkhorn iterations in the log domain from
-//!    zero scalings, until both marginals hold to `delta`;
-//! 2. particles to grid with the power (GIMP) weights `w_pi = sum_j T_pj N_i(x_j) / V_p`: each
-//!    transport cell gathers the mass `sum_p T_pj` and momentum `sum_p T_pj v_p` of its
-//!    column, and splats them with the tent functions `N_i` of the faces;
-//! 3. forces and the projection as in flip;
-//! 4. grid to particles with the same weights (the FLIP/PIC blend of flip, `u` and `u - u_old`
-//!    averaged over the kernel), and each particle moved to its kernel's barycentre
-//!    `sum_j T_pj x_j / V_p`;
-//! 5. advection from there, as in flip.
-//!
-//! The free surface: a transport cell need not be full, `sum_p T_pj + a_j = V_j` with an
-//! air slack `a_j >= 0`, so kernels fill the liquid's cells and keep their Gaussian shape
-//! where there is air. Solids: transport cells in solid cells have no capacity, so no kernel
-//! reaches into a solid (no clipping, no ghost particles).
-//!
-//! Parameters ([`PowerPicSettings`]; defaults from Levi, sec. Evaluation): transport grid 2x
-//! finer per axis, `eps = 0.1`, `eta = 1`, `tau = 1 / (2 mu^(1/d))`, `delta = 0.1`. Qu et al.'s
-//! text is not available to this project (its public summary and the open Taichi code,
-//! g1n0st/power-pic, which has no free surface, are), and Levi gives only the values, so the
-//! meaning of `eta` and `tau` is our reading, chosen to match their formulas:
-//!
-//! - `tau` is a length in cells: half a particle's spacing at rest, the half-width `l_p` of
-//!   its GIMP domain (Bardenhagen and Kober 2004), so `(2 tau)^d` is its rest volume;
-//! - `eta` scales that volume: every particle carries `V_p = eta (2 tau)^d` cells. With a free
-//!   surface the fluid's volume is not the domain's, so it must be given; `eta = 1` is the
-//!   volume the particles were seeded with ("precise volume control" of Qu et al.'s abstract).
-//!
-//! Where the text leaves a choice: `eps` is in simulation cells squared (the Taichi code's
-//! `2 dx_T^2` is 0.125 of them, close to Levi's 0.1); the kernel is cut at `1e-12` of its peak
-//! (Levi cut nothing; the Taichi code cuts at 6 transport cells); each step starts from zero
-//! scalings (as the Taichi code does), so iteration counts measure the step's own problem; the
-//! barycentre move is clamped like any particle move (into the domain, never into a solid);
-//! the liquid cells of the pressure solve are those holding particles, as in every method
-//! here, and advection is flip's forward Euler from the barycentre (the Taichi code moves to
-//! `barycentre + dt sum_j T_pj u(x_j) / V_p`).
+//! Method powerpic's step: the hooks it implements (see the module doc of `super`).
 
-use super::{FluidMethod, Known, MethodInfo, MethodReport, MethodSettings, MethodType};
+use super::settings::PowerPicSettings;
 use crate::grid::{Grid, MacField, Vector};
+use crate::methods::seam::{FluidMethod, MethodRecording, MethodReport};
 use crate::metrics::InvariantViolation;
-use crate::record::layout::{LayerView, Needs, Panel};
-use crate::record::Log;
 use crate::sim::advect::displace;
-use crate::sim::solids::ObstacleMode;
-use crate::sim::{transfer, State};
-use crate::solvers::sinkhorn::{SinkhornError, SinkhornSettings, Transport, TransportGrid};
+use crate::sim::transfer::{self, Known};
+use crate::sim::State;
+use crate::solvers::sinkhorn::{SinkhornError, Transport, TransportGrid};
 use rayon::prelude::*;
-use serde::{Deserialize, Serialize};
-use std::any::Any;
-
-/// Power PIC's parameters: `[simulation.powerpic]` in a scene file.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct PowerPicSettings {
-    /// Transport cells per simulation cell along each axis (Levi: 2).
-    pub refine: usize,
-    /// `eps`, the entropic regularisation, in cells squared (Levi: 0.1).
-    pub epsilon: f64,
-    /// `eta`: a particle's volume as a multiple of its rest volume `(2 tau)^d` (Levi: 1).
-    pub eta: f64,
-    /// `tau`: half a particle's rest spacing, in cells (Levi: `1 / (2 mu^(1/d))`, the default
-    /// when unset).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub tau: Option<f64>,
-    /// `delta`: the relative marginal error at which Sinkhorn stops (Levi: 0.1).
-    pub delta: f64,
-    /// Sinkhorn iterations per step at most; a step that reaches it is reported.
-    pub max_iterations: u32,
-}
-
-impl Default for PowerPicSettings {
-    fn default() -> Self {
-        Self {
-            refine: 2,
-            epsilon: 0.1,
-            eta: 1.0,
-            tau: None,
-            delta: 0.1,
-            max_iterations: 1000,
-        }
-    }
-}
-
-impl PowerPicSettings {
-    /// `tau` for `per_axis` particles per cell along each axis.
-    pub fn tau(&self, per_axis: usize) -> f64 {
-        self.tau.unwrap_or(0.5 / per_axis as f64)
-    }
-
-    /// The smallest `eps` whose kernel reaches the nearest transport cell centre from anywhere
-    /// (half a transport cell's diagonal).
-    pub fn min_epsilon(&self, dim: usize) -> f64 {
-        let h = 1.0 / self.refine as f64;
-        dim as f64 * h * h / 4.0 / crate::solvers::sinkhorn::KERNEL_CUTOFF
-    }
-
-    fn sinkhorn(&self) -> SinkhornSettings {
-        SinkhornSettings {
-            epsilon: self.epsilon,
-            delta: self.delta,
-            max_iterations: self.max_iterations,
-        }
-    }
-}
-
-/// Power PIC, as registered.
-pub struct Powerpic;
-
-impl MethodType for Powerpic {
-    const INFO: MethodInfo = MethodInfo {
-        name: "powerpic",
-        about: "Power PIC (Qu et al. 2022): transfers through volume-constrained kernels, an \
-                entropic transport to a finer grid solved by Sinkhorn, with air slack at the \
-                free surface",
-        options: &[],
-        obstacle_modes: &[ObstacleMode::Naive, ObstacleMode::Ignore],
-        panels: &[
-            Panel {
-                title: "powerpic: Sinkhorn iterations",
-                series: &["metrics/powerpic/iterations"],
-                needs: Needs::Always,
-            },
-            Panel {
-                title: "powerpic: marginal error",
-                series: &["metrics/powerpic/marginal_error"],
-                needs: Needs::Always,
-            },
-            Panel {
-                title: "powerpic: air in liquid cells",
-                series: &["metrics/powerpic/air_volume"],
-                needs: Needs::Always,
-            },
-        ],
-        layer_views: &[LayerView {
-            title: "transport grid: fluid fraction",
-            origin: "powerpic",
-            layers: &["powerpic/fluid_fraction"],
-            marks: &[],
-            needs: Needs::Always,
-        }],
-        figures: &[
-            "powerpic_iterations",
-            "powerpic_marginal_error",
-            "powerpic_air_volume",
-        ],
-    };
-
-    fn build<const D: usize>(s: &MethodSettings) -> Box<dyn FluidMethod<D>> {
-        Box::new(PowerPicSim::<D> {
-            settings: s.powerpic,
-            volume: 0.0,
-            tg: TransportGrid {
-                grid: Grid::new([1; D]),
-                h: 1.0,
-                capacity: vec![],
-            },
-            plan: None,
-            fill: vec![],
-            air_volume: 0.0,
-            row_error: 0.0,
-            totals: Totals::default(),
-        })
-    }
-}
 
 /// Power PIC in a running simulation.
 pub struct PowerPicSim<const D: usize> {
@@ -184,19 +24,25 @@ pub struct PowerPicSim<const D: usize> {
     air_volume: f64,
     /// The largest `|sum_j T_pj / V_p - 1|` the transfer back found.
     row_error: f64,
-    totals: Totals,
-}
-
-/// What the summary reports.
-#[derive(Clone, Copy, Debug, Default)]
-struct Totals {
-    steps: u64,
-    iterations: u64,
-    most_iterations: u32,
-    at_cap: u64,
 }
 
 impl<const D: usize> PowerPicSim<D> {
+    pub fn new(settings: PowerPicSettings) -> Self {
+        PowerPicSim {
+            settings,
+            volume: 0.0,
+            tg: TransportGrid {
+                grid: Grid::new([1; D]),
+                h: 1.0,
+                capacity: vec![],
+            },
+            plan: None,
+            fill: vec![],
+            air_volume: 0.0,
+            row_error: 0.0,
+        }
+    }
+
     /// Transport cells in solid cells have no capacity (the solids of this step).
     fn update_capacity(&mut self, s: &State<D>) {
         let tg = &mut self.tg;
@@ -384,42 +230,14 @@ impl<const D: usize> FluidMethod<D> for PowerPicSim<D> {
         let Some(plan) = &self.plan else {
             return Box::new(PowerPicReport::default());
         };
-        let t = &mut self.totals;
-        t.steps += 1;
-        t.iterations += plan.iterations as u64;
-        t.most_iterations = t.most_iterations.max(plan.iterations);
-        t.at_cap += u64::from(!plan.converged);
         Box::new(PowerPicReport {
+            solved: true,
             iterations: plan.iterations,
             marginal_error: plan.error,
             converged: plan.converged,
             air_volume: self.air_volume,
             fraction: fraction_image(&self.tg, &self.fill),
         })
-    }
-
-    fn summary(&self) -> Vec<String> {
-        let t = &self.totals;
-        if t.steps == 0 {
-            return vec![];
-        }
-        let mut lines = vec![format!(
-            "Sinkhorn: {:.1} iterations per step on average, {} at most",
-            t.iterations as f64 / t.steps as f64,
-            t.most_iterations
-        )];
-        if t.at_cap > 0 {
-            lines.push(format!(
-                "Sinkhorn reached its cap of {} iterations in {} of {} steps \
-                 (simulation.powerpic.max_iterations)",
-                self.settings.max_iterations, t.at_cap, t.steps
-            ));
-        }
-        lines
-    }
-
-    fn reset_summary(&mut self) {
-        self.totals = Totals::default();
     }
 }
 
@@ -451,6 +269,8 @@ pub struct FractionImage {
 /// What Power PIC did in one step.
 #[derive(Clone, Debug, Default)]
 pub struct PowerPicReport {
+    /// Whether a transport was solved this step (the other fields are zero otherwise).
+    pub solved: bool,
     /// Sinkhorn's row updates.
     pub iterations: u32,
     /// The largest relative column error when it stopped.
@@ -463,33 +283,4 @@ pub struct PowerPicReport {
     pub fraction: FractionImage,
 }
 
-impl<const D: usize> MethodReport<D> for PowerPicReport {
-    fn record(&self, _s: &State<D>, log: &mut dyn Log<D>, full: bool) {
-        log.scalar("metrics/powerpic/iterations", self.iterations as f64);
-        log.scalar("metrics/powerpic/marginal_error", self.marginal_error);
-        log.scalar("metrics/powerpic/air_volume", self.air_volume);
-        if !self.converged {
-            log.warn(&format!(
-                "powerpic: Sinkhorn stopped at its cap of {} iterations with marginal error \
-                 {:.3e}",
-                self.iterations, self.marginal_error
-            ));
-        }
-        if full {
-            let f = &self.fraction;
-            log.image("powerpic/fluid_fraction", f.size, &f.values, [0.0, 1.0]);
-        }
-    }
-
-    fn figures(&self) -> Vec<(&'static str, f64)> {
-        vec![
-            ("powerpic_iterations", self.iterations as f64),
-            ("powerpic_marginal_error", self.marginal_error),
-            ("powerpic_air_volume", self.air_volume),
-        ]
-    }
-
-    fn as_any(&self) -> &dyn Any {
-        self
-    }
-}
+impl<const D: usize> MethodRecording<D> for PowerPicSim<D> {}

@@ -31,7 +31,7 @@
 //! Without the first solve's prices (the simplex solved `b*`, or the solver failed) the
 //! problem is solved from scratch.
 
-use super::band::{BandPath, PathDirection};
+use super::paths::{BandPath, PathDirection};
 use super::problem::CorrectionProblem;
 use crate::grid::Grid;
 use crate::sim::markings::Markings;

@@ -1,0 +1,55 @@
+//! The paths of sec. push_part, shared by the greedy `paths` variant ([`super::band`]) and
+//! the exact one ([`super::exact_paths`]): which way they run, where they may start and end,
+//! and what one applied path was.
+
+use crate::grid::Vector;
+use crate::sim::markings::{CellKind, DepthLevel, Markings};
+
+/// The direction of the paths (sec. push_part).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PathDirection {
+    /// `s_out < 0`: from surface cells into the band interface and the deep.
+    In,
+    /// `s_in < 0`: from band interface cells to the rest of the band and empty cells.
+    Out,
+}
+
+impl PathDirection {
+    /// The direction that undoes `b*`'s imbalance: out of `C_<=-R` when too many went in.
+    pub fn of(s_in: i64) -> Self {
+        if s_in < 0 {
+            PathDirection::Out
+        } else {
+            PathDirection::In
+        }
+    }
+
+    /// Whether a path may start in cell `c` (if it holds a particle): a surface cell for paths
+    /// in, a band interface cell for paths out (of the previous markings).
+    pub fn is_source(self, previous: &Markings, r: u32, c: usize) -> bool {
+        previous.kind[c] == CellKind::Fluid
+            && match self {
+                PathDirection::In => previous.surface[c],
+                PathDirection::Out => previous.level(c, r) == DepthLevel::Interface,
+            }
+    }
+
+    /// Whether a path may end in the non-solid cell `c` (if it has room): a cell of
+    /// `C_<=-R` for paths in, any other cell for paths out.
+    pub fn is_sink(self, previous: &Markings, r: u32, c: usize) -> bool {
+        let low = previous.at_or_below_interface(c, r);
+        match self {
+            PathDirection::In => low,
+            PathDirection::Out => !low,
+        }
+    }
+}
+
+/// One path of alg. find that alg. update applied: cell centres from source to sink.
+#[derive(Clone, Debug, Default)]
+pub struct BandPath<const D: usize> {
+    pub cells: Vec<Vector<D>>,
+    /// Sum of `sigma_edge` along the path (eq. edge); negative when the path lowers the
+    /// objective.
+    pub cost: f64,
+}

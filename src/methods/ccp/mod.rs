@@ -1,0 +1,63 @@
+//! Method ccp: cell-constrained particles (Z. Levi), FLIP plus the paper's correction step
+//! (sec. 4-5, alg. flip line 6), with the band method of sec. band_method (alg. band) and the
+//! coupling with moving obstacles of sec. 7.
+//!
+//! Its parts, each in a file of this folder: the correction ([`correct`]: eq. problem3 built as
+//! data in [`correct::problem`], the band variants in [`correct::band`], the guarantees checked
+//! after each correction in [`correct::guarantees`]), the deep's bookkeeping ([`deep`]), its
+//! settings (`settings.rs`) and what it records and sums up (`record.rs`). The band's geometry
+//! (levels, velocity combination, advection of the grid velocity), which narrow-band FLIP
+//! shares, is [`crate::sim::band`].
+
+pub mod correct;
+pub mod deep;
+mod physics;
+mod record;
+mod settings;
+
+pub use record::CcpReport;
+pub use settings::{BandMode, CcpSettings, Directions, Solver};
+
+use super::seam::{FluidMethod, MethodInfo, MethodOption, MethodSummary, MethodType};
+use crate::draw::{LayerView, Needs};
+use crate::sim::solids::ObstacleMode;
+use physics::CcpSim;
+use record::{Totals, PANELS};
+
+/// The paper's method, as registered.
+pub struct Ccp;
+
+impl MethodType for Ccp {
+    const INFO: MethodInfo = MethodInfo {
+        name: "ccp",
+        about: "cell-constrained particles: FLIP plus the paper's correction (sec. 4-7)",
+        options: &[
+            MethodOption::Band,
+            MethodOption::BandR,
+            MethodOption::Solver,
+            MethodOption::Directions,
+            MethodOption::CrossCheck,
+            MethodOption::ExportLp,
+        ],
+        obstacle_modes: &[ObstacleMode::Couple],
+        panels: PANELS,
+        layer_views: &[LayerView {
+            title: "band levels",
+            origin: "world",
+            layers: &["world/grid/depth"],
+            marks: &["world/corrector/paths"],
+            needs: Needs::Band,
+        }],
+        figures: &["ccp_augmentations", "ccp_moved", "ccp_solver_ms"],
+    };
+
+    type Settings = CcpSettings;
+
+    fn build<const D: usize>(s: &CcpSettings) -> Box<dyn FluidMethod<D>> {
+        Box::new(CcpSim::<D>::new(s))
+    }
+
+    fn summary<const D: usize>(s: &CcpSettings) -> Box<dyn MethodSummary<D>> {
+        Box::new(Totals::new(s))
+    }
+}

@@ -1,0 +1,80 @@
+//! Method ccp's settings: the correction's solver and candidate moves, and the band method
+//! (sec. band_method) with its depth `R`.
+
+use super::correct::band::BandVariant;
+
+pub use super::correct::problem::Directions;
+pub use super::correct::Solver;
+use crate::sim::band::DEFAULT_BAND_R;
+use std::path::PathBuf;
+
+/// Method ccp's settings.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CcpSettings {
+    /// Solver of the correction step (`simulation.solver`, `--solver`).
+    pub solver: Solver,
+    /// Candidate moves of the correction (`simulation.directions`, `--directions`).
+    pub directions: Directions,
+    /// The band method (sec. band_method) and how its count is kept (`simulation.band`,
+    /// `--band`).
+    pub band: BandMode,
+    /// `R`: depth of the band interface; the band is `R + 1` cells thick (`simulation.band_r`,
+    /// `--band-r`).
+    pub band_r: u32,
+    /// Solve every correction twice (other solver, other band variants) and compare
+    /// (`--cross-check`).
+    pub cross_check: bool,
+    /// Write the correction problem of this step as MPS to this path (`--export-lp`).
+    pub export_lp: Option<(u64, PathBuf)>,
+}
+
+impl Default for CcpSettings {
+    /// The paper's choices: the exact flow solver, von Neumann moves, no band.
+    fn default() -> Self {
+        Self {
+            solver: Solver::Flow,
+            directions: Directions::VonNeumann,
+            band: BandMode::None,
+            band_r: DEFAULT_BAND_R,
+            cross_check: false,
+            export_lp: None,
+        }
+    }
+}
+
+/// The band setting of method ccp (`simulation.band`, `--band`): no band, or the band with the
+/// variant that keeps its count.
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum,
+)]
+#[serde(rename_all = "kebab-case")]
+pub enum BandMode {
+    /// No band: particles fill the whole fluid.
+    None,
+    /// The paper's choice: push particles along grid paths (sec. push_part).
+    Paths,
+    /// A second solve with the one-way constraint (sec. band_con2), an integer program.
+    OneWay,
+    /// Eq. problem3 with eq. band_con as one integer program: small grids only.
+    Full,
+    /// Beyond the paper: the problem `paths` solves greedily (move `n_move` particles from
+    /// sources to sinks, other cells keeping their count), solved exactly as a min-cost flow.
+    ExactPaths,
+}
+
+impl BandMode {
+    /// The band variant, when there is a band.
+    pub fn variant(self) -> Option<BandVariant> {
+        match self {
+            BandMode::None => None,
+            BandMode::Paths => Some(BandVariant::Paths),
+            BandMode::OneWay => Some(BandVariant::OneWay),
+            BandMode::Full => Some(BandVariant::Full),
+            BandMode::ExactPaths => Some(BandVariant::ExactPaths),
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        self.variant().map_or("none", BandVariant::name)
+    }
+}

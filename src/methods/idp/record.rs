@@ -1,0 +1,147 @@
+//! What method idp records and sums up: its panels and density-error view, its step report's
+//! scalars and drawings, and the run's totals.
+
+use super::physics::{ErrorClass, IdpReport};
+use crate::draw::{Layer, LayerView, Log, Needs, Panel, Style};
+use crate::methods::seam::{MethodReport, MethodSummary};
+use crate::metrics::median;
+use crate::sim::State;
+use std::any::Any;
+
+pub(super) const PANELS: &[Panel] = &[
+    Panel {
+        title: "idp: PCG iterations",
+        series: &["metrics/idp/iterations"],
+        needs: Needs::Always,
+    },
+    Panel {
+        title: "idp: PCG residual",
+        series: &["metrics/idp/residual"],
+        needs: Needs::Always,
+    },
+    Panel {
+        title: "idp: largest move (cells)",
+        series: &["metrics/idp/max_displacement"],
+        needs: Needs::Always,
+    },
+    Panel {
+        title: "idp: cells",
+        series: &[
+            "metrics/idp/overdense_cells",
+            "metrics/idp/clamped_cells",
+            "metrics/idp/resampled",
+        ],
+        needs: Needs::Always,
+    },
+    Panel {
+        title: "idp: particles pushed out of solids",
+        series: &["metrics/idp/pushed"],
+        needs: Needs::Always,
+    },
+];
+
+pub(super) const LAYER_VIEWS: &[LayerView] = &[LayerView {
+    title: "density error",
+    origin: "world",
+    layers: &["world/idp/density_error"],
+    marks: &["world/idp/displacement"],
+    needs: Needs::Always,
+}];
+
+impl<const D: usize> MethodReport<D> for IdpReport<D> {
+    fn record(&self, _s: &State<D>, log: &mut dyn Log<D>, full: bool) {
+        log.scalar("metrics/idp/iterations", self.pcg.iterations as f64);
+        log.scalar("metrics/idp/residual", self.pcg.residual);
+        log.scalar("metrics/idp/max_displacement", self.max_displacement);
+        log.scalar("metrics/idp/overdense_cells", self.overdense as f64);
+        log.scalar("metrics/idp/clamped_cells", self.clamped as f64);
+        log.scalar("metrics/idp/pushed", self.pushed as f64);
+        log.scalar("metrics/idp/resampled", self.resampled as f64);
+        if !self.pcg.converged {
+            log.warn(&format!(
+                "idp: the second solve did not converge ({:?})",
+                self.pcg
+            ));
+        }
+        if full {
+            let class = |c: usize| self.class[c];
+            let hidden = [ErrorClass::NotFluid as u8, ErrorClass::Rest as u8];
+            let layer = Layer {
+                order: 1.0,
+                radius_3d: 0.25,
+            };
+            log.cell_classes("world/idp/density_error", &class, &hidden, layer);
+            let style = Style {
+                color: [255, 170, 0],
+                radius: 0.04,
+                order: 20.0,
+            };
+            log.arrows("world/idp/displacement", &self.moves, style);
+        }
+    }
+
+    fn figures(&self) -> Vec<(&'static str, f64)> {
+        vec![
+            ("idp_iterations", self.pcg.iterations as f64),
+            ("idp_max_displacement", self.max_displacement),
+        ]
+    }
+
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+}
+
+/// What idp did over a run.
+#[derive(Clone, Debug, Default)]
+pub(super) struct Totals {
+    iterations: Vec<usize>,
+    not_converged: u64,
+    max_displacement: f64,
+    overdense_max: usize,
+    clamped_max: usize,
+    pushed: u64,
+    resampled: u64,
+}
+
+impl<const D: usize> MethodSummary<D> for Totals {
+    fn add(&mut self, report: &dyn MethodReport<D>, _s: &State<D>) {
+        let r = report.as_any().downcast_ref::<IdpReport<D>>();
+        self.add_report(r.expect("an idp report"));
+    }
+
+    fn lines(&self) -> Vec<String> {
+        self.summary_lines()
+    }
+}
+
+impl Totals {
+    fn add_report<const D: usize>(&mut self, r: &IdpReport<D>) {
+        self.iterations.push(r.pcg.iterations);
+        self.not_converged += !r.pcg.converged as u64;
+        self.max_displacement = self.max_displacement.max(r.max_displacement);
+        self.overdense_max = self.overdense_max.max(r.overdense);
+        self.clamped_max = self.clamped_max.max(r.clamped);
+        self.pushed += r.pushed as u64;
+        self.resampled += r.resampled as u64;
+    }
+
+    fn summary_lines(&self) -> Vec<String> {
+        let mut out = vec![format!(
+            "idp: second solve median {} PCG iterations (max {}), did not converge on {} steps; largest particle displacement {:.3} cells; up to {} over-dense and {} clamped cells in a step",
+            median(&self.iterations).unwrap_or(0),
+            self.iterations.iter().max().unwrap_or(&0),
+            self.not_converged,
+            self.max_displacement,
+            self.overdense_max,
+            self.clamped_max
+        )];
+        if self.pushed > 0 || self.resampled > 0 {
+            out.push(format!(
+                "  {} particles pushed out of solids, {} cells resampled in all",
+                self.pushed, self.resampled
+            ));
+        }
+        out
+    }
+}

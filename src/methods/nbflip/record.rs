@@ -1,0 +1,104 @@
+//! What method nbflip records and sums up: its panels and band-level view, its step report's
+//! scalars and the band levels by the level set, and the run's totals.
+
+use super::physics::{level, NbflipReport};
+use crate::draw::{Layer, LayerView, Log, Needs, Panel};
+use crate::methods::seam::{MethodReport, MethodSummary};
+use crate::metrics::median;
+use crate::sim::markings::DepthLevel;
+use crate::sim::State;
+use std::any::Any;
+
+pub(super) const PANELS: &[Panel] = &[
+    Panel {
+        title: "narrow band: particles held",
+        series: &["metrics/nbflip/particles"],
+        needs: Needs::Always,
+    },
+    Panel {
+        title: "narrow band: resampling",
+        series: &["metrics/nbflip/seeded", "metrics/nbflip/deleted"],
+        needs: Needs::Always,
+    },
+];
+
+pub(super) const LAYER_VIEWS: &[LayerView] = &[LayerView {
+    title: "band levels",
+    origin: "world",
+    layers: &["world/grid/depth"],
+    marks: &[],
+    needs: Needs::Always,
+}];
+
+impl<const D: usize> MethodReport<D> for NbflipReport {
+    fn record(&self, s: &State<D>, log: &mut dyn Log<D>, full: bool) {
+        log.scalar("metrics/nbflip/particles", self.particles as f64);
+        log.scalar("metrics/nbflip/seeded", self.seeded as f64);
+        log.scalar("metrics/nbflip/deleted", self.deleted() as f64);
+        if full {
+            let layer = Layer {
+                order: 1.0,
+                radius_3d: 0.2,
+            };
+            let hidden = [DepthLevel::NotFluid as u8, DepthLevel::Deep as u8];
+            let (phi, solid, r) = (&self.phi, &s.solids.solid, self.band_r as f64);
+            let class = |c| level::<D>(phi, solid, r, c) as u8;
+            log.cell_classes("world/grid/depth", &class, &hidden, layer);
+        }
+    }
+
+    fn figures(&self) -> Vec<(&'static str, f64)> {
+        vec![
+            ("nbflip_seeded", self.seeded as f64),
+            ("nbflip_deleted", self.deleted() as f64),
+        ]
+    }
+
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+}
+
+/// What nbflip did over a run: each step's report without its level set.
+#[derive(Debug)]
+pub(super) struct Totals {
+    band_r: u32,
+    steps: Vec<NbflipReport>,
+}
+
+impl Totals {
+    pub(super) fn new(band_r: u32) -> Self {
+        Self {
+            band_r,
+            steps: vec![],
+        }
+    }
+}
+
+impl<const D: usize> MethodSummary<D> for Totals {
+    fn add(&mut self, report: &dyn MethodReport<D>, _s: &State<D>) {
+        let rep = report.as_any().downcast_ref::<NbflipReport>();
+        let rep = rep.expect("an nbflip report");
+        self.steps.push(NbflipReport {
+            phi: Default::default(),
+            ..rep.clone()
+        });
+    }
+
+    fn lines(&self) -> Vec<String> {
+        let (lo, hi) = self.steps.iter().fold((usize::MAX, 0), |(lo, hi), r| {
+            (lo.min(r.particles), hi.max(r.particles))
+        });
+        let sum = |f: fn(&NbflipReport) -> usize| self.steps.iter().map(f).sum::<usize>();
+        let seeded: Vec<usize> = self.steps.iter().map(|r| r.seeded).collect();
+        vec![format!(
+            "narrow band (R = {}): {lo} .. {hi} particles after a step; resampling seeded {} (median {} a step) and deleted {} outside the liquid, {} below the band, {} in crowded cells",
+            self.band_r,
+            sum(|r| r.seeded),
+            median(&seeded).unwrap_or(0),
+            sum(|r| r.outside),
+            sum(|r| r.below),
+            sum(|r| r.crowded),
+        )]
+    }
+}

@@ -1,0 +1,220 @@
+//! The seam between the step and the methods: what a method declares ([`MethodInfo`], its
+//! options and settings), the traits it implements (the step's hooks in [`FluidMethod`], what
+//! recordings ask of it in [`MethodRecording`], its step report [`MethodReport`] and its run's
+//! [`MethodSummary`]) and how it is registered ([`MethodType`]). The hook table is in the
+//! module doc of `crate::methods`.
+
+use crate::draw::{LayerView, Log, Panel};
+use crate::grid::{MacField, Vector};
+use crate::metrics::InvariantViolation;
+use crate::sim::markings::Markings;
+use crate::sim::solids::ObstacleMode;
+use crate::sim::transfer::{self, Known};
+use crate::sim::State;
+use std::any::Any;
+use std::fmt::Debug;
+
+/// The options of the command line and the scene file that only some methods have. A method
+/// that has none of them refuses it (see [`MethodSettings::check_given`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MethodOption {
+    Band,
+    BandR,
+    Solver,
+    Directions,
+    CrossCheck,
+    ExportLp,
+}
+
+impl MethodOption {
+    /// The option as the command line spells it.
+    pub fn flag(self) -> &'static str {
+        match self {
+            MethodOption::Band => "--band",
+            MethodOption::BandR => "--band-r",
+            MethodOption::Solver => "--solver",
+            MethodOption::Directions => "--directions",
+            MethodOption::CrossCheck => "--cross-check",
+            MethodOption::ExportLp => "--export-lp",
+        }
+    }
+}
+
+/// What a method is, for lists, help and checks.
+#[derive(Debug)]
+pub struct MethodInfo {
+    /// Its name in scene files and on the command line.
+    pub name: &'static str,
+    /// One line: the method and its paper.
+    pub about: &'static str,
+    /// The method-specific options it takes.
+    pub options: &'static [MethodOption],
+    /// The obstacle modes it supports; the first is its default.
+    pub obstacle_modes: &'static [ObstacleMode],
+    /// Time-series panels of its metrics in the recording's layout, one quantity family each.
+    pub panels: &'static [Panel],
+    /// Its layers that would hide or blend with the particles in the world view, each in a
+    /// view of its own beside it.
+    pub layer_views: &'static [LayerView],
+    /// The names of the per-step figures its reports give ([`MethodReport::figures`]), which
+    /// `cellflip report` summarises (median over the steps) in columns `<name>_median`.
+    pub figures: &'static [&'static str],
+}
+
+/// Registration of a method type: its description, how to build its step and its summary.
+pub trait MethodType {
+    const INFO: MethodInfo;
+    /// Its own settings, from the scene file and the command line.
+    type Settings: Clone + Debug + PartialEq + Default;
+    fn build<const D: usize>(settings: &Self::Settings) -> Box<dyn FluidMethod<D>>;
+    fn summary<const D: usize>(settings: &Self::Settings) -> Box<dyn MethodSummary<D>>;
+}
+
+/// One fluid method's step: the places where it departs from plain FLIP. Every hook has
+/// FLIP's behaviour as its default.
+pub trait FluidMethod<const D: usize>: MethodRecording<D> + Send {
+    /// After seeding and the first markings.
+    fn start(&mut self, _s: &mut State<D>) {}
+
+    /// The particle count per cell that emitters top up to `mu`, when it is not the markings'
+    /// count.
+    fn emitter_counts(&self, _s: &State<D>) -> Option<Vec<u32>> {
+        None
+    }
+
+    /// Particles seeded or emitted that the method accounts for without holding them: the
+    /// band's imaginary particles of the deep (ccp), or what resampling deleted net of what it
+    /// seeded (nbflip; negative when it seeded more). Particles held plus these are all particles
+    /// ever seeded or emitted (checked every step).
+    fn particles_not_held(&self) -> isize {
+        0
+    }
+
+    /// Alg. flip line 1: particle velocities to the grid's faces, and which faces got one.
+    fn particles_to_grid(&mut self, s: &State<D>) -> anyhow::Result<(MacField<D>, Known<D>)> {
+        Ok(transfer::particles_to_grid(
+            &s.grid,
+            &s.particles.pos,
+            &s.particles.vel,
+        ))
+    }
+
+    /// Alg. flip line 4: the grid velocity back to the particles (`u_old` is the field before
+    /// forces and projection), their speeds bounded by `max_speed` (checked after every step's
+    /// transfer: [`crate::metrics::check_speed_bound`]). Returns true when it wrote
+    /// `u(x_p)` per particle to `at` and the particles have not moved, for the advection (line
+    /// 5) to use instead of interpolating `u` again at the same points.
+    fn grid_to_particles(
+        &mut self,
+        s: &mut State<D>,
+        u: &MacField<D>,
+        u_old: &MacField<D>,
+        at: &mut Vec<Vector<D>>,
+    ) -> bool {
+        let blend = transfer::Blend {
+            flip_ratio: s.config.flip_ratio,
+            max_speed: s.config.max_speed,
+        };
+        transfer::grid_to_particles(&s.grid, u, u_old, blend, &mut s.particles, at);
+        true
+    }
+
+    /// Just before the particles are advected (their positions are `x_bar`).
+    fn before_advection(&mut self, _s: &State<D>) {}
+
+    /// The grid velocity the next step starts from, given this step's projected one.
+    fn next_grid_velocity(&mut self, _s: &State<D>, u: MacField<D>, _dt: f64) -> MacField<D> {
+        u
+    }
+
+    /// Alg. flip line 6: corrects the advected positions. `penalty` is the per-cell cost of
+    /// a particle in a cell a moving obstacle wants (eq. solid_penalty2), when obstacles are
+    /// coupled.
+    fn correct_positions(
+        &mut self,
+        _s: &mut State<D>,
+        _penalty: Option<&[f64]>,
+    ) -> anyhow::Result<()> {
+        Ok(())
+    }
+
+    /// Just before new markings are computed from the particles (`s.markings` are still the
+    /// previous ones): the method may resample its particles (nbflip) and returns the cells
+    /// that stay fluid even without particles.
+    fn before_markings(&mut self, _s: &mut State<D>) -> Option<Vec<bool>> {
+        None
+    }
+
+    /// After new markings were computed (after emission and at the end of the step);
+    /// `previous` are the markings they replace.
+    fn after_markings(&mut self, _s: &mut State<D>, _previous: &Markings) {}
+
+    /// The invariants this method guarantees beyond those of every method.
+    fn check_invariants(&self, _s: &State<D>) -> Result<(), InvariantViolation> {
+        Ok(())
+    }
+
+    /// Ends the step: what the method did in it, as one value.
+    fn finish_step(&mut self, _s: &State<D>) -> Box<dyn MethodReport<D>> {
+        Box::new(NoReport)
+    }
+}
+
+/// What a recording asks of a method's state beyond its step reports ([`MethodReport`]);
+/// every hook has a default for a method with nothing to add.
+pub trait MethodRecording<const D: usize> {
+    /// Static recording data (class colours of its layers).
+    fn record_setup(&self, _log: &mut dyn Log<D>) {}
+
+    /// Whether cell `c` is in the method's deep: fluid below its band, whose particles it does
+    /// not hold. Recordings draw it as its own class in the markings rather than as a bubble.
+    fn is_deep(&self, _s: &State<D>, _c: usize) -> bool {
+        false
+    }
+}
+
+/// What a method did over a run, gathered from its step reports, for the run's summary.
+pub trait MethodSummary<const D: usize>: Send {
+    /// Adds one step's report (of this method) with the state after the step.
+    fn add(&mut self, report: &dyn MethodReport<D>, s: &State<D>);
+
+    /// Lines for the run's summary.
+    fn lines(&self) -> Vec<String>;
+}
+
+/// The summary of a method with nothing to add to the run's.
+pub struct NoSummary;
+
+impl<const D: usize> MethodSummary<D> for NoSummary {
+    fn add(&mut self, _report: &dyn MethodReport<D>, _s: &State<D>) {}
+
+    fn lines(&self) -> Vec<String> {
+        vec![]
+    }
+}
+
+/// What a method did in one step.
+pub trait MethodReport<const D: usize>: Any + Debug + Send {
+    /// Logs the report: metrics every step, drawings when `full`.
+    fn record(&self, s: &State<D>, log: &mut dyn Log<D>, full: bool);
+
+    /// Per-step figures for `cellflip report`: solver statistics by name (each name listed
+    /// in [`MethodInfo::figures`]).
+    fn figures(&self) -> Vec<(&'static str, f64)> {
+        vec![]
+    }
+
+    fn as_any(&self) -> &dyn Any;
+}
+
+/// The report of a method with nothing to say.
+#[derive(Debug)]
+pub struct NoReport;
+
+impl<const D: usize> MethodReport<D> for NoReport {
+    fn record(&self, _s: &State<D>, _log: &mut dyn Log<D>, _full: bool) {}
+
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+}

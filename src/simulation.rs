@@ -1,0 +1,188 @@
+//! A running simulation: the state, the method that steps it, and one time step as a list of
+//! named stages (paper alg. flip; alg. band for the band methods).
+//!
+//! This module sits above the methods: [`Simulation::step`] calls the stages of [`crate::sim`]
+//! (the library of the paper's steps, which knows no method) and, where methods differ, the
+//! hooks of [`FluidMethod`]. After every step it checks the invariants every method keeps,
+//! then the method's own.
+
+use crate::grid::Vector;
+use crate::methods::{FluidMethod, MethodReport, MethodSettings, MethodSummary, NoReport};
+use crate::metrics::{self, InvariantViolation, Stage, StageTimes};
+use crate::sim::{advect, emit, forces, pressure, timestep, transfer, SimConfig, State};
+use crate::solvers::pcg::PcgStats;
+
+/// What one step did.
+#[derive(Debug)]
+pub struct StepReport<const D: usize> {
+    pub dt_secs: f64,
+    /// The step had to be shortened after the projection to keep motion within `cfl` cells.
+    pub dt_shortened: bool,
+    pub times: StageTimes,
+    pub pcg: PcgStats,
+    /// Largest face velocity component after the projection, cells per second.
+    pub max_speed: f64,
+    pub emitted: usize,
+    pub volume_percent: f64,
+    /// Per obstacle: whether it had to stay this step.
+    pub blocked: Vec<bool>,
+    /// The cells obstacles wanted this step (`C_new_solid`) with their clearing distance.
+    pub new_solid: Vec<(usize, u32)>,
+    /// What the method did.
+    pub method: Box<dyn MethodReport<D>>,
+}
+
+impl<const D: usize> StepReport<D> {
+    fn new() -> Self {
+        Self {
+            dt_secs: 0.0,
+            dt_shortened: false,
+            times: StageTimes::default(),
+            pcg: PcgStats::default(),
+            max_speed: 0.0,
+            emitted: 0,
+            volume_percent: 0.0,
+            blocked: vec![],
+            new_solid: vec![],
+            method: Box::new(NoReport),
+        }
+    }
+
+    /// The method's report as its own type, e.g. `rep.method_report::<CcpReport<2>>()`.
+    pub fn method_report<T: 'static>(&self) -> Option<&T> {
+        self.method.as_any().downcast_ref()
+    }
+}
+
+/// A running simulation: the state, the method that steps it and what the method did so far.
+pub struct Simulation<const D: usize> {
+    pub state: State<D>,
+    pub method: Box<dyn FluidMethod<D>>,
+    /// The method's totals since the start or the last [`Simulation::reset_summary`].
+    pub summary: Box<dyn MethodSummary<D>>,
+    settings: MethodSettings,
+    /// Grid-to-particle's `u(x_p)` for the advection, its allocation kept between steps.
+    u_at_particles: Vec<Vector<D>>,
+}
+
+impl<const D: usize> Simulation<D> {
+    /// Seeds the scene's fluid and starts the method of `settings` on it.
+    pub fn new(config: SimConfig<D>, settings: &MethodSettings) -> Self {
+        let mut state = State::new(config);
+        let mut method = settings.kind.build::<D>(settings);
+        method.start(&mut state);
+        Self {
+            state,
+            method,
+            summary: settings.kind.summary::<D>(settings),
+            settings: settings.clone(),
+            u_at_particles: vec![],
+        }
+    }
+
+    /// Forgets the method's totals so far (after a warm-up).
+    pub fn reset_summary(&mut self) {
+        self.summary = self.settings.kind.summary::<D>(&self.settings);
+    }
+
+    /// Advances the simulation by one step (alg. flip; alg. band with the band).
+    pub fn step(&mut self) -> anyhow::Result<StepReport<D>> {
+        let Simulation {
+            state: s,
+            method: m,
+            u_at_particles,
+            ..
+        } = self;
+        let mut rep = StepReport::new();
+        let mut dt = timestep::planned(s);
+        rep.emitted = rep
+            .times
+            .time(Stage::Emit, || emit::emit(s, m.emitter_counts(s)));
+        if rep.emitted > 0 {
+            // New fluid changes the depths the correction reads.
+            refresh_markings(s, m.as_mut());
+        }
+        // Line 1: particles to grid.
+        let mut u = rep.times.time(Stage::ParticlesToGrid, || {
+            let (mut u, mut known) = m.particles_to_grid(s)?;
+            transfer::extrapolate(&s.grid, &mut u, &mut known, 2);
+            anyhow::Ok(u)
+        })?;
+        let u_old = u.clone();
+        // Lines 2-3: forces and the pressure projection.
+        rep.times
+            .time(Stage::Forces, || forces::apply(s, &mut u, dt));
+        rep.pcg = rep
+            .times
+            .time(Stage::Pressure, || pressure::project_stage(s, &mut u));
+        rep.max_speed = timestep::finite_speed(&u, &rep.pcg)?;
+        (dt, rep.dt_shortened) = timestep::shortened(dt, rep.max_speed, s.config.cfl);
+        // Line 4: grid to particles.
+        let have_at = rep.times.time(Stage::GridToParticles, || {
+            m.grid_to_particles(s, &u, &u_old, u_at_particles)
+        });
+        metrics::check_speed_bound(&s.particles.vel, s.config.max_speed)?;
+        // Line 5: advection (and, with the band, of the grid velocity).
+        m.before_advection(s);
+        rep.times.time(Stage::Advect, || {
+            let (grid, pos) = (&s.grid, &mut s.particles.pos);
+            let at = have_at.then_some(u_at_particles.as_slice());
+            advect::advect_particles(grid, &u, at, &s.solids.solid, dt, pos);
+            s.velocity = m.next_grid_velocity(s, u, dt);
+        });
+        // Line 6: the correction, with the cells obstacles want this step (sec. 7).
+        let plan = s.solids.plan(&s.grid, dt);
+        rep.times.time(Stage::Correct, || {
+            m.correct_positions(s, plan.penalty.as_deref())
+        })?;
+        rep.blocked = s.solids.advance(
+            &s.grid,
+            &plan,
+            &s.particles.pos,
+            &s.markings,
+            &s.config.gravity,
+            dt,
+        );
+        rep.new_solid = plan.new_solid;
+        // Line 7: new markings (alg. band line 9 in the method's hook).
+        rep.times
+            .time(Stage::Markings, || refresh_markings(s, m.as_mut()));
+        s.time_secs += dt;
+        s.steps += 1;
+        rep.dt_secs = dt;
+        rep.volume_percent = s.volume_percent();
+        self.check_invariants()?;
+        rep.method = self.method.finish_step(&self.state);
+        self.summary.add(rep.method.as_ref(), &self.state);
+        Ok(rep)
+    }
+
+    /// The invariants every method keeps, checked after every step (O(particles)): particles
+    /// held plus those the method holds no longer account for every particle seeded or emitted,
+    /// all state is finite, every particle is inside the domain and outside solids; then the
+    /// method's own.
+    pub fn check_invariants(&self) -> Result<(), InvariantViolation> {
+        let s = &self.state;
+        let not_held = self.method.particles_not_held();
+        let expected = s
+            .total_particles
+            .checked_add_signed(-not_held)
+            .ok_or_else(|| {
+                InvariantViolation(format!(
+                    "{not_held} particles not held exceed the {} ever seeded or emitted",
+                    s.total_particles
+                ))
+            })?;
+        let p = &s.particles;
+        metrics::check_particles(&s.grid, &p.pos, &p.vel, s.solids.particle_free(), expected)?;
+        self.method.check_invariants(s)
+    }
+}
+
+/// New markings from the current positions; the method may keep cells fluid without
+/// particles, and acts on the new markings (the band's exchange with the deep).
+fn refresh_markings<const D: usize>(s: &mut State<D>, m: &mut dyn FluidMethod<D>) {
+    let keep = m.before_markings(s);
+    let previous = s.remark(keep.as_deref());
+    m.after_markings(s, &previous);
+}
