@@ -8,12 +8,12 @@ use crate::metrics::median;
 use crate::outln;
 use crate::solvers::mps;
 use anyhow::{Context, Result};
+use std::path::Path;
 use std::time::Instant;
 
 pub fn solve(args: &SolveArgs) -> Result<()> {
     for path in &args.files {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("{}: cannot read", path.display()))?;
+        let text = read_text(path)?;
         let file = mps::read(&text).with_context(|| format!("{}", path.display()))?;
         let p = &file.problem;
         outln!(
@@ -71,4 +71,37 @@ pub fn solve(args: &SolveArgs) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// The file's text, or an error naming the file and the line where it stops being UTF-8.
+fn read_text(path: &Path) -> Result<String> {
+    let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
+    String::from_utf8(bytes).map_err(|e| {
+        let text = &e.as_bytes()[..e.utf8_error().valid_up_to()];
+        let line = text.iter().filter(|&&b| b == b'\n').count() + 1;
+        let path = path.display();
+        anyhow::anyhow!("{path}: line {line}: not a text file (not UTF-8): expected an MPS file")
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A file that is not UTF-8 is refused, naming the file and the line of the first bad byte.
+    #[test]
+    fn read_text_refuses_a_file_that_is_not_utf8() {
+        let path =
+            std::env::temp_dir().join(format!("cellflip-{}-not-utf8.mps", std::process::id()));
+        std::fs::write(&path, b"NAME t\nROWS\n\xff\xfe\n").unwrap();
+        let e = format!("{:#}", read_text(&path).unwrap_err());
+        std::fs::remove_file(&path).unwrap();
+        assert_eq!(
+            e,
+            format!(
+                "{}: line 3: not a text file (not UTF-8): expected an MPS file",
+                path.display()
+            )
+        );
+    }
 }

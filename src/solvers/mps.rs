@@ -5,6 +5,8 @@
 //! The file: rows `item<i>` (`E`, right-hand side 1), `bin<b>` for the bins whose bounds can
 //! bind (`E` when lower and upper meet, else `L` on the upper bound with the lower bound as a
 //! range), columns `x<k>` with their cost, item and bin entries, all bounded above by 1.
+//! [`read`] takes the objective row under any name, as other tools write it, and refuses
+//! what is not such a problem, naming the line and what it expected there.
 
 use crate::solvers::min_cost_flow::BoundedAssignment;
 use std::fmt::Write as _;
@@ -66,7 +68,8 @@ pub fn write(p: &BoundedAssignment, name: &str, comment: &[String]) -> String {
     s
 }
 
-/// A line of an MPS file that [`read`] cannot take, with its 1-based number.
+/// A line of an MPS file that [`read`] cannot take, with its 1-based number: the line past
+/// the last one for what the file as a whole lacks (a ROWS section, items, a column per item).
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 #[error("line {line}: {reason}")]
 pub struct MpsError {
@@ -90,21 +93,40 @@ struct Column {
     cost: f64,
 }
 
-/// Reads a file that [`write`] wrote. A column with no bin row gets a bin of its own with
-/// room for it (its bin could not bind), which leaves the optimum unchanged.
+/// The sections [`read`] takes, each with the entries it expects in it.
+const SECTIONS: [(&str, &str); 7] = [
+    ("NAME", "none (the name goes on the NAME line)"),
+    ("ROWS", "a row type and a row name, e.g. `E item0`"),
+    ("COLUMNS", "a column, rows and values, e.g. `x0 item0 1`"),
+    ("RHS", "a set, a row and a value, e.g. `rhs item0 1`"),
+    ("RANGES", "a set, a bin row and a value, e.g. `rng bin1 1`"),
+    ("BOUNDS", "`UP <set> <column> 1`"),
+    ("ENDATA", "none (the data has ended)"),
+];
+
+/// The row types [`read`] takes, for its errors.
+const ROW_TYPES: &str = "N (the objective), E (item<i> or bin<b>) or L (bin<b>)";
+
+/// Reads a file that [`write`] wrote, or another tool wrote for the same problem: its `N` row
+/// is the objective whatever its name, and a second `N` row is refused rather than dropped.
+/// A column with no bin row gets a bin of its own with room for it (its bin could not bind),
+/// which leaves the optimum unchanged. Refused, naming the line and what it expected: control
+/// characters (binary data), an entry before any section, a section other than NAME, ROWS,
+/// COLUMNS, RHS, RANGES, BOUNDS and ENDATA, a row type other than N, E and L, rows other than
+/// the objective, `item<i>` and `bin<b>`, and a file with no ROWS section or no item.
 pub fn read(text: &str) -> Result<MpsProblem, MpsError> {
     let mut r = Reader::default();
     for (n, line) in text.lines().enumerate() {
         r.line = n + 1;
-        if let Some(c) = line.strip_prefix('*') {
-            let value = c.trim().strip_prefix("optimal objective ");
-            if let Some(v) = value.and_then(|v| v.split_whitespace().next()) {
-                r.recorded_optimum = Some(r.number(v)?);
-            }
-        } else if !line.starts_with(' ') {
-            r.section = line.split_whitespace().next().unwrap_or("").to_string();
-        } else {
-            r.entry(&line.split_whitespace().collect::<Vec<_>>())?;
+        if let Some(c) = line.chars().find(|&c| c.is_control() && c != '\t') {
+            return r.fail(format!("binary data ({c:?}): expected a text file"));
+        }
+        let words: Vec<_> = line.split_whitespace().collect();
+        match (line.strip_prefix('*'), words.first()) {
+            (Some(c), _) => r.comment(c)?,
+            (None, None) => {} // a blank line
+            (None, Some(_)) if line.starts_with(char::is_whitespace) => r.entry(&words)?,
+            (None, Some(name)) => r.header(name)?,
         }
     }
     r.finish()
@@ -115,6 +137,9 @@ struct Reader {
     line: usize,
     section: String,
     recorded_optimum: Option<f64>,
+    rows_seen: bool,
+    /// The name of the `N` row.
+    objective: Option<String>,
     items: usize,
     /// Per bin row: `E` or `L`, right-hand side and range.
     bins: Vec<(bool, Option<f64>, Option<f64>)>,
@@ -153,24 +178,30 @@ impl Reader {
         }
     }
 
+    /// A comment, which records the optimum when it reads `optimal objective <value>`.
+    fn comment(&mut self, c: &str) -> Result<(), MpsError> {
+        let value = c.trim().strip_prefix("optimal objective ");
+        if let Some(v) = value.and_then(|v| v.split_whitespace().next()) {
+            self.recorded_optimum = Some(self.number(v)?);
+        }
+        Ok(())
+    }
+
+    /// A section header, named by its first word: one of [`SECTIONS`].
+    fn header(&mut self, name: &str) -> Result<(), MpsError> {
+        if !SECTIONS.iter().any(|&(s, _)| s == name) {
+            let names: Vec<_> = SECTIONS.iter().map(|&(s, _)| s).collect();
+            let names = names.join(", ");
+            return self.fail(format!("section {name:?}: expected one of {names}"));
+        }
+        self.rows_seen |= name == "ROWS";
+        self.section = name.to_string();
+        Ok(())
+    }
+
     fn entry(&mut self, f: &[&str]) -> Result<(), MpsError> {
         match (self.section.as_str(), f) {
-            ("ROWS", ["N", "cost"]) => Ok(()),
-            ("ROWS", ["E", name]) if name.starts_with("item") => {
-                if self.index(name, "item") != Some(self.items as u64) {
-                    return self.fail(format!("item row {name:?} out of order"));
-                }
-                self.items += 1;
-                Ok(())
-            }
-            ("ROWS", [kind @ ("E" | "L"), name]) => match self.index(name, "bin") {
-                Some(b) => {
-                    self.bin_of_name.insert(b, self.bins.len() as u32);
-                    self.bins.push((*kind == "E", None, None));
-                    Ok(())
-                }
-                None => self.fail(format!("row {name:?}: expected item<i> or bin<b>")),
-            },
+            ("ROWS", [kind, name]) => self.row(kind, name),
             ("COLUMNS", [name, pairs @ ..]) if !pairs.is_empty() && pairs.len() % 2 == 0 => {
                 self.column(name, pairs)
             }
@@ -181,8 +212,43 @@ impl Reader {
                 Ok(())
             }
             ("BOUNDS", ["UP", _, _, "1"]) => Ok(()),
-            (section, _) => self.fail(format!("unexpected entry in section {section:?}")),
+            (section, _) => match SECTIONS.iter().find(|&&(s, _)| s == section) {
+                Some((_, want)) => self.fail(format!("entry in {section}: expected {want}")),
+                None => self.fail("entry outside any section: expected a section header first"),
+            },
         }
+    }
+
+    /// A row of [`ROW_TYPES`]: the objective, `item<i>` in order, or `bin<b>`.
+    fn row(&mut self, kind: &str, name: &str) -> Result<(), MpsError> {
+        match (kind, self.index(name, "item"), self.index(name, "bin")) {
+            ("N", ..) => self.objective_row(name),
+            ("E", Some(i), _) if i == self.items as u64 => {
+                self.items += 1;
+                Ok(())
+            }
+            ("E", Some(_), _) => self.fail(format!("item row {name:?} out of order")),
+            ("E" | "L", _, Some(b)) => {
+                self.bin_of_name.insert(b, self.bins.len() as u32);
+                self.bins.push((kind == "E", None, None));
+                Ok(())
+            }
+            ("E" | "L", ..) => self.fail(format!("row {name:?}: expected item<i> or bin<b>")),
+            ("G", ..) => self.fail(format!("row type G of {name:?}: expected {ROW_TYPES}")),
+            _ => self.fail(format!(
+                "row type {kind:?} is not an MPS row type (N, E, L, G): expected {ROW_TYPES}"
+            )),
+        }
+    }
+
+    /// The objective: the first `N` row, whatever its name; a second one is refused.
+    fn objective_row(&mut self, name: &str) -> Result<(), MpsError> {
+        if let Some(first) = &self.objective {
+            let reason = format!("second N row {name:?}: expected one objective ({first:?})");
+            return self.fail(reason);
+        }
+        self.objective = Some(name.to_string());
+        Ok(())
     }
 
     fn column(&mut self, name: &str, pairs: &[&str]) -> Result<(), MpsError> {
@@ -196,7 +262,7 @@ impl Reader {
         }
         for pair in pairs.chunks(2) {
             let (row, value) = (pair[0], self.number(pair[1])?);
-            if row == "cost" {
+            if Some(row) == self.objective.as_deref() {
                 self.columns.last_mut().expect("pushed").cost = value;
                 continue;
             }
@@ -235,9 +301,15 @@ impl Reader {
     }
 
     /// The problem: candidates in item order, then the bins of the rows and one free bin per
-    /// column without a row.
+    /// column without a row. Its errors name the line past the last one.
     fn finish(mut self) -> Result<MpsProblem, MpsError> {
-        self.line = 0;
+        self.line += 1;
+        if !self.rows_seen {
+            return self.fail("end of file without a ROWS section: expected an MPS file");
+        }
+        if self.items == 0 {
+            return self.fail("no item rows: expected a correction problem (`E item0`, ...)");
+        }
         let mut p = BoundedAssignment::default();
         for (kind_e, rhs, range) in &self.bins {
             let upper = rhs.unwrap_or(0.0);
@@ -377,5 +449,90 @@ ENDATA
         let e = read(&text).unwrap_err();
         assert_eq!(e.line, 7, "{e}");
         assert!(e.reason.contains("\"one\" is not a finite number"), "{e}");
+    }
+
+    /// One item with one candidate in a bin that must hold it; its file has ` E item0` on
+    /// line 4.
+    fn one_item() -> BoundedAssignment {
+        BoundedAssignment {
+            item_start: vec![0, 1],
+            cand_bin: vec![0],
+            cand_cost: vec![1.0],
+            lower: vec![1],
+            upper: vec![1],
+        }
+    }
+
+    /// Text that is not MPS is refused at its first line: an unknown section, or an entry
+    /// before any section.
+    #[test]
+    fn read_refuses_text_at_its_first_line() {
+        let e = read("the quick brown fox\njumps\n").unwrap_err();
+        assert_eq!(e.line, 1, "{e}");
+        let want = "section \"the\": expected one of NAME, ROWS, COLUMNS, RHS, RANGES";
+        assert!(e.reason.starts_with(want), "{e}");
+        let e = read("  the quick brown fox\n").unwrap_err().to_string();
+        assert_eq!(
+            e,
+            "line 1: entry outside any section: expected a section header first"
+        );
+    }
+
+    /// An empty file has no ROWS section, and rows without items are no correction problem:
+    /// both are refused at the line past the last one.
+    #[test]
+    fn read_refuses_a_file_without_rows_or_items() {
+        let e = read("").unwrap_err();
+        assert_eq!(e.line, 1, "{e}");
+        assert!(e.reason.contains("without a ROWS section"), "{e}");
+        let e = read("NAME t\nROWS\n N cost\nENDATA\n").unwrap_err();
+        assert_eq!(e.line, 5, "{e}");
+        assert!(e.reason.starts_with("no item rows"), "{e}");
+    }
+
+    /// Control characters (NUL bytes of binary data) are refused at their line.
+    #[test]
+    fn read_refuses_binary_data() {
+        let e = read("\u{7f}ELF\u{2}\u{1}\u{1}\0\0\n").unwrap_err();
+        assert_eq!(e.line, 1, "{e}");
+        assert!(e.reason.starts_with("binary data"), "{e}");
+        let e = read(&write(&one_item(), "t", &[]).replace("item0\n", "item0\0\n")).unwrap_err();
+        assert_eq!(e.line, 4, "{e}");
+        assert!(e.reason.starts_with("binary data ('\\0')"), "{e}");
+    }
+
+    /// A row type outside N, E, L and G, a G row, a row that is neither the objective nor an
+    /// item or bin row, and a second N row are refused at their line, saying what is taken.
+    #[test]
+    fn read_refuses_rows_it_does_not_take() {
+        let text = write(&one_item(), "t", &[]);
+        for (row, want) in [
+            (" X item0", "row type \"X\" is not an MPS row type"),
+            (" G item0", "row type G of \"item0\": expected N (the"),
+            (" E balance", "row \"balance\": expected item<i> or bin<b>"),
+            (" N cost2", "second N row \"cost2\": expected one"),
+        ] {
+            let e = read(&text.replace(" E item0", row)).unwrap_err();
+            assert_eq!(e.line, 4, "{e}");
+            assert!(e.reason.starts_with(want), "{e}");
+        }
+    }
+
+    /// The objective is the N row whatever its name: a file that calls it `obj` reads back to
+    /// the same problem as with `cost`.
+    #[test]
+    fn read_takes_the_objective_under_any_name() {
+        let p = BoundedAssignment {
+            item_start: vec![0, 2, 3],
+            cand_bin: vec![0, 1, 0],
+            cand_cost: vec![0.5, 0.25, 2.0],
+            lower: vec![0, 0],
+            upper: vec![1, 1],
+        };
+        let text = write(&p, "t", &[]);
+        let obj = text.replace(" N cost", " N obj").replace(" cost ", " obj ");
+        assert!(!obj.contains("cost"), "{obj}");
+        assert_eq!(read(&obj).unwrap(), read(&text).unwrap());
+        assert_eq!(read(&obj).unwrap().problem.cand_cost, p.cand_cost);
     }
 }
