@@ -61,7 +61,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
                 2 => bench_dim::<2>(&scene, args)?,
                 _ => bench_dim::<3>(&scene, args)?,
             };
-            results.push((scene.method.ccp.band.name(), m));
+            results.push((scene.method.band().name(), m));
         }
         print_band_ratios(res, &results);
         scaling.extend(results.into_iter().next().map(|(_, m)| (res, m)));

@@ -38,7 +38,7 @@ mod seam;
 
 pub use seam::{
     FluidMethod, MethodInfo, MethodOption, MethodRecording, MethodReport, MethodSummary,
-    MethodType, NoReport, NoSummary,
+    MethodType, NoReport, NoSummary, SettingContext, SettingError,
 };
 
 /// Registers the methods (each module declared above, where `cargo fmt` sees it): makes
@@ -68,6 +68,13 @@ macro_rules! methods {
             /// `kind` with every method's default settings.
             pub fn new(kind: MethodKind) -> Self {
                 Self { kind, $($module: Default::default(),)* }
+            }
+
+            /// The checks of the settings of the method to run ([`MethodType::check`]).
+            pub fn check(&self, ctx: SettingContext) -> Result<(), SettingError> {
+                match self.kind {
+                    $(MethodKind::$ty => $module::$ty::check(&self.$module, ctx),)*
+                }
             }
         }
 
@@ -127,26 +134,43 @@ impl MethodKind {
     }
 }
 
+impl MethodKind {
+    /// Why this method refuses `option`, or `None` when it has it: the same words whether the
+    /// option came from the command line or the scene file.
+    pub fn refusal(self, option: MethodOption) -> Option<String> {
+        if self.info().options.contains(&option) {
+            return None;
+        }
+        let having: Vec<&str> = MethodKind::ALL
+            .iter()
+            .filter(|k| k.info().options.contains(&option))
+            .map(|k| k.name())
+            .collect();
+        Some(format!(
+            "method '{}' has no such option (it is an option of {})",
+            self.name(),
+            having.join(", ")
+        ))
+    }
+}
+
 impl MethodSettings {
+    /// The band the run keeps: ccp's band mode when ccp runs, none for the other methods (whose
+    /// scene files may configure ccp's band for when ccp runs them).
+    pub fn band(&self) -> ccp::BandMode {
+        match self.kind {
+            MethodKind::Ccp => self.ccp.band,
+            _ => ccp::BandMode::None,
+        }
+    }
+
     /// Refuses options the method does not have: `given` lists the ones the user set
     /// explicitly. The error names the option and the method.
     pub fn check_given(&self, given: &[MethodOption]) -> Result<(), String> {
-        let info = self.kind.info();
-        match given.iter().find(|o| !info.options.contains(o)) {
+        let refused = given.iter().find_map(|&o| Some((o, self.kind.refusal(o)?)));
+        match refused {
             None => Ok(()),
-            Some(o) => {
-                let having: Vec<&str> = MethodKind::ALL
-                    .iter()
-                    .filter(|k| k.info().options.contains(o))
-                    .map(|k| k.name())
-                    .collect();
-                Err(format!(
-                    "{}: method '{}' has no such option (it is an option of {})",
-                    o.flag(),
-                    info.name,
-                    having.join(", ")
-                ))
-            }
+            Some((o, why)) => Err(format!("{}: {why}", o.name())),
         }
     }
 }

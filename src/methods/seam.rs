@@ -15,7 +15,8 @@ use std::any::Any;
 use std::fmt::Debug;
 
 /// The options of the command line and the scene file that only some methods have. A method
-/// that has none of them refuses it (see [`MethodSettings::check_given`]).
+/// that has none of them refuses it, on either input path, with the same reason
+/// (`MethodKind::refusal`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum MethodOption {
     Band,
@@ -24,20 +25,74 @@ pub enum MethodOption {
     Directions,
     CrossCheck,
     ExportLp,
+    IdpResample,
+    PowerPic,
 }
 
 impl MethodOption {
-    /// The option as the command line spells it.
-    pub fn flag(self) -> &'static str {
-        match self {
+    /// How the user gave it: the command-line flag, else the scene file's key.
+    pub fn name(self) -> String {
+        match (self.flag(), self.key()) {
+            (Some(flag), _) => flag.to_string(),
+            (None, Some(key)) => format!("simulation.{key}"),
+            (None, None) => unreachable!("every option has a flag or a key"),
+        }
+    }
+
+    /// The option as the command line spells it, if it has a flag.
+    pub fn flag(self) -> Option<&'static str> {
+        Some(match self {
             MethodOption::Band => "--band",
             MethodOption::BandR => "--band-r",
             MethodOption::Solver => "--solver",
             MethodOption::Directions => "--directions",
             MethodOption::CrossCheck => "--cross-check",
             MethodOption::ExportLp => "--export-lp",
+            MethodOption::IdpResample | MethodOption::PowerPic => return None,
+        })
+    }
+
+    /// Its key in the scene file's `[simulation]` table, if it has one.
+    pub fn key(self) -> Option<&'static str> {
+        Some(match self {
+            MethodOption::Band => "band",
+            MethodOption::BandR => "band_r",
+            MethodOption::Solver => "solver",
+            MethodOption::Directions => "directions",
+            MethodOption::IdpResample => "idp_resample",
+            MethodOption::PowerPic => "powerpic",
+            MethodOption::CrossCheck | MethodOption::ExportLp => return None,
+        })
+    }
+}
+
+/// A method's setting out of its range or at odds with another: its key under the scene file's
+/// `[simulation]` table (e.g. `band_r`, `powerpic.eta`), whether it is a conflict between
+/// settings (else a value out of range), and why.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SettingError {
+    pub key: String,
+    pub conflict: bool,
+    pub reason: String,
+}
+
+impl SettingError {
+    /// A value out of its range.
+    pub fn range(key: &str, reason: String) -> Self {
+        Self {
+            key: key.into(),
+            conflict: false,
+            reason,
         }
     }
+}
+
+/// What a method's settings are checked with besides themselves.
+#[derive(Clone, Copy, Debug)]
+pub struct SettingContext {
+    pub dim: usize,
+    /// Particles per cell along an axis, `k`; `mu = k^dim`.
+    pub per_axis: usize,
 }
 
 /// What a method is, for lists, help and checks.
@@ -66,6 +121,11 @@ pub trait MethodType {
     const INFO: MethodInfo;
     /// Its own settings, from the scene file and the command line.
     type Settings: Clone + Debug + PartialEq + Default;
+    /// Refuses settings out of range or at odds with each other (the scene file's check calls it
+    /// for the method a scene runs).
+    fn check(_settings: &Self::Settings, _ctx: SettingContext) -> Result<(), SettingError> {
+        Ok(())
+    }
     fn build<const D: usize>(settings: &Self::Settings) -> Box<dyn FluidMethod<D>>;
     fn summary<const D: usize>(settings: &Self::Settings) -> Box<dyn MethodSummary<D>>;
 }

@@ -80,7 +80,7 @@ impl Recorder {
         let facts = RunFacts {
             dims: scene.dims.clone(),
             method: scene.method.kind.info(),
-            band: scene.method.ccp.band != BandMode::None,
+            band: scene.method.band() != BandMode::None,
             cross_check,
             obstacles: scene.file.obstacle.iter().map(|o| o.name.clone()).collect(),
             slice_axis: drawing.slice.0,
@@ -404,7 +404,7 @@ fn run_properties(scene: &Scene) -> rerun::AnyValues {
     [
         ("scene", scene.name().to_string()),
         ("method", scene.method.kind.name().to_string()),
-        ("band", scene.method.ccp.band.name().to_string()),
+        ("band", scene.method.band().name().to_string()),
         ("cells", cells.join("x")),
         ("ppc", sim.ppc.to_string()),
         ("seed", sim.seed.to_string()),

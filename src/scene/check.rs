@@ -6,10 +6,7 @@ use super::{
     EmitterFile, MotionKind, ObstacleFile, RegionFile, Scene, SceneFile, Shape, SimulationFile,
 };
 use crate::grid::Grid;
-use crate::methods::ccp::BandMode;
-use crate::methods::ccp::Directions;
-use crate::methods::powerpic::PowerPicSettings;
-use crate::methods::MethodSettings;
+use crate::methods::{MethodSettings, SettingContext};
 use crate::particles;
 use std::collections::BTreeSet;
 
@@ -401,17 +398,6 @@ fn simulation(ch: &Checker, s: &SimulationFile) -> Checked<MethodSettings> {
             false => ch.err(&format!("simulation.{key}"), ErrorKind::Range, why),
         }
     };
-    if s.band != BandMode::None && s.directions == Directions::Moore {
-        let why = "the band method moves particles to von Neumann neighbours only \
-                   (sec. push_part); use directions = \"von-neumann\" or band = \"none\"";
-        return ch.err("simulation.band", ErrorKind::Conflict, why.into());
-    }
-    let r = s.band_r;
-    range(
-        "band_r",
-        (1..=10_000).contains(&r),
-        format!("must be at least 1 (the band interface lies R cells below the surface), got {r}"),
-    )?;
     let d = s.duration;
     range(
         "duration",
@@ -479,16 +465,54 @@ fn simulation(ch: &Checker, s: &SimulationFile) -> Checked<MethodSettings> {
         ),
     )?;
     step_count(ch, s)?;
-    powerpic(ch, &s.powerpic, ppc_per_axis(s.ppc, dim).unwrap_or(1))?;
-    let mut m = MethodSettings::new(s.method);
-    m.ccp.solver = s.solver;
-    m.ccp.directions = s.directions;
-    m.ccp.band = s.band;
-    m.ccp.band_r = s.band_r;
-    m.nbflip.band_r = s.band_r;
-    m.idp.resample = s.idp_resample;
-    m.powerpic = s.powerpic;
+    let m = method_settings(s);
+    let ctx = SettingContext {
+        dim,
+        per_axis: ppc_per_axis(s.ppc, dim).unwrap_or(1),
+    };
+    m.check(ctx).or_else(|e| {
+        let kind = match e.conflict {
+            true => ErrorKind::Conflict,
+            false => ErrorKind::Range,
+        };
+        ch.err(&format!("simulation.{}", e.key), kind, e.reason)
+    })?;
     Ok(m)
+}
+
+/// Each method's settings from the keys the file sets (defaults for the others).
+fn method_settings(s: &SimulationFile) -> MethodSettings {
+    let mut m = MethodSettings::new(s.method);
+    let ccp = &mut m.ccp;
+    ccp.solver = s.solver.unwrap_or(ccp.solver);
+    ccp.directions = s.directions.unwrap_or(ccp.directions);
+    ccp.band = s.band.unwrap_or(ccp.band);
+    ccp.band_r = s.band_r.unwrap_or(ccp.band_r);
+    m.nbflip.band_r = s.band_r.unwrap_or(m.nbflip.band_r);
+    m.idp.resample = s.idp_resample.unwrap_or(m.idp.resample);
+    m.powerpic = s.powerpic.unwrap_or(m.powerpic);
+    m
+}
+
+/// Refuses a method key (`simulation.band`, ...) that the file's own method does not have,
+/// with the words the command line's flags are refused with.
+pub(super) fn method_keys(source: &str, s: &SimulationFile) -> Checked<()> {
+    let refused = s
+        .options_set()
+        .into_iter()
+        .find_map(|o| Some((o, s.method.refusal(o)?)));
+    let Some((o, why)) = refused else {
+        return Ok(());
+    };
+    Err(SceneError {
+        file: source.into(),
+        key: format!(
+            "simulation.{}",
+            o.key().expect("a file sets options by key")
+        ),
+        kind: ErrorKind::Conflict,
+        reason: format!("{why}; remove the key or set simulation.method"),
+    })
 }
 
 /// The run ends in about [`MAX_STEPS`] steps at most, however the fluid moves: a step is
@@ -537,58 +561,6 @@ fn step_count(ch: &Checker, s: &SimulationFile) -> Checked<()> {
         s.duration
     );
     ch.err(&format!("simulation.{key}"), ErrorKind::Range, why)
-}
-
-/// Section `simulation.powerpic`: a kernel that reaches a transport cell from anywhere, a
-/// particle volume that fits in a cell, and tolerances that can be met.
-fn powerpic(ch: &Checker, p: &PowerPicSettings, per_axis: usize) -> Checked<()> {
-    let range = |key: &str, ok: bool, why: String| -> Checked<()> {
-        match ok {
-            true => Ok(()),
-            false => ch.err(&format!("simulation.powerpic.{key}"), ErrorKind::Range, why),
-        }
-    };
-    range(
-        "refine",
-        (1..=8).contains(&p.refine),
-        format!(
-            "must be 1 to 8 transport cells per cell and axis, got {}",
-            p.refine
-        ),
-    )?;
-    let (e, min) = (p.epsilon, p.min_epsilon(ch.dim));
-    range(
-        "epsilon",
-        e.is_finite() && e >= min && e <= 4.0,
-        format!(
-            "must be in [{min:.5}, 4] cells^2, got {e}: below, the kernel vanishes before the              nearest transport cell; above, it spans many cells"
-        ),
-    )?;
-    let t = p.tau(per_axis);
-    range(
-        "tau",
-        t.is_finite() && t > 0.0 && t <= 0.5,
-        format!("must be a half-width in (0, 0.5] cells, got {t}"),
-    )?;
-    let v = p.eta * (2.0 * t).powi(ch.dim as i32);
-    range(
-        "eta",
-        p.eta.is_finite() && p.eta > 0.0 && v <= 1.0,
-        format!(
-            "must be positive with eta (2 tau)^d at most one cell (the particle volume), got              eta = {} and a volume of {v} cells",
-            p.eta
-        ),
-    )?;
-    range(
-        "delta",
-        p.delta > 0.0 && p.delta < 1.0,
-        format!("must be in (0, 1), got {}", p.delta),
-    )?;
-    range(
-        "max_iterations",
-        p.max_iterations >= 1,
-        "must be at least 1".into(),
-    )
 }
 
 /// Sections `fluid` and `solid`: at least some fluid (or an emitter), every region valid.

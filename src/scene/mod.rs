@@ -14,7 +14,7 @@ use crate::methods::ccp::BandMode;
 use crate::methods::ccp::Directions;
 use crate::methods::ccp::Solver;
 use crate::methods::powerpic::PowerPicSettings;
-use crate::methods::{MethodKind, MethodSettings};
+use crate::methods::{MethodKind, MethodOption, MethodSettings};
 use crate::particles::{Region, SpiralBlock};
 use crate::sim::emit::Emitter;
 use crate::sim::solids::{Motion, Obstacle, ObstacleMode};
@@ -191,27 +191,55 @@ pub struct SimulationFile {
     /// Relative tolerance of the pressure solve.
     pub pressure_tolerance: f64,
     pub seed: u64,
-    /// Solver of the correction step (method ccp).
-    pub solver: Solver,
-    /// Candidate moves of the correction: von Neumann (5 in 2D, 7 in 3D) or Moore (9, 27).
-    pub directions: Directions,
-    /// The band method of method ccp (sec. band_method): none, or how the band's count is
-    /// kept: paths (sec. push_part, the paper's choice), one-way (sec. band_con2) or full
-    /// (sec. band_con, small problems only).
-    pub band: BandMode,
-    /// `R`: depth of the band interface; the band is `R + 1` cells thick (the paper: 3, and 6
-    /// for the dam scenes).
-    pub band_r: u32,
+    /// The keys below belong to some methods only (`MethodInfo::options`): a scene file that
+    /// sets one its own method does not have is refused, naming the key. Unset, each takes its
+    /// method's default.
+    ///
+    /// Solver of the correction step (method ccp; default flow).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub solver: Option<Solver>,
+    /// Candidate moves of the correction (method ccp): von Neumann (5 in 2D, 7 in 3D, the
+    /// default) or Moore (9, 27).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub directions: Option<Directions>,
+    /// The band method of method ccp (sec. band_method): none (the default), or how the band's
+    /// count is kept: paths (sec. push_part, the paper's choice), one-way (sec. band_con2) or
+    /// full (sec. band_con, small problems only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub band: Option<BandMode>,
+    /// `R` (methods ccp and nbflip): depth of the band interface; the band is `R + 1` cells
+    /// thick (default 3; the paper: 3, and 6 for the dam scenes).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub band_r: Option<u32>,
     /// How obstacles get through particles: couple (method ccp, sec. 7), or for the other
     /// methods naive (wait until the way is free) or ignore (move regardless). Default: the
     /// method's first mode ([`crate::methods::MethodInfo::obstacle_modes`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub obstacle: Option<ObstacleMode>,
     /// Method idp: resample cells over twice the rest density (Kugelstadt et al.'s optional
-    /// step; off as in their 3D scene).
-    pub idp_resample: bool,
+    /// step; off by default, as in their 3D scene).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub idp_resample: Option<bool>,
     /// Method powerpic's parameters (defaults: Levi's, sec. Evaluation).
-    pub powerpic: PowerPicSettings,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub powerpic: Option<PowerPicSettings>,
+}
+
+impl SimulationFile {
+    /// The method-specific options this file sets.
+    pub fn options_set(&self) -> Vec<MethodOption> {
+        [
+            (MethodOption::Solver, self.solver.is_some()),
+            (MethodOption::Directions, self.directions.is_some()),
+            (MethodOption::Band, self.band.is_some()),
+            (MethodOption::BandR, self.band_r.is_some()),
+            (MethodOption::IdpResample, self.idp_resample.is_some()),
+            (MethodOption::PowerPic, self.powerpic.is_some()),
+        ]
+        .into_iter()
+        .filter_map(|(o, set)| set.then_some(o))
+        .collect()
+    }
 }
 
 impl Default for SimulationFile {
@@ -228,13 +256,13 @@ impl Default for SimulationFile {
             max_speed: 10.0,
             pressure_tolerance: 1e-9,
             seed: 1,
-            solver: Solver::Flow,
-            directions: Directions::VonNeumann,
-            band: BandMode::None,
-            band_r: 3,
+            solver: None,
+            directions: None,
+            band: None,
+            band_r: None,
             obstacle: None,
-            idp_resample: false,
-            powerpic: PowerPicSettings::default(),
+            idp_resample: None,
+            powerpic: None,
         }
     }
 }
@@ -321,7 +349,15 @@ impl Overrides {
                 })*
             };
         }
-        set!(method, duration, ppc, seed, solver, directions, band, band_r);
+        set!(method, duration, ppc, seed);
+        macro_rules! set_option {
+            ($($field:ident),*) => {
+                $(if let Some(v) = &self.$field {
+                    sim.$field = Some(*v);
+                })*
+            };
+        }
+        set_option!(solver, directions, band, band_r);
         if let Some(m) = self.obstacle {
             sim.obstacle = Some(m);
         }
@@ -353,8 +389,8 @@ impl Scene {
     /// 50x50x50 ppc8 seed1`. Names recordings and exported problems.
     pub fn run_tags(&self) -> Vec<String> {
         let mut tags = vec![self.name().to_string(), self.method.kind.name().to_string()];
-        if self.method.ccp.band != BandMode::None {
-            tags.push(format!("band-{}", self.method.ccp.band.name()));
+        if self.method.band() != BandMode::None {
+            tags.push(format!("band-{}", self.method.band().name()));
             tags.push(format!("r{}", self.method.ccp.band_r));
         }
         let cells: Vec<String> = self.dims.iter().map(usize::to_string).collect();
@@ -392,10 +428,13 @@ impl Scene {
         Self::parse(&source, &text, overrides)
     }
 
-    /// Parses and checks scene text; `source` names it in errors.
+    /// Parses and checks scene text; `source` names it in errors. The method keys the file
+    /// sets are checked against the file's own method, before the command line's overrides
+    /// (whose options the commands check against the method run).
     pub fn parse(source: &str, text: &str, overrides: &Overrides) -> Result<Scene> {
         let mut file: SceneFile =
             toml::from_str(text).map_err(|e| check::toml_error(source, text, &e))?;
+        check::method_keys(source, &file.simulation)?;
         overrides.apply(&mut file);
         Ok(check::check(source, file)?)
     }

@@ -15,6 +15,16 @@ use rayon::prelude::*;
 /// `R` when a scene file does not say (the paper: 3, and 6 for the dam scenes).
 pub const DEFAULT_BAND_R: u32 = 3;
 
+/// Refuses an `R` below 1 (or absurdly deep), with the reason.
+pub fn check_band_r(r: u32) -> Result<(), String> {
+    match (1..=10_000).contains(&r) {
+        true => Ok(()),
+        false => Err(format!(
+            "must be at least 1 (the band interface lies R cells below the surface), got {r}"
+        )),
+    }
+}
+
 /// A band `R + 1` cells thick: the interface is at depth `-R`, the deep below it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Band {

@@ -18,7 +18,9 @@ mod settings;
 pub use record::CcpReport;
 pub use settings::{BandMode, CcpSettings, Directions, Solver};
 
-use super::seam::{FluidMethod, MethodInfo, MethodOption, MethodSummary, MethodType};
+use super::seam::{
+    FluidMethod, MethodInfo, MethodOption, MethodSummary, MethodType, SettingContext, SettingError,
+};
 use crate::draw::{LayerView, Needs};
 use crate::sim::solids::ObstacleMode;
 use physics::CcpSim;
@@ -52,6 +54,10 @@ impl MethodType for Ccp {
     };
 
     type Settings = CcpSettings;
+
+    fn check(s: &CcpSettings, _ctx: SettingContext) -> Result<(), SettingError> {
+        s.check()
+    }
 
     fn build<const D: usize>(s: &CcpSettings) -> Box<dyn FluidMethod<D>> {
         Box::new(CcpSim::<D>::new(s))

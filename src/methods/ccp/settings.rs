@@ -5,7 +5,8 @@ use super::correct::band::BandVariant;
 
 pub use super::correct::problem::Directions;
 pub use super::correct::Solver;
-use crate::sim::band::DEFAULT_BAND_R;
+use crate::methods::seam::SettingError;
+use crate::sim::band::{check_band_r, DEFAULT_BAND_R};
 use std::path::PathBuf;
 
 /// Method ccp's settings.
@@ -26,6 +27,23 @@ pub struct CcpSettings {
     pub cross_check: bool,
     /// Write the correction problem of this step as MPS to this path (`--export-lp`).
     pub export_lp: Option<(u64, PathBuf)>,
+}
+
+impl CcpSettings {
+    /// Refuses a band with Moore moves (the paths move to von Neumann neighbours only) and an
+    /// `R` below 1.
+    pub fn check(&self) -> Result<(), SettingError> {
+        if self.band != BandMode::None && self.directions == Directions::Moore {
+            let why = "the band method moves particles to von Neumann neighbours only \
+                       (sec. push_part); use directions = \"von-neumann\" or band = \"none\"";
+            return Err(SettingError {
+                key: "band".into(),
+                conflict: true,
+                reason: why.into(),
+            });
+        }
+        check_band_r(self.band_r).map_err(|why| SettingError::range("band_r", why))
+    }
 }
 
 impl Default for CcpSettings {

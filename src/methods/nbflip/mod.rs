@@ -32,8 +32,10 @@ mod record;
 
 pub use physics::{combine, level, NbflipReport, Resampling};
 
-use super::seam::{FluidMethod, MethodInfo, MethodOption, MethodSummary, MethodType};
-use crate::sim::band::DEFAULT_BAND_R;
+use super::seam::{
+    FluidMethod, MethodInfo, MethodOption, MethodSummary, MethodType, SettingContext, SettingError,
+};
+use crate::sim::band::{check_band_r, DEFAULT_BAND_R};
 use crate::sim::solids::ObstacleMode;
 use physics::NbflipSim;
 use record::{Totals, LAYER_VIEWS, PANELS};
@@ -68,6 +70,10 @@ impl MethodType for Nbflip {
     };
 
     type Settings = NbflipSettings;
+
+    fn check(s: &NbflipSettings, _ctx: SettingContext) -> Result<(), SettingError> {
+        check_band_r(s.band_r).map_err(|why| SettingError::range("band_r", why))
+    }
 
     fn build<const D: usize>(s: &NbflipSettings) -> Box<dyn FluidMethod<D>> {
         Box::new(NbflipSim::<D>::new(s.band_r))

@@ -49,7 +49,9 @@ mod settings;
 pub use physics::{FractionImage, PowerPicReport};
 pub use settings::PowerPicSettings;
 
-use super::seam::{FluidMethod, MethodInfo, MethodSummary, MethodType};
+use super::seam::{
+    FluidMethod, MethodInfo, MethodOption, MethodSummary, MethodType, SettingContext, SettingError,
+};
 use crate::sim::solids::ObstacleMode;
 use physics::PowerPicSim;
 use record::{Totals, LAYER_VIEWS, PANELS};
@@ -63,7 +65,7 @@ impl MethodType for Powerpic {
         about: "Power PIC (Qu et al. 2022): transfers through volume-constrained kernels, an \
                 entropic transport to a finer grid solved by Sinkhorn, with air slack at the \
                 free surface",
-        options: &[],
+        options: &[MethodOption::PowerPic],
         obstacle_modes: &[ObstacleMode::Naive, ObstacleMode::Ignore],
         panels: PANELS,
         layer_views: LAYER_VIEWS,
@@ -75,6 +77,10 @@ impl MethodType for Powerpic {
     };
 
     type Settings = PowerPicSettings;
+
+    fn check(s: &PowerPicSettings, ctx: SettingContext) -> Result<(), SettingError> {
+        s.check(ctx)
+    }
 
     fn build<const D: usize>(s: &PowerPicSettings) -> Box<dyn FluidMethod<D>> {
         Box::new(PowerPicSim::<D>::new(*s))

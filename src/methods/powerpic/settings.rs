@@ -1,6 +1,7 @@
 //! Power PIC's settings: `[simulation.powerpic]` in a scene file (defaults: Levi's, sec.
 //! Evaluation).
 
+use crate::methods::seam::{SettingContext, SettingError};
 use crate::solvers::sinkhorn::SinkhornSettings;
 use serde::{Deserialize, Serialize};
 
@@ -38,6 +39,57 @@ impl Default for PowerPicSettings {
 }
 
 impl PowerPicSettings {
+    /// Refuses a kernel that does not reach a transport cell from anywhere, a particle volume
+    /// that does not fit in a cell, and tolerances that cannot be met.
+    pub fn check(&self, ctx: SettingContext) -> Result<(), SettingError> {
+        let (p, per_axis) = (self, ctx.per_axis);
+        let range = |key: &str, ok: bool, why: String| match ok {
+            true => Ok(()),
+            false => Err(SettingError::range(&format!("powerpic.{key}"), why)),
+        };
+        range(
+            "refine",
+            (1..=8).contains(&p.refine),
+            format!(
+                "must be 1 to 8 transport cells per cell and axis, got {}",
+                p.refine
+            ),
+        )?;
+        let (e, min) = (p.epsilon, p.min_epsilon(ctx.dim));
+        range(
+            "epsilon",
+            e.is_finite() && e >= min && e <= 4.0,
+            format!(
+                "must be in [{min:.5}, 4] cells^2, got {e}: below, the kernel vanishes before the nearest transport cell; above, it spans many cells"
+            ),
+        )?;
+        let t = p.tau(per_axis);
+        range(
+            "tau",
+            t.is_finite() && t > 0.0 && t <= 0.5,
+            format!("must be a half-width in (0, 0.5] cells, got {t}"),
+        )?;
+        let v = p.eta * (2.0 * t).powi(ctx.dim as i32);
+        range(
+            "eta",
+            p.eta.is_finite() && p.eta > 0.0 && v <= 1.0,
+            format!(
+                "must be positive with eta (2 tau)^d at most one cell (the particle volume), got eta = {} and a volume of {v} cells",
+                p.eta
+            ),
+        )?;
+        range(
+            "delta",
+            p.delta > 0.0 && p.delta < 1.0,
+            format!("must be in (0, 1), got {}", p.delta),
+        )?;
+        range(
+            "max_iterations",
+            p.max_iterations >= 1,
+            "must be at least 1".into(),
+        )
+    }
+
     /// `tau` for `per_axis` particles per cell along each axis.
     pub fn tau(&self, per_axis: usize) -> f64 {
         self.tau.unwrap_or(0.5 / per_axis as f64)
