@@ -757,4 +757,69 @@ mod tests {
         assert_eq!(key_at(text, 2), "name");
         assert_eq!(key_at("dim = 2\n[domain\n", 9), "domain");
     }
+
+    /// A scene with `method` and the extra `[simulation]` lines, parsed with `overrides`.
+    fn scene_with(method: &str, keys: &str, overrides: &super::super::Overrides) -> Checked<Scene> {
+        let text = format!(
+            "name = \"x\"\ndim = 2\n[domain]\nsize = [1.0, 1.0]\ncells = 8\n\
+             [simulation]\nmethod = \"{method}\"\n{keys}\n\
+             [[fluid]]\nshape = \"box\"\nmin = [0.0, 0.0]\nmax = [1.0, 0.5]\n"
+        );
+        let file: SceneFile = toml::from_str(&text).expect("valid TOML");
+        method_keys("x.toml", &file.simulation)?;
+        let mut file = file;
+        overrides.apply(&mut file);
+        check("x.toml", file)
+    }
+
+    #[test]
+    fn a_method_key_the_files_method_lacks_is_refused_naming_the_key() {
+        let none = super::super::Overrides::default();
+        let e = scene_with("flip", "band = \"paths\"", &none).unwrap_err();
+        assert_eq!(
+            (e.key.as_str(), e.kind),
+            ("simulation.band", ErrorKind::Conflict)
+        );
+        assert!(
+            e.reason.contains("'flip'") && e.reason.contains("ccp"),
+            "{e}"
+        );
+        let e = scene_with("ccp", "idp_resample = true", &none).unwrap_err();
+        assert_eq!(e.key, "simulation.idp_resample");
+        let e = scene_with("idp", "[simulation.powerpic]\nrefine = 2", &none).unwrap_err();
+        assert_eq!(e.key, "simulation.powerpic");
+        // Keys the method has are taken; R is both band methods'.
+        assert!(scene_with("ccp", "band = \"paths\"\nband_r = 2", &none).is_ok());
+        let nb = scene_with("nbflip", "band_r = 2", &none).unwrap();
+        assert_eq!(nb.method.nbflip.band_r, 2);
+    }
+
+    #[test]
+    fn another_method_from_the_command_line_runs_without_the_files_band() {
+        let flip = super::super::Overrides {
+            method: Some(crate::methods::MethodKind::Flip),
+            ..Default::default()
+        };
+        let s = scene_with("ccp", "band = \"paths\"", &flip).unwrap();
+        assert_eq!(s.method.kind, crate::methods::MethodKind::Flip);
+        assert_eq!(s.method.band(), crate::methods::ccp::BandMode::None);
+        assert!(!s.run_tags().iter().any(|t| t.starts_with("band-")));
+    }
+
+    #[test]
+    fn a_methods_own_check_names_its_key() {
+        let none = super::super::Overrides::default();
+        let e = scene_with("ccp", "band = \"paths\"\ndirections = \"moore\"", &none).unwrap_err();
+        assert_eq!(
+            (e.key.as_str(), e.kind),
+            ("simulation.band", ErrorKind::Conflict)
+        );
+        let e = scene_with("nbflip", "band_r = 0", &none).unwrap_err();
+        assert_eq!(
+            (e.key.as_str(), e.kind),
+            ("simulation.band_r", ErrorKind::Range)
+        );
+        let e = scene_with("powerpic", "[simulation.powerpic]\nrefine = 9", &none).unwrap_err();
+        assert_eq!(e.key, "simulation.powerpic.refine");
+    }
 }
