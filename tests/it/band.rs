@@ -2,8 +2,7 @@
 //! and 3D, feasibility of all band corrections, their objectives against each other (and
 //! exact-paths' second step against the simplex), and a known-answer case of fig. path.
 
-mod common;
-
+use crate::common::{ccp, load, run_config};
 use cellflip::grid::{Grid, Vector};
 use cellflip::methods::MethodKind;
 use cellflip::metrics::check_cell_counts;
@@ -14,7 +13,6 @@ use cellflip::sim::correct::band::{BandContext, BandMode, BandVariant};
 use cellflip::sim::correct::{correct, CorrectionSettings};
 use cellflip::sim::markings::{DepthLevel, Markings};
 use cellflip::sim::Simulation;
-use common::{ccp, load, run_config};
 
 /// Runs `steps` steps of a scene with method ccp and the given band, checking every step: the
 /// invariants (inside `step`: cell bounds after the correction, particles plus `n_deep` equal

@@ -1,12 +1,10 @@
 //! Every built-in scene runs with its invariants intact (checked inside every step), in 2D and
 //! 3D; emitters reach their target; runs are deterministic.
 
-mod common;
-
+use crate::common::{self, load, run};
 use cellflip::methods::MethodKind;
 use cellflip::scene::{Overrides, Scene, BUILT_IN};
 use cellflip::sim::Simulation;
-use common::{load, run};
 
 /// Runs a built-in scene, checking every step: a finite volume, a positive time step, a
 /// converged pressure solve, and nothing moving more than `cfl` cells (sec. grid_move).

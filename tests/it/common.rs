@@ -243,7 +243,7 @@ pub fn logged_entities(path: &Path) -> BTreeSet<String> {
 
 /// The entity paths the README's recording table documents (`<name>` placeholders kept).
 pub fn documented_entities() -> Vec<String> {
-    let readme = include_str!("../../README.md");
+    let readme = include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/README.md"));
     let table = readme
         .split("| entity | when | what |")
         .nth(1)

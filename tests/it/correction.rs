@@ -2,8 +2,7 @@
 //! instances and real steps, the guarantees of eq. problem3 in 2D and 3D, and the paper's
 //! volume claims.
 
-mod common;
-
+use crate::common::{self, ccp, load, run_config};
 use cellflip::grid::{Grid, Vector};
 use cellflip::methods::MethodKind;
 use cellflip::runner::Limit;
@@ -13,7 +12,6 @@ use cellflip::sim::correct::problem::{self, Directions};
 use cellflip::sim::correct::{self, CorrectionSettings};
 use cellflip::sim::markings::Markings;
 use cellflip::solvers::{lp, min_cost_flow, mps};
-use common::{ccp, load, run_config};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 

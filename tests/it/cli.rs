@@ -2,8 +2,7 @@
 //! the key and the reason; non-zero exit; no panic; no output file) and a recording that reads
 //! back with the documented entities.
 
-mod common;
-
+use crate::common;
 use cellflip::scene::{ErrorKind, Overrides, Scene, SceneError};
 use std::collections::BTreeSet;
 use std::path::Path;

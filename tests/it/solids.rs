@@ -3,8 +3,7 @@
 //! Every step checks the invariants inside `step` (no particle in a solid, cell bounds after
 //! the correction, counts conserved, all finite).
 
-mod common;
-
+use crate::common::{self, load};
 use cellflip::grid::Vector;
 use cellflip::methods::ccp::CcpReport;
 use cellflip::methods::MethodKind;
@@ -13,7 +12,6 @@ use cellflip::scene::{Overrides, Scene};
 use cellflip::sim::correct::band::BandMode;
 use cellflip::sim::solids::ObstacleMode;
 use cellflip::sim::Simulation;
-use common::load;
 
 struct Run {
     volume_min: f64,
