@@ -5,7 +5,7 @@
 mod common;
 
 mod band;
-mod cli;
+mod cli_process;
 mod correction;
 mod fuzz;
 mod golden;
@@ -14,6 +14,7 @@ mod nbflip;
 mod powerpic;
 mod recordings;
 mod report;
+mod scene_refusals;
 mod scenes;
 mod solids;
 mod validation;
