@@ -13,6 +13,7 @@ mod idp;
 mod nbflip;
 mod powerpic;
 mod recordings;
+mod regression;
 mod report;
 mod scene_refusals;
 mod scenes;
