@@ -2,15 +2,13 @@
 //! (all but timings), chained over a fixed number of steps, for every built-in scene with its
 //! default method and with flip, for the band variants, and for the other baselines on the
 //! dams. The digests live in
-//! `tests/golden_digests.txt`; after a change that must alter results, regenerate them with
-//! `CELLFLIP_BLESS=1 cargo test --release --test golden` and say why in the commit.
+//! `tests/it/golden_digests.txt`; after a change that must alter results, regenerate them with
+//! `CELLFLIP_BLESS=1 cargo test --release --test it golden::` and say why in the commit.
 
-mod common;
-
+use crate::common::{digest_run, load};
 use cellflip::methods::MethodKind;
 use cellflip::scene::{Overrides, BUILT_IN};
 use cellflip::sim::correct::band::BandMode;
-use common::{digest_run, load};
 
 /// The runs: (scene, method override, band override, steps). 3D scenes run at 16 cells along
 /// their shortest axis.
@@ -53,7 +51,7 @@ fn digest(name: &str, method: Option<MethodKind>, band: Option<BandMode>, steps:
     digest_run::<2>(&s, steps)
 }
 
-const FILE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/golden_digests.txt");
+const FILE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/it/golden_digests.txt");
 
 #[test]
 fn every_scene_gives_the_recorded_digest() {
@@ -72,7 +70,7 @@ fn every_scene_gives_the_recorded_digest() {
         std::fs::write(FILE, lines.join("\n") + "\n").unwrap();
         return;
     }
-    let want = std::fs::read_to_string(FILE).expect("tests/golden_digests.txt");
+    let want = std::fs::read_to_string(FILE).expect("tests/it/golden_digests.txt");
     let want: Vec<&str> = want.lines().collect();
     let changed: Vec<String> = lines
         .iter()

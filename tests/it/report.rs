@@ -2,8 +2,7 @@
 //! independent run of the same scene, valid plots, a readable comparison recording, and runs
 //! that fail (a scene that does not load, one that breaks an invariant) as rows, not aborts.
 
-mod common;
-
+use crate::common;
 use cellflip::methods::MethodKind;
 use cellflip::report::measure::{figure_columns, COLUMNS};
 use cellflip::scene::Overrides;
@@ -104,7 +103,7 @@ fn the_csv_has_every_documented_column_and_a_row_per_run() {
     let text = std::fs::read_to_string(dir.join("report.csv")).unwrap();
     let header = fields(text.lines().next().unwrap());
     // The README documents exactly the columns the code declares.
-    let readme = include_str!("../README.md");
+    let readme = include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/README.md"));
     for (c, _) in COLUMNS {
         assert!(header.contains(&c.to_string()), "{c} missing from the CSV");
         assert!(

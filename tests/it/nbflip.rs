@@ -4,8 +4,7 @@
 //! hand-made fields. Every run checks the invariants every step (inside `step`), among them
 //! what resampling guarantees.
 
-mod common;
-
+use crate::common::{load, run, run_at_rest, with};
 use cellflip::grid::{Grid, MacField, Vector};
 use cellflip::methods::nbflip::{combine, NbflipReport, Resampling};
 use cellflip::methods::MethodKind;
@@ -16,7 +15,6 @@ use cellflip::sim::levelset::{particle_radius, LevelSet};
 use cellflip::sim::markings::Markings;
 use cellflip::sim::transfer::particles_to_grid;
 use cellflip::sim::{Simulation, StepReport};
-use common::{load, run, run_at_rest, with};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 

@@ -2,8 +2,7 @@
 //! naming a key, or runs a few steps with every invariant checked inside the step. Never a
 //! panic. A failing case prints its TOML.
 
-mod common;
-
+use crate::common;
 use cellflip::runner::Limit;
 use cellflip::scene::{Overrides, Scene, SceneError};
 use rand::rngs::StdRng;

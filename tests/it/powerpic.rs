@@ -4,13 +4,11 @@
 //! Every run checks the invariants every step (inside `step`), among them the plan's
 //! marginals recounted from the transport cells.
 
-mod common;
-
+use crate::common::{load, run, run_at_rest, with};
 use cellflip::methods::powerpic::PowerPicReport;
 use cellflip::methods::MethodKind;
 use cellflip::scene::{Overrides, Scene};
 use cellflip::sim::StepReport;
-use common::{load, run, run_at_rest, with};
 
 fn powerpic<const D: usize>(rep: &StepReport<D>) -> &PowerPicReport {
     rep.method_report::<PowerPicReport>()

@@ -1,5 +1,6 @@
 //! Helpers shared by the integration tests: loading scenes, the one step loop (through the
-//! program's own runner), the golden digest, and recordings read back.
+//! program's own runner), the golden digest, recordings read back, and the program run as a
+//! command.
 
 #![allow(dead_code)]
 
@@ -12,6 +13,7 @@ use cellflip::sim::correct::band::BandMode;
 use cellflip::sim::{SimConfig, Simulation, StepReport};
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
 
 pub fn load(name: &str, o: &Overrides) -> Scene {
     Scene::load(name, o).unwrap_or_else(|e| panic!("{name}: {e:#}"))
@@ -243,7 +245,7 @@ pub fn logged_entities(path: &Path) -> BTreeSet<String> {
 
 /// The entity paths the README's recording table documents (`<name>` placeholders kept).
 pub fn documented_entities() -> Vec<String> {
-    let readme = include_str!("../../README.md");
+    let readme = include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/README.md"));
     let table = readme
         .split("| entity | when | what |")
         .nth(1)
@@ -405,4 +407,24 @@ impl Drop for Scratch {
     fn drop(&mut self) {
         let _ = std::fs::remove_dir_all(&self.0);
     }
+}
+
+/// `cellflip args` run from the package folder.
+pub fn cellflip(args: &[&str]) -> Output {
+    cellflip_in(Path::new("."), args)
+}
+
+/// `cellflip args` run from the folder `dir`.
+pub fn cellflip_in(dir: &Path, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_cellflip"))
+        .args(args)
+        .current_dir(dir)
+        .env_remove("RERUN")
+        .output()
+        .expect("the binary runs")
+}
+
+/// The scratch folder of a command-line test.
+pub fn scratch_dir(test: &str) -> Scratch {
+    Scratch::new("test", test)
 }

@@ -2,9 +2,7 @@
 //! file, against what they log, both ways; the side panels; the moves drawn against the moves
 //! counted. Tests cannot look at pixels: the screenshots in docs/ were checked by eye.
 
-mod common;
-
-use common::ReadView;
+use crate::common::{self, ReadView};
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 use std::process::Command;

@@ -2,8 +2,7 @@
 //! the spreading of an over-dense cluster, the push-out of particles in solids, and IDP against
 //! FLIP on the dam. Every run checks the invariants every step (inside `step`).
 
-mod common;
-
+use crate::common::{self, load, run};
 use cellflip::grid::{Grid, Vector};
 use cellflip::methods::idp::{
     density_errors, project_density, push_out, IdpReport, Inputs, Resample, SolidShare, CLAMP,
@@ -13,7 +12,6 @@ use cellflip::methods::MethodKind;
 use cellflip::scene::Overrides;
 use cellflip::sim::solids::{clearing_distance, ObstacleMode};
 use cellflip::solvers::pcg::PcgSettings;
-use common::{load, run};
 use rand::rngs::StdRng;
 
 /// `k^D` particles on the regular sub-grid of cell `c` (no jitter), `copies` times over.

@@ -1,0 +1,21 @@
+//! The integration tests, one test crate organised by topic (issue 37): each file under
+//! `tests/` used to be its own crate, linking the rerun SDK once per file; one crate links it
+//! once. `cargo test --release --test it band::` runs one topic.
+
+mod common;
+
+mod band;
+mod cli_process;
+mod correction;
+mod fuzz;
+mod golden;
+mod idp;
+mod nbflip;
+mod powerpic;
+mod recordings;
+mod regression;
+mod report;
+mod scene_refusals;
+mod scenes;
+mod solids;
+mod validation;

@@ -1,0 +1,269 @@
+//! What the command line refuses, as a user meets it: a scene file, a scene name or options
+//! that cannot run give a clear error naming the file, the key (or option) and the reason;
+//! non-zero exit; no panic; no output file. `GOOD`, the scene every refusal edits, runs.
+
+use crate::common::{cellflip, scratch_dir};
+use cellflip::scene::{ErrorKind, Overrides, Scene, SceneError};
+
+pub(crate) const GOOD: &str = r#"
+name = "tiny"
+dim = 2
+[domain]
+size = [1.0, 1.0]
+cells = 8
+[simulation]
+duration = 0.05
+[[fluid]]
+shape = "box"
+min = [0.0, 0.0]
+max = [0.5, 0.5]
+"#;
+
+/// `text` is refused: the library's error has this `key` and `kind`, and `cellflip run` on
+/// the file fails cleanly (no panic, non-zero exit, no output file) naming the file and the
+/// key in its message.
+pub(crate) fn rejects(test: &str, text: &str, key: &str, kind: ErrorKind) {
+    let e = Scene::parse("scene.toml", text, &Overrides::default())
+        .expect_err(test)
+        .downcast::<SceneError>()
+        .unwrap_or_else(|e| panic!("{test}: not a scene error: {e:#}"));
+    assert_eq!((e.key.as_str(), e.kind), (key, kind), "{test}: {e}");
+    let dir = scratch_dir(test);
+    let file = dir.join("scene.toml");
+    std::fs::write(&file, text).unwrap();
+    let out = dir.join("out.rrd");
+    let o = cellflip(&[
+        "run",
+        file.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "-q",
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "{test}: accepted");
+    assert!(!err.contains("panicked"), "{test}: panic: {err}");
+    assert!(
+        err.contains("scene.toml") && err.contains(key),
+        "{test}: file or key not named: {err}"
+    );
+    assert!(!out.exists(), "{test}: wrote output on bad input");
+}
+
+#[test]
+fn good_scene_file_runs() {
+    let dir = scratch_dir("good");
+    let file = dir.join("scene.toml");
+    std::fs::write(&file, GOOD).unwrap();
+    let o = cellflip(&["run", file.to_str().unwrap(), "--no-record"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let summary = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        summary.contains("steps") && summary.contains("volume"),
+        "{summary}"
+    );
+}
+
+#[test]
+fn malformed_toml_is_rejected() {
+    rejects(
+        "malformed",
+        "name = \"x\"\ndim = 2\n[domain\n",
+        "domain",
+        ErrorKind::Syntax,
+    );
+}
+
+#[test]
+fn unknown_key_is_rejected() {
+    let text = GOOD.replace("duration = 0.05", "duration = 0.05\nviscosity = 1.0");
+    rejects(
+        "unknown-key",
+        &text,
+        "simulation.viscosity",
+        ErrorKind::Syntax,
+    );
+}
+
+#[test]
+fn too_few_cells_are_rejected() {
+    let text = GOOD.replace("cells = 8", "cells = 3");
+    rejects("cells", &text, "domain.cells", ErrorKind::Range);
+}
+
+#[test]
+fn zero_ppc_is_rejected() {
+    let text = GOOD.replace("duration = 0.05", "duration = 0.05\nppc = 0");
+    rejects("ppc", &text, "simulation.ppc", ErrorKind::Range);
+}
+
+#[test]
+fn bad_band_settings_are_rejected() {
+    let with = |extra: &str| GOOD.replace("duration = 0.05", &format!("duration = 0.05\n{extra}"));
+    rejects(
+        "band-name",
+        &with("band = \"wide\""),
+        "simulation.band",
+        ErrorKind::Syntax,
+    );
+    let zero = with("band = \"paths\"\nband_r = 0");
+    rejects("band-r", &zero, "simulation.band_r", ErrorKind::Range);
+    let moore = with("band = \"paths\"\ndirections = \"moore\"");
+    rejects("band-moore", &moore, "simulation.band", ErrorKind::Conflict);
+    let method = with("method = \"sph\"");
+    rejects(
+        "method-name",
+        &method,
+        "simulation.method",
+        ErrorKind::Syntax,
+    );
+    let couple = with("obstacle = \"couple\"");
+    rejects(
+        "flip-couple",
+        &couple,
+        "simulation.obstacle",
+        ErrorKind::Conflict,
+    );
+}
+
+#[test]
+fn bad_solids_and_obstacles_are_rejected() {
+    let with = |extra: &str| format!("{GOOD}{extra}");
+    // At 64 cells, two cells are 3.1 cm.
+    let spiral = |keys: &str| {
+        with(&format!(
+            "[[solid]]\nshape = \"spiral\"\nmin = [0.0, 0.5]\nmax = [1.0, 1.0]\n{keys}\n"
+        ))
+        .replace("cells = 8", "cells = 64")
+    };
+    let fluid_spiral = GOOD.replace("shape = \"box\"", "shape = \"spiral\"");
+    rejects(
+        "spiral-fluid",
+        &fluid_spiral,
+        "fluid[0].shape",
+        ErrorKind::Conflict,
+    );
+    let keys = spiral("center = [0.5, 0.75]\nradius = 0.2");
+    rejects("spiral-keys", &keys, "solid[0]", ErrorKind::Keys);
+    let narrow = spiral("center = [0.5, 0.75]\nradius = 0.2\nturns = 0.5\nwidth = 0.02");
+    rejects(
+        "spiral-narrow",
+        &narrow,
+        "solid[0].width",
+        ErrorKind::Geometry,
+    );
+    let walls = spiral("center = [0.5, 0.75]\nradius = 0.2\nturns = 1.5\nwidth = 0.08");
+    rejects("spiral-walls", &walls, "solid[0]", ErrorKind::Geometry);
+    let outside = spiral("center = [0.5, 0.6]\nradius = 0.2\nturns = 0.5\nwidth = 0.05");
+    rejects("spiral-outside", &outside, "solid[0]", ErrorKind::Geometry);
+    let good_spiral = "center = [0.5, 0.75]\nradius = 0.2\nturns = 0.5\nwidth = 0.05";
+    rejects(
+        "spiral-3d",
+        &spiral(good_spiral)
+            .replace("dim = 2", "dim = 3")
+            .replace("duration = 0.05", "duration = 0.05\nppc = 8")
+            .replace("size = [1.0, 1.0]", "size = [1.0, 1.0, 1.0]")
+            .replace("[0.0, 0.0]", "[0.0, 0.0, 0.0]")
+            .replace("[0.5, 0.5]", "[0.5, 0.5, 0.5]"),
+        "solid[0].shape",
+        ErrorKind::Conflict,
+    );
+    let moving = spiral("center = [0.5, 0.75]\nradius = 0.2").replace(
+        "[[solid]]",
+        "[[obstacle]]\nname = \"s\"\nvelocity = [0.0, 0.0]",
+    );
+    rejects(
+        "spiral-obstacle",
+        &moving,
+        "obstacle[0].shape",
+        ErrorKind::Conflict,
+    );
+    let radius =
+        with("[[solid]]\nshape = \"box\"\nmin = [0.0, 0.0]\nmax = [1.0, 0.1]\nradius = 0.2\n");
+    rejects("box-radius", &radius, "solid[0]", ErrorKind::Keys);
+    let obstacle = |name: &str, min: &str, max: &str| {
+        format!(
+            "[[obstacle]]\nname = \"{name}\"\nshape = \"box\"\nmin = {min}\nmax = {max}\n\
+             velocity = [0.0, -1.0]\n"
+        )
+    };
+    let in_solid = with(&format!(
+        "[[solid]]\nshape = \"box\"\nmin = [0.0, 0.6]\nmax = [1.0, 0.7]\n{}",
+        obstacle("lid", "[0.2, 0.65]", "[0.4, 0.9]")
+    ));
+    rejects(
+        "obstacle-in-solid",
+        &in_solid,
+        "obstacle[0]",
+        ErrorKind::Geometry,
+    );
+    let overlap = with(&format!(
+        "{}{}",
+        obstacle("a", "[0.2, 0.6]", "[0.4, 0.8]"),
+        obstacle("b", "[0.3, 0.65]", "[0.6, 0.9]")
+    ));
+    rejects(
+        "obstacles-overlap",
+        &overlap,
+        "obstacle[1]",
+        ErrorKind::Geometry,
+    );
+}
+
+#[test]
+fn negative_duration_is_rejected() {
+    let text = GOOD.replace("duration = 0.05", "duration = -1.0");
+    rejects("duration", &text, "simulation.duration", ErrorKind::Range);
+}
+
+#[test]
+fn fluid_outside_the_domain_is_rejected() {
+    let text = GOOD.replace("max = [0.5, 0.5]", "max = [0.5, 1.5]");
+    rejects("outside", &text, "fluid[0].max", ErrorKind::Geometry);
+}
+
+#[test]
+fn unknown_scene_name_is_rejected() {
+    let o = cellflip(&["run", "no-such-scene", "--no-record"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("unknown scene 'no-such-scene'") && err.contains("dam-2d"),
+        "{err}"
+    );
+}
+
+#[test]
+fn options_a_method_lacks_are_refused_before_anything_is_written() {
+    let dir = scratch_dir("options");
+    let out = dir.join("x.rrd");
+    for flags in [
+        vec!["--export-lp", "1"],
+        vec!["--band", "paths"],
+        vec!["--band-r", "2"],
+        vec!["--solver", "simplex"],
+        vec!["--directions", "moore"],
+        vec!["--cross-check"],
+    ] {
+        let mut args = vec!["run", "hydrostatic-2d", "--out", out.to_str().unwrap()];
+        args.extend(&flags);
+        let o = cellflip(&args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{flags:?} accepted");
+        assert!(
+            err.contains(flags[0]) && err.contains("'flip'"),
+            "{flags:?}: {err}"
+        );
+        assert!(!out.exists(), "{flags:?}: wrote a recording");
+    }
+    let o = cellflip(&[
+        "bench",
+        "--scene",
+        "hydrostatic-2d",
+        "--res",
+        "16",
+        "--band",
+        "paths",
+    ]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--band"));
+}
