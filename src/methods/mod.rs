@@ -24,10 +24,14 @@
 //! the reports).
 //!
 //! Adding a method: a folder here whose `mod.rs` registers a type implementing [`MethodType`]
-//! (its [`MethodInfo`], how to build its step and its summary), with its step in `physics.rs`
-//! (implementing [`FluidMethod`] and [`MethodRecording`]) and its recording in `record.rs`
-//! (its panels, its [`MethodReport`] and [`MethodSummary`]); then one line in the [`methods!`]
-//! list below. `flip` is the smallest example, `idp` a typical one.
+//! (its [`MethodInfo`], its `Settings` type with their `check`, how to build its step and its
+//! summary), with its step in `physics.rs` (implementing [`FluidMethod`] and
+//! [`MethodRecording`]) and its recording in `record.rs` (its panels, its [`MethodReport`] and
+//! [`MethodSummary`]); then one line in the [`methods!`] list below, which makes its settings
+//! a field of [`MethodSettings`] named after its folder. `flip` is the smallest example, `idp`
+//! a typical one. An option of the command line or the scene file that only some methods have
+//! is a [`MethodOption`], listed in their [`MethodInfo::options`]: the others refuse it in the
+//! same words on both input paths ([`MethodKind::refusal`]).
 
 pub mod ccp;
 pub mod flip;

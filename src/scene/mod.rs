@@ -226,7 +226,9 @@ pub struct SimulationFile {
 }
 
 impl SimulationFile {
-    /// The method-specific options this file sets.
+    /// The method-specific keys of `[simulation]` this file sets. A table named after its
+    /// method (`[simulation.powerpic]`) is not among them: it applies whenever that method runs
+    /// the scene (`--method`, `cellflip report`), whatever the file's own method.
     pub fn options_set(&self) -> Vec<MethodOption> {
         [
             (MethodOption::Solver, self.solver.is_some()),
@@ -234,7 +236,6 @@ impl SimulationFile {
             (MethodOption::Band, self.band.is_some()),
             (MethodOption::BandR, self.band_r.is_some()),
             (MethodOption::IdpResample, self.idp_resample.is_some()),
-            (MethodOption::PowerPic, self.powerpic.is_some()),
         ]
         .into_iter()
         .filter_map(|(o, set)| set.then_some(o))

@@ -4,13 +4,13 @@
 
 #![allow(dead_code)]
 
+use cellflip::methods::ccp::BandMode;
 use cellflip::methods::ccp::CcpReport;
 use cellflip::methods::idp::IdpReport;
 use cellflip::methods::MethodKind;
 use cellflip::runner::{Limit, Runner};
 use cellflip::scene::{Overrides, Scene};
-use cellflip::sim::correct::band::BandMode;
-use cellflip::sim::{SimConfig, Simulation, StepReport};
+use cellflip::simulation::{Simulation, StepReport};
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -28,15 +28,22 @@ pub fn with(method: MethodKind, band: Option<BandMode>) -> Overrides {
     }
 }
 
-/// Steps `config` until `limit` with the program's runner (the invariants are checked inside
+/// A new simulation of `scene` with its method, and ccp's `--cross-check` when `cross_check`.
+pub fn simulation<const D: usize>(scene: &Scene, cross_check: bool) -> Simulation<D> {
+    let mut method = scene.method.clone();
+    method.ccp.cross_check = cross_check;
+    Simulation::new(scene.config::<D>(), &method)
+}
+
+/// Steps `sim` until `limit` with the program's runner (the invariants are checked inside
 /// every step); `check` sees the simulation and the report after each step. Panics naming the
 /// step when a step fails.
-pub fn run_config<const D: usize>(
-    config: SimConfig<D>,
+pub fn run_sim<const D: usize>(
+    sim: Simulation<D>,
     limit: Limit,
     mut check: impl FnMut(&Simulation<D>, &StepReport<D>),
 ) -> Runner<D> {
-    let mut runner = Runner::new(Simulation::new(config));
+    let mut runner = Runner::new(sim);
     runner
         .run(
             limit,
@@ -50,13 +57,13 @@ pub fn run_config<const D: usize>(
     runner
 }
 
-/// [`run_config`] that returns a failed step's error instead of panicking.
-pub fn try_run_config<const D: usize>(
-    config: SimConfig<D>,
+/// [`run_sim`] that returns a failed step's error instead of panicking.
+pub fn try_run_sim<const D: usize>(
+    sim: Simulation<D>,
     limit: Limit,
     mut check: impl FnMut(&Simulation<D>, &StepReport<D>),
 ) -> anyhow::Result<()> {
-    Runner::new(Simulation::new(config)).run(
+    Runner::new(sim).run(
         limit,
         || false,
         |sim, rep| {
@@ -86,14 +93,14 @@ pub fn run_at_rest<const D: usize>(
     (runner, fastest)
 }
 
-/// [`run_config`] on a scene, for `steps` steps or (`None`) the scene's duration.
+/// [`run_sim`] on a scene, for `steps` steps or (`None`) the scene's duration.
 pub fn run<const D: usize>(
     scene: &Scene,
     steps: Option<u64>,
     check: impl FnMut(&Simulation<D>, &StepReport<D>),
 ) -> Runner<D> {
     let limit = steps.map_or(Limit::SimSeconds(scene.duration_secs()), Limit::Steps);
-    run_config(scene.config::<D>(), limit, check)
+    run_sim(simulation::<D>(scene, false), limit, check)
 }
 
 /// The report of method ccp.
@@ -212,7 +219,7 @@ pub fn digest_report<const D: usize>(d: &mut Digest, rep: &StepReport<D>) {
 /// The digest of `steps` steps of a scene: state and report after every step, chained.
 pub fn digest_run<const D: usize>(scene: &Scene, steps: u64) -> String {
     let mut d = Digest::default();
-    digest_state(&mut d, &Simulation::<D>::new(scene.config::<D>()));
+    digest_state(&mut d, &simulation::<D>(scene, false));
     run::<D>(scene, Some(steps), |sim, rep| {
         digest_report(&mut d, rep);
         digest_state(&mut d, sim);

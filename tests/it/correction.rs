@@ -2,13 +2,13 @@
 //! instances and real steps, the guarantees of eq. problem3 in 2D and 3D, and the paper's
 //! volume claims.
 
-use crate::common::{ccp, load, run_config};
+use crate::common::{ccp, load, run_sim, simulation};
 use cellflip::grid::{Grid, Vector};
+use cellflip::methods::ccp::correct::problem;
+use cellflip::methods::ccp::{BandMode, Directions};
 use cellflip::methods::MethodKind;
 use cellflip::runner::Limit;
 use cellflip::scene::Overrides;
-use cellflip::sim::correct::band::BandMode;
-use cellflip::sim::correct::problem::{self, Directions};
 use cellflip::sim::markings::Markings;
 use cellflip::solvers::{lp, min_cost_flow, mps};
 use rand::rngs::StdRng;
@@ -368,10 +368,9 @@ fn run_ccp<const D: usize>(
         method: Some(MethodKind::Ccp),
         ..overrides
     };
-    let mut config = load(name, &overrides).config::<D>();
-    config.method.cross_check = cross_check;
+    let sim = simulation::<D>(&load(name, &overrides), cross_check);
     let mut volumes = vec![];
-    run_config::<D>(config, Limit::Steps(steps), |sim, rep| {
+    run_sim::<D>(sim, Limit::Steps(steps), |sim, rep| {
         let at = format!("{name} step {}", sim.state.steps);
         let c = &ccp(rep).correction;
         assert!(c.fallback.is_none(), "{at}: {:?}", c.fallback);

@@ -6,9 +6,9 @@
 //! `CELLFLIP_BLESS=1 cargo test --release --test it golden::` and say why in the commit.
 
 use crate::common::{digest_run, load};
+use cellflip::methods::ccp::BandMode;
 use cellflip::methods::MethodKind;
 use cellflip::scene::{Overrides, BUILT_IN};
-use cellflip::sim::correct::band::BandMode;
 
 /// The runs: (scene, method override, band override, steps). 3D scenes run at 16 cells along
 /// their shortest axis.

@@ -8,7 +8,7 @@ use crate::common::{load, run, run_at_rest, with};
 use cellflip::methods::powerpic::PowerPicReport;
 use cellflip::methods::MethodKind;
 use cellflip::scene::{Overrides, Scene};
-use cellflip::sim::StepReport;
+use cellflip::simulation::StepReport;
 
 fn powerpic<const D: usize>(rep: &StepReport<D>) -> &PowerPicReport {
     rep.method_report::<PowerPicReport>()
@@ -35,11 +35,13 @@ fn tank(dim: usize, extra: &str) -> Result<Scene, String> {
 fn a_tank_at_rest_stays_at_rest_and_keeps_its_volume_2d_and_3d() {
     fn check<const D: usize>(steps: u64) {
         let scene = tank(D, "").unwrap();
-        let start = scene.config::<D>();
         let (runner, fastest) = run_at_rest::<D>(&scene, steps, |rep, at| {
             assert!(powerpic(rep).converged, "{at}");
         });
-        let seeded = cellflip::sim::Simulation::new(start).state.particles.pos;
+        let seeded = crate::common::simulation::<D>(&scene, false)
+            .state
+            .particles
+            .pos;
         let moved = runner.sim.state.particles.pos.iter().zip(&seeded);
         let farthest = moved.map(|(a, b)| (a - b).norm()).fold(0.0, f64::max);
         println!("{D}D: fastest {fastest} cells/s, farthest {farthest} cells");
@@ -127,7 +129,7 @@ fn a_sinkhorn_that_reaches_its_cap_is_reported_not_hidden() {
         capped += usize::from(!r.converged);
     });
     assert_eq!(capped, 3);
-    let summary = runner.sim.method.summary().join("\n");
+    let summary = runner.sim.summary.lines().join("\n");
     assert!(
         summary.contains("cap of 1 iterations in 3 of 3 steps"),
         "{summary}"

@@ -2,16 +2,15 @@
 //! fixed it. They came from the topic modules named above each group, where the rest of their
 //! history is (`git log --follow`).
 
-use crate::common::{self, cellflip, load, run_config, scratch_dir};
+use crate::common::{self, cellflip, load, run_sim, scratch_dir, simulation};
 use crate::scene_refusals::{rejects, GOOD};
 use crate::solids::{point, run, run_apart};
 use cellflip::grid::{Grid, Vector};
+use cellflip::methods::ccp::correct::{self, CorrectionSettings};
 use cellflip::methods::MethodKind;
 use cellflip::runner::Limit;
 use cellflip::scene::{ErrorKind, Overrides, Scene};
-use cellflip::sim::correct::{self, CorrectionSettings};
 use cellflip::sim::markings::Markings;
-use cellflip::sim::Simulation;
 use std::path::Path;
 use std::process::Command;
 
@@ -329,7 +328,11 @@ fn a_failed_solve_was_exported_as_an_optimal_objective() {
 fn dam_front(method: MethodKind, cfl: f64, seconds: f64) -> f64 {
     let mut scene = load("dam-2d", &common::with(method, None));
     scene.file.simulation.cfl = cfl;
-    let runner = run_config(scene.config::<2>(), Limit::SimSeconds(seconds), |_, _| {});
+    let runner = run_sim(
+        simulation::<2>(&scene, false),
+        Limit::SimSeconds(seconds),
+        |_, _| {},
+    );
     let pos = &runner.sim.state.particles.pos;
     pos.iter().map(|x| x[0]).fold(f64::MIN, f64::max)
 }
@@ -377,7 +380,7 @@ fn best_cell_pos_clamped_every_component_and_pinned_the_dam_front_at_small_steps
 fn a_nan_velocity_slipped_past_max_abs_and_panicked_in_advection() {
     for method in [MethodKind::Flip, MethodKind::Ccp] {
         let scene = load("drop-2d", &common::with(method, None));
-        let mut sim = Simulation::<2>::new(scene.config::<2>());
+        let mut sim = simulation::<2>(&scene, false);
         sim.step().unwrap();
         sim.state.particles.vel[7][0] = f64::NAN;
         let err = sim.step().expect_err("a NaN velocity must not pass");

@@ -105,10 +105,13 @@ fn bad_band_settings_are_rejected() {
         "simulation.band",
         ErrorKind::Syntax,
     );
-    let zero = with("band = \"paths\"\nband_r = 0");
+    let zero = with("method = \"ccp\"\nband = \"paths\"\nband_r = 0");
     rejects("band-r", &zero, "simulation.band_r", ErrorKind::Range);
-    let moore = with("band = \"paths\"\ndirections = \"moore\"");
+    let moore = with("method = \"ccp\"\nband = \"paths\"\ndirections = \"moore\"");
     rejects("band-moore", &moore, "simulation.band", ErrorKind::Conflict);
+    // GOOD runs flip, which has no band: refused as `--band` is on the command line.
+    let flip = with("band = \"paths\"");
+    rejects("flip-band", &flip, "simulation.band", ErrorKind::Conflict);
     let method = with("method = \"sph\"");
     rejects(
         "method-name",

@@ -4,13 +4,13 @@
 use crate::common::{load, run};
 use cellflip::methods::MethodKind;
 use cellflip::scene::{Overrides, Scene, BUILT_IN};
-use cellflip::sim::Simulation;
+use cellflip::simulation::Simulation;
 
 /// Runs a built-in scene, checking every step: a finite volume, a positive time step, a
 /// converged pressure solve, and nothing moving more than `cfl` cells (sec. grid_move).
 fn run_checked<const D: usize>(name: &str, overrides: &Overrides, steps: u64) -> Simulation<D> {
     let scene = load(name, overrides);
-    let sim = Simulation::<D>::new(scene.config::<D>());
+    let sim = Simulation::<D>::new(scene.config::<D>(), &scene.method);
     sim.check_invariants().unwrap();
     run::<D>(&scene, Some(steps), |sim, rep| {
         let at = format!("{name} step {}", sim.state.steps);
@@ -54,7 +54,7 @@ fn every_3d_scene_keeps_its_invariants() {
 #[test]
 fn dam_2d_emitter_fills_exactly_half_the_tank() {
     let scene = load("dam-2d", &Overrides::default());
-    let seeded = Simulation::<2>::new(scene.config::<2>())
+    let seeded = Simulation::<2>::new(scene.config::<2>(), &scene.method)
         .state
         .particles
         .len();

@@ -5,13 +5,13 @@
 
 use crate::common::{self, load};
 use cellflip::grid::Vector;
+use cellflip::methods::ccp::BandMode;
 use cellflip::methods::ccp::CcpReport;
 use cellflip::methods::MethodKind;
 use cellflip::runner::Limit;
 use cellflip::scene::{Overrides, Scene};
-use cellflip::sim::correct::band::BandMode;
 use cellflip::sim::solids::ObstacleMode;
-use cellflip::sim::Simulation;
+use cellflip::simulation::Simulation;
 
 pub(crate) struct Run {
     pub(crate) volume_min: f64,
@@ -362,7 +362,7 @@ fn falling_obstacles_reach_the_floor_in_3d_with_the_band() {
             ..Default::default()
         };
         let s = load(name, &o);
-        assert_ne!(s.method.band, BandMode::None);
+        assert_ne!(s.method.band(), BandMode::None);
         reaches_the_floor(name, 3, &s);
     }
 }
@@ -377,10 +377,9 @@ fn split_objective<const D: usize>(
     steps: u64,
     mut check: impl FnMut(&CcpReport<D>, &str),
 ) -> usize {
-    let mut config = scene.config::<D>();
-    config.method.cross_check = cross_check;
+    let sim = common::simulation::<D>(scene, cross_check);
     let mut penalised = 0;
-    common::run_config::<D>(config, Limit::Steps(steps), |sim, rep| {
+    common::run_sim::<D>(sim, Limit::Steps(steps), |sim, rep| {
         let at = format!("{} step {}", scene.name(), sim.state.steps);
         let r = common::ccp(rep);
         let c = &r.correction;
