@@ -6,7 +6,7 @@ use super::{
     EmitterFile, MotionKind, ObstacleFile, RegionFile, Scene, SceneFile, Shape, SimulationFile,
 };
 use crate::grid::Grid;
-use crate::methods::{MethodSettings, SettingContext};
+use crate::methods::{MethodKind, MethodSettings, SettingContext};
 use crate::particles;
 use std::collections::BTreeSet;
 
@@ -490,28 +490,47 @@ fn method_settings(s: &SimulationFile) -> MethodSettings {
     ccp.band_r = s.band_r.unwrap_or(ccp.band_r);
     m.nbflip.band_r = s.band_r.unwrap_or(m.nbflip.band_r);
     m.idp.resample = s.idp_resample.unwrap_or(m.idp.resample);
+    // A method's table gives all its settings.
+    m.ccp = s.ccp.clone().unwrap_or(m.ccp);
+    m.idp = s.idp.clone().unwrap_or(m.idp);
+    m.nbflip = s.nbflip.clone().unwrap_or(m.nbflip);
     m.powerpic = s.powerpic.unwrap_or(m.powerpic);
     m
 }
 
+/// Whether the file has a table for method `kind`.
+fn has_table(s: &SimulationFile, kind: MethodKind) -> bool {
+    match kind {
+        MethodKind::Ccp => s.ccp.is_some(),
+        MethodKind::Idp => s.idp.is_some(),
+        MethodKind::Nbflip => s.nbflip.is_some(),
+        MethodKind::Powerpic => s.powerpic.is_some(),
+        MethodKind::Flip => false,
+    }
+}
+
 /// Refuses a method key (`simulation.band`, ...) that the file's own method does not have,
-/// with the words the command line's flags are refused with.
+/// with the words the command line's flags are refused with, and one the method has when the
+/// file also has the method's table (each setting has one place).
 pub(super) fn method_keys(source: &str, s: &SimulationFile) -> Checked<()> {
-    let refused = s
-        .options_set()
-        .into_iter()
-        .find_map(|o| Some((o, s.method.refusal(o)?)));
-    let Some((o, why)) = refused else {
+    let table = has_table(s, s.method).then_some(s.method.name());
+    let refused = s.options_set().into_iter().find_map(|o| {
+        let why = match (s.method.refusal(o), table) {
+            (Some(why), _) => format!("{why}; remove the key or set simulation.method"),
+            (None, Some(m)) => format!("the file has [simulation.{m}]: set the key there"),
+            (None, None) => return None,
+        };
+        Some((o, why))
+    });
+    let Some((o, reason)) = refused else {
         return Ok(());
     };
+    let key = o.key().expect("a file sets options by key");
     Err(SceneError {
         file: source.into(),
-        key: format!(
-            "simulation.{}",
-            o.key().expect("a file sets options by key")
-        ),
+        key: format!("simulation.{key}"),
         kind: ErrorKind::Conflict,
-        reason: format!("{why}; remove the key or set simulation.method"),
+        reason,
     })
 }
 
@@ -742,6 +761,7 @@ fn regions_cover_cells<const D: usize>(ch: &Checker, scene: &Scene) -> Checked<(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::methods::ccp::{BandMode, Solver};
 
     #[test]
     fn a_toml_error_names_the_key_it_points_at() {
@@ -821,5 +841,47 @@ mod tests {
         );
         let e = scene_with("powerpic", "[simulation.powerpic]\nrefine = 9", &none).unwrap_err();
         assert_eq!(e.key, "simulation.powerpic.refine");
+    }
+
+    #[test]
+    fn a_methods_table_applies_whenever_it_runs_and_takes_the_flags() {
+        let none = super::super::Overrides::default();
+        let idp = super::super::Overrides {
+            method: Some(crate::methods::MethodKind::Idp),
+            ..Default::default()
+        };
+        // A ccp file configures idp for when idp runs it.
+        let keys = "band_r = 6\n[simulation.idp]\nresample = true";
+        let s = scene_with("ccp", keys, &idp).unwrap();
+        assert!(s.method.idp.resample);
+        // Its own method's table holds its keys: a key beside it is refused.
+        let both = "band = \"paths\"\n[simulation.ccp]\nsolver = \"simplex\"";
+        let e = scene_with("ccp", both, &none).unwrap_err();
+        assert_eq!(
+            (e.key.as_str(), e.kind),
+            ("simulation.band", ErrorKind::Conflict)
+        );
+        assert!(e.reason.contains("[simulation.ccp]"), "{e}");
+        // The table's unset keys take their defaults; the flags reach the table.
+        let table = "[simulation.ccp]\nsolver = \"simplex\"";
+        let s = scene_with("ccp", table, &none).unwrap();
+        assert_eq!(
+            (s.method.ccp.solver, s.method.band()),
+            (Solver::Simplex, BandMode::None)
+        );
+        let band = super::super::Overrides {
+            band: Some(BandMode::Paths),
+            ..Default::default()
+        };
+        assert_eq!(
+            scene_with("ccp", table, &band).unwrap().method.band(),
+            BandMode::Paths
+        );
+        // An unknown key in a table is refused naming it.
+        let text_err = toml::from_str::<SceneFile>(
+            "name = \"x\"\ndim = 2\n[domain]\nsize = [1.0, 1.0]\ncells = 8\n[simulation.idp]\nresampel = true\n",
+        );
+        let e = text_err.expect_err("an unknown key").to_string();
+        assert!(e.contains("resampel"), "{e}");
     }
 }

@@ -10,9 +10,9 @@ mod memory;
 pub use check::{ErrorKind, SceneError};
 
 use crate::grid::Vector;
-use crate::methods::ccp::BandMode;
-use crate::methods::ccp::Directions;
-use crate::methods::ccp::Solver;
+use crate::methods::ccp::{BandMode, CcpSettings, Directions, Solver};
+use crate::methods::idp::IdpSettings;
+use crate::methods::nbflip::NbflipSettings;
 use crate::methods::powerpic::PowerPicSettings;
 use crate::methods::{MethodKind, MethodOption, MethodSettings};
 use crate::particles::{Region, SpiralBlock};
@@ -191,9 +191,11 @@ pub struct SimulationFile {
     /// Relative tolerance of the pressure solve.
     pub pressure_tolerance: f64,
     pub seed: u64,
-    /// The keys below belong to some methods only (`MethodInfo::options`): a scene file that
-    /// sets one its own method does not have is refused, naming the key. Unset, each takes its
-    /// method's default.
+    /// The keys below belong to some methods only (`MethodInfo::options`) and configure the
+    /// file's own method (`band_r` both band methods): a file that sets one its method does not
+    /// have is refused, naming the key, as the command line refuses the flag. Other methods run
+    /// on the file take their settings from their table (`[simulation.idp]`, below) or their
+    /// defaults. Unset, each takes its method's default.
     ///
     /// Solver of the correction step (method ccp; default flow).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -220,6 +222,15 @@ pub struct SimulationFile {
     /// step; off by default, as in their 3D scene).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub idp_resample: Option<bool>,
+    /// A table per method, `[simulation.<method>]`: that method's settings whenever it runs
+    /// the scene (its own method, `--method`, `cellflip report`), unset keys at their defaults.
+    /// A file whose method has a table sets that method's keys there only.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ccp: Option<CcpSettings>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub idp: Option<IdpSettings>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub nbflip: Option<NbflipSettings>,
     /// Method powerpic's parameters (defaults: Levi's, sec. Evaluation).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub powerpic: Option<PowerPicSettings>,
@@ -263,6 +274,9 @@ impl Default for SimulationFile {
             band_r: None,
             obstacle: None,
             idp_resample: None,
+            ccp: None,
+            idp: None,
+            nbflip: None,
             powerpic: None,
         }
     }
@@ -359,6 +373,16 @@ impl Overrides {
             };
         }
         set_option!(solver, directions, band, band_r);
+        // The flags reach the tables too, which take precedence over the keys above.
+        if let Some(ccp) = &mut sim.ccp {
+            ccp.solver = self.solver.unwrap_or(ccp.solver);
+            ccp.directions = self.directions.unwrap_or(ccp.directions);
+            ccp.band = self.band.unwrap_or(ccp.band);
+            ccp.band_r = self.band_r.unwrap_or(ccp.band_r);
+        }
+        if let Some(nbflip) = &mut sim.nbflip {
+            nbflip.band_r = self.band_r.unwrap_or(nbflip.band_r);
+        }
         if let Some(m) = self.obstacle {
             sim.obstacle = Some(m);
         }

@@ -330,8 +330,10 @@ fn idp_runs_the_3d_dam_with_the_solve_converging_every_step() {
     // Resampling on: the run keeps its invariants too.
     let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/dam-2d.toml"))
         .unwrap()
-        .replace("method = \"ccp\"", "method = \"idp\"\nidp_resample = true")
-        .replace("band_r = 6", "");
+        .replace(
+            "[simulation]",
+            "[simulation.idp]\nresample = true\n[simulation]",
+        );
     let o = common::with(MethodKind::Idp, None);
     let scene = cellflip::scene::Scene::parse("dam-2d with resampling", &text, &o).unwrap();
     run::<2>(&scene, Some(100), |_, _| {});

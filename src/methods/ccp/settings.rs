@@ -9,8 +9,10 @@ use crate::methods::seam::SettingError;
 use crate::sim::band::{check_band_r, DEFAULT_BAND_R};
 use std::path::PathBuf;
 
-/// Method ccp's settings.
-#[derive(Clone, Debug, PartialEq)]
+/// Method ccp's settings: `[simulation.ccp]` in a scene file (or, for a file whose method is
+/// ccp, the same keys directly in `[simulation]`).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct CcpSettings {
     /// Solver of the correction step (`simulation.solver`, `--solver`).
     pub solver: Solver,
@@ -23,9 +25,12 @@ pub struct CcpSettings {
     /// `--band-r`).
     pub band_r: u32,
     /// Solve every correction twice (other solver, other band variants) and compare
-    /// (`--cross-check`).
+    /// (`--cross-check`; not a scene key).
+    #[serde(skip)]
     pub cross_check: bool,
-    /// Write the correction problem of this step as MPS to this path (`--export-lp`).
+    /// Write the correction problem of this step as MPS to this path (`--export-lp`; not a
+    /// scene key).
+    #[serde(skip)]
     pub export_lp: Option<(u64, PathBuf)>,
 }
 

@@ -70,11 +70,13 @@ use crate::sim::solids::ObstacleMode;
 use physics::IdpSim;
 use record::{Totals, LAYER_VIEWS, PANELS};
 
-/// Method idp's settings.
-#[derive(Clone, Debug, Default, PartialEq)]
+/// Method idp's settings: `[simulation.idp]` in a scene file.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct IdpSettings {
-    /// Resample cells over twice the rest density (`simulation.idp_resample`; Kugelstadt et
-    /// al.'s optional step, off as in their 3D scene).
+    /// Resample cells over twice the rest density (`simulation.idp.resample`, or
+    /// `simulation.idp_resample` in a file whose method is idp; Kugelstadt et al.'s optional
+    /// step, off as in their 3D scene).
     pub resample: bool,
 }
 

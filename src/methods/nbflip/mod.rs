@@ -40,10 +40,12 @@ use crate::sim::solids::ObstacleMode;
 use physics::NbflipSim;
 use record::{Totals, LAYER_VIEWS, PANELS};
 
-/// Method nbflip's settings.
-#[derive(Clone, Debug, PartialEq)]
+/// Method nbflip's settings: `[simulation.nbflip]` in a scene file.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct NbflipSettings {
-    /// `R`: the band's depth in cells (`simulation.band_r`, `--band-r`).
+    /// `R`: the band's depth in cells (`simulation.nbflip.band_r`, or `simulation.band_r` in a
+    /// file whose method has a band; `--band-r`).
     pub band_r: u32,
 }
 
