@@ -1,8 +1,6 @@
 //! Command-line definitions (clap) and nothing else.
 
-use crate::methods::ccp::BandMode;
-use crate::methods::ccp::Directions;
-use crate::methods::ccp::Solver;
+use crate::methods::ccp::{BandMode, CcpArgs, Solver};
 use crate::methods::MethodKind;
 use crate::record::Moves;
 use crate::sim::solids::ObstacleMode;
@@ -114,16 +112,6 @@ pub struct RunArgs {
     /// Random seed (overrides `simulation.seed`).
     #[arg(long)]
     pub seed: Option<u64>,
-    /// Solver of the ccp correction: flow (exact min-cost flow) or simplex (the LP reference).
-    #[arg(long, value_enum)]
-    pub solver: Option<Solver>,
-    /// Candidate moves of the ccp correction: von-neumann (paper) or moore.
-    #[arg(long, value_enum)]
-    pub directions: Option<Directions>,
-    /// Band method of ccp (overrides `simulation.band`): none, paths (the paper's), one-way or
-    /// full (an integer program: small grids only).
-    #[arg(long, value_enum)]
-    pub band: Option<BandMode>,
     /// Band depth R: ccp's band interface lies R cells below the surface (the band is R + 1
     /// cells thick); nbflip keeps particles down to R cells below its level set's zero
     /// (overrides `simulation.band_r`).
@@ -133,17 +121,6 @@ pub struct RunArgs {
     /// the other methods naive (wait for free cells) or ignore (move regardless).
     #[arg(long, value_enum)]
     pub obstacle: Option<ObstacleMode>,
-    /// Solve every correction with both solvers and report their largest objective difference;
-    /// with a band, run every band variant on each step's problem and record their objectives
-    /// (full and one-way, integer programs, only up to 50,000 candidates), and check
-    /// exact-paths' second step against the simplex.
-    #[arg(long)]
-    pub cross_check: bool,
-    /// Write the correction problem of step N as free-format MPS next to the recording (in
-    /// recordings/ with --no-record), as
-    /// <scene>-<method>[-band-<band>-r<R>]-<cells>-ppc<ppc>-seed<seed>-step<N>.mps.
-    #[arg(long, value_name = "N")]
-    pub export_lp: Option<u64>,
     /// Where to write the recording [default: recordings/<scene>.rrd].
     #[arg(long, conflicts_with = "no_record")]
     pub out: Option<PathBuf>,
@@ -167,6 +144,9 @@ pub struct RunArgs {
     /// No progress bar and no summary.
     #[arg(long, short)]
     pub quiet: bool,
+    /// Method ccp's flags.
+    #[command(flatten)]
+    pub ccp: CcpArgs,
 }
 
 #[derive(Args, Debug, Clone)]

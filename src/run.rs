@@ -21,9 +21,9 @@ impl RunArgs {
             cells: self.res,
             ppc: self.ppc,
             seed: self.seed,
-            solver: self.solver,
-            directions: self.directions,
-            band: self.band,
+            solver: self.ccp.solver,
+            directions: self.ccp.directions,
+            band: self.ccp.band,
             band_r: self.band_r,
             obstacle: self.obstacle,
         }
@@ -31,17 +31,11 @@ impl RunArgs {
 
     /// The method-specific options given on the command line.
     fn method_options(&self) -> Vec<MethodOption> {
-        [
-            (MethodOption::Band, self.band.is_some()),
-            (MethodOption::BandR, self.band_r.is_some()),
-            (MethodOption::Solver, self.solver.is_some()),
-            (MethodOption::Directions, self.directions.is_some()),
-            (MethodOption::CrossCheck, self.cross_check),
-            (MethodOption::ExportLp, self.export_lp.is_some()),
-        ]
-        .into_iter()
-        .filter_map(|(o, given)| given.then_some(o))
-        .collect()
+        let mut given = self.ccp.given();
+        if self.band_r.is_some() {
+            given.push(MethodOption::BandR);
+        }
+        given
     }
 }
 
@@ -58,7 +52,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
         Some(n) => Limit::Steps(n),
         None => Limit::SimSeconds(scene.duration_secs()),
     };
-    check_export_step(args.export_lp, limit)?;
+    check_export_step(args.ccp.export_lp, limit)?;
     parse_slice(args.slice.as_deref(), scene.dim())?;
     let out = if args.no_record {
         None
@@ -89,7 +83,7 @@ fn run_dim<const D: usize>(
         slice: parse_slice(args.slice.as_deref(), D)?,
     };
     let recorder = out
-        .map(|p| Recorder::create(p, scene, args.cross_check, drawing))
+        .map(|p| Recorder::create(p, scene, args.ccp.cross_check, drawing))
         .transpose()?;
     match simulate::<D>(scene, limit, recorder.as_ref(), out, args) {
         Ok((runner, result)) => finish(scene, runner, result, recorder, out, args),
@@ -112,11 +106,11 @@ fn simulate<const D: usize>(
     args: &RunArgs,
 ) -> Result<(Runner<D>, Result<()>)> {
     let mut method = scene.method.clone();
-    method.ccp.export_lp = match args.export_lp {
+    method.ccp.export_lp = match args.ccp.export_lp {
         Some(n) => Some((n, mps_path(scene, out, n)?)),
         None => None,
     };
-    method.ccp.cross_check = args.cross_check;
+    method.ccp.cross_check = args.ccp.cross_check;
     let sim = Simulation::<D>::new(scene.config::<D>(), &method);
     if let Some(r) = recorder {
         r.log_setup(&sim);
@@ -204,7 +198,7 @@ fn finish<const D: usize>(
             );
         }
     }
-    result.and_then(|()| check_export_written(args.export_lp, runner.sim.state.steps))
+    result.and_then(|()| check_export_written(args.ccp.export_lp, runner.sim.state.steps))
 }
 
 /// When a step's particles, cells and moves are recorded (its metrics always are).

@@ -16,7 +16,7 @@ mod record;
 mod settings;
 
 pub use record::CcpReport;
-pub use settings::{BandMode, CcpSettings, Directions, Solver};
+pub use settings::{BandMode, CcpArgs, CcpSettings, Directions, Solver};
 
 use super::seam::{
     FluidMethod, MethodInfo, MethodOption, MethodSummary, MethodType, SettingContext, SettingError,

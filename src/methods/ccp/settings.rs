@@ -5,7 +5,7 @@ use super::correct::band::BandVariant;
 
 pub use super::correct::problem::Directions;
 pub use super::correct::Solver;
-use crate::methods::seam::SettingError;
+use crate::methods::seam::{MethodOption, SettingError};
 use crate::sim::band::{check_band_r, DEFAULT_BAND_R};
 use std::path::PathBuf;
 
@@ -99,5 +99,48 @@ impl BandMode {
 
     pub fn name(self) -> &'static str {
         self.variant().map_or("none", BandVariant::name)
+    }
+}
+
+/// Method ccp's flags on `cellflip run` (`--band-r`, which nbflip shares, is the run's own).
+#[derive(clap::Args, Debug, Clone, Default)]
+#[command(next_help_heading = "Method ccp")]
+pub struct CcpArgs {
+    /// Solver of the ccp correction: flow (exact min-cost flow) or simplex (the LP reference).
+    #[arg(long, value_enum)]
+    pub solver: Option<Solver>,
+    /// Candidate moves of the ccp correction: von-neumann (paper) or moore.
+    #[arg(long, value_enum)]
+    pub directions: Option<Directions>,
+    /// Band method of ccp (overrides `simulation.band`): none, paths (the paper's), one-way or
+    /// full (an integer program: small grids only).
+    #[arg(long, value_enum)]
+    pub band: Option<BandMode>,
+    /// Solve every correction with both solvers and report their largest objective difference;
+    /// with a band, run every band variant on each step's problem and record their objectives
+    /// (full and one-way, integer programs, only up to 50,000 candidates), and check
+    /// exact-paths' second step against the simplex.
+    #[arg(long)]
+    pub cross_check: bool,
+    /// Write the correction problem of step N as free-format MPS next to the recording (in
+    /// recordings/ with --no-record), as
+    /// <scene>-<method>[-band-<band>-r<R>]-<cells>-ppc<ppc>-seed<seed>-step<N>.mps.
+    #[arg(long, value_name = "N")]
+    pub export_lp: Option<u64>,
+}
+
+impl CcpArgs {
+    /// The flags given, for the run's method to refuse those it lacks.
+    pub fn given(&self) -> Vec<MethodOption> {
+        [
+            (MethodOption::Band, self.band.is_some()),
+            (MethodOption::Solver, self.solver.is_some()),
+            (MethodOption::Directions, self.directions.is_some()),
+            (MethodOption::CrossCheck, self.cross_check),
+            (MethodOption::ExportLp, self.export_lp.is_some()),
+        ]
+        .into_iter()
+        .filter_map(|(o, given)| given.then_some(o))
+        .collect()
     }
 }
