@@ -3,5 +3,6 @@
 pub mod lp;
 pub mod min_cost_flow;
 pub mod mps;
+pub mod multigrid;
 pub mod pcg;
 pub mod sinkhorn;

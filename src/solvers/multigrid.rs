@@ -1,0 +1,1085 @@
+//! A geometric multigrid V-cycle as CG's preconditioner for the pressure matrix: MGPCG after
+//! McAdams, Sifakis and Teran 2010, "A parallel multigrid Poisson solver for fluids simulation
+//! on large grids" (below: McAdams). It knows no fluid, only a grid whose cells are classed.
+//!
+//! **The system.** [`Multigrid::new`] takes the grid's dimensions and one [`CellClass`] per
+//! cell (linear order, axis 0 fastest, as `crate::grid::Grid`). Its rows are the
+//! [`CellClass::Unknown`] cells in ascending cell order, and the matrix is the (2D+1)-point
+//! negative Laplacian in unit cells: `-1` between neighbouring unknowns, and on the diagonal
+//! the number of neighbours that are unknown or [`CellClass::Dirichlet`] (a known zero);
+//! [`CellClass::Neumann`] cells and the outside of the grid add nothing. This is exactly the
+//! matrix `crate::sim::pressure::Poisson` builds (empty cells Dirichlet, solid cells Neumann),
+//! so the finest level smooths the very system CG solves. The classes, rather than the
+//! matrix, are the input because coarsening needs them: a matrix row tells how many
+//! neighbours are Dirichlet, not which.
+//!
+//! **Coarsening.** Level `l + 1` halves every axis (rounding up); a coarse cell is an
+//! unknown if any of its `2^D` children is, else Dirichlet if any child is, else Neumann.
+//! Unknowns thus never vanish: every fine row has an unknown parent, and a fluid region keeps
+//! a coarse image however thin it is. Faces are coarsened too: a coarse face is open if any
+//! face of the finest grid within it joins two cells that are not Neumann, and closed
+//! otherwise (a solid wall all along it). Without this, a wall one cell thick between two
+//! parts of a winding one-cell channel vanishes inside the coarse cells and the coarse
+//! problem short-circuits the channel (a 64 x 64 serpentine: 469 iterations to 1e-12; with
+//! closed faces kept, 157; the dam problems do not change). Coarsening stops once a level has
+//! at most [`COARSEST_ROWS`] rows.
+//!
+//! **Coarse operators: rediscretisation**, as McAdams, rather than Galerkin `R A P`: the
+//! coarse matrix is the same (2D+1)-point stencil on the coarse classes, across open faces
+//! only, so every level keeps the finest level's storage and smoother, and stays symmetric
+//! positive semi-definite by construction. Galerkin with the trilinear transfers below would
+//! give 27-point stencils in 3D (three times the storage and work per row) for a coarse
+//! correction that is only an approximation either way. The stencil is scaled by
+//! `2^{(D-2) l}`: with `R = P^T` (which sums `2^D` fine residuals per coarse cell) and
+//! unit-cell stencils, `R A P` of a smooth function is `2^D / 4` times the coarse stencil, the
+//! 4 being the coarse cell's squared width.
+//!
+//! **Transfers.** Prolongation `P` is trilinear (bilinear in 2D) interpolation of
+//! cell-centred values, as McAdams: a fine cell takes 3/4 of its parent and 1/4 of the
+//! parent's neighbour on its side, per axis. Of the `2^D` coarse cells so weighted, an
+//! unknown gives its value, a Dirichlet cell its zero, and a Neumann cell, the outside, or a
+//! cell behind a closed face of the parent the parent's value (the mirror image a no-flux
+//! wall implies), so that `P` maps a constant to a constant away from Dirichlet cells.
+//! Restriction is exactly `R = P^T`, evaluated as a gather over the `4^D` fine cells that may
+//! interpolate from each coarse cell.
+//!
+//! **Smoother**: red-black Gauss-Seidel rather than McAdams' damped Jacobi: it smooths
+//! better per sweep, needs no damping factor, and each half-sweep is just as parallel, since
+//! a colour couples only to the other. Each level stores its red rows first, then its black
+//! rows, so a half-sweep writes one slice while reading the other ([`SWEEPS`] each way). Pre-smoothing runs red then black, post-smoothing black then
+//! red: the post-smoother is the pre-smoother's transpose. A row with no coupling at all (a
+//! single cell among Neumann cells, zero diagonal) is smoothed with the level's scale in
+//! place of its diagonal, as a correction `x_i += r_i / scale`: overwriting it instead would
+//! drop the coarse correction there on the way up but not on the way down, and break the
+//! symmetry.
+//!
+//! **Coarsest level**: an exact solve by a dense Cholesky factor. A connected part of it
+//! with no Dirichlet neighbour (a closed region: its block is singular, with the constants
+//! as null space) gets `(s / |K|) 1_K 1_K^T` added, `s` the level's scale: the factor then
+//! inverts the pseudo-inverse plus a constant on `K`, which `P` carries to a constant on the
+//! fine closed region, the fine matrix's own null space. The right-hand side's mean over a
+//! closed region is removed by the caller (as for MIC(0)); `P^T` keeps it zero on the
+//! coarse image (`1^T P^T r = (P 1)^T r`), and where it is not (a closed coarse region whose
+//! fine children reach a Dirichlet cell) the rank-one term keeps the solve bounded.
+//!
+//! **Symmetry and definiteness** (the conditions of Tatebe 1993, "The multigrid
+//! preconditioned conjugate gradient method"). Let `S` be one forward sweep, `S^-1 = D' + L`
+//! in red-black order (`D'` the smoothing diagonal, `L` the black-to-red couplings), so the
+//! backward sweep is `S^T`. The V-cycle on level `l` is
+//! `B_l = S_bar + (I - S^T A) P B_{l+1} P^T (I - A S)`, with
+//! `S_bar = S + S^T - S^T A S = S^T (2D' - D) S`. It is symmetric because the post-smoother
+//! is the pre-smoother's transpose and `R = P^T`; positive definite because `2D' - D` is
+//! (it is `D` on coupled rows, `2 scale` on uncoupled ones) and `S` is invertible, while the
+//! second term is semi-definite whenever `B_{l+1}` is. More sweeps nest the same way (the
+//! inner sweeps take the place of the coarse correction), and the coarsest `B` is the
+//! inverse of a positive definite matrix. So the V-cycle is symmetric positive definite even
+//! for singular (closed) systems, and CG stays valid.
+
+use crate::solvers::pcg::{Precondition, NONE};
+use crate::PAR_GRAIN;
+use rayon::prelude::*;
+
+/// What a cell is to the system.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CellClass {
+    /// A row of the system (a fluid cell).
+    Unknown,
+    /// A known zero next to the unknowns (an empty cell at the free surface).
+    Dirichlet,
+    /// No coupling (a solid cell; the outside of the grid counts as one).
+    Neumann,
+}
+
+/// The largest coarsest level: its dense Cholesky factor costs `n^3 / 6` operations per
+/// solve and each application `2 n^2`, well below one fine-level sweep.
+pub const COARSEST_ROWS: usize = 256;
+
+/// Red-black Gauss-Seidel sweeps before and after each coarse correction.
+pub const SWEEPS: usize = 2;
+
+/// The interpolation weight of the parent (`3/4`) and of its neighbour (`1/4`), per axis.
+const NEAR: f64 = 0.75;
+const FAR: f64 = 0.25;
+
+/// Coordinates of cell `i` on a grid of `dims` (axis 0 fastest).
+fn coords<const D: usize>(dims: &[usize; D], mut i: usize) -> [usize; D] {
+    std::array::from_fn(|a| {
+        let c = i % dims[a];
+        i /= dims[a];
+        c
+    })
+}
+
+/// `f(cell, its coordinates)` for every cell of `shape`, in parallel, a line along axis 0
+/// at a time (one division per line).
+fn map_cells<const D: usize, T: Copy + Send + Sync>(
+    shape: &Shape<D>,
+    init: T,
+    f: impl Fn(usize, [usize; D]) -> T + Sync,
+) -> Vec<T> {
+    let n0 = shape.dims[0];
+    let mut out = vec![init; shape.cells()];
+    (out.par_chunks_mut(n0).with_min_len((PAR_GRAIN / n0).max(1)))
+        .enumerate()
+        .for_each(|(line, out)| {
+            let mut c = coords(&shape.dims, line * n0);
+            for (x, o) in out.iter_mut().enumerate() {
+                c[0] = x;
+                *o = f(line * n0 + x, c);
+            }
+        });
+    out
+}
+
+/// A level's grid: its dimensions and the linear index strides.
+#[derive(Clone, Copy, Debug)]
+struct Shape<const D: usize> {
+    dims: [usize; D],
+    stride: [usize; D],
+}
+
+impl<const D: usize> Shape<D> {
+    fn new(dims: [usize; D]) -> Self {
+        let mut stride = [1; D];
+        for a in 1..D {
+            stride[a] = stride[a - 1] * dims[a - 1];
+        }
+        Shape { dims, stride }
+    }
+
+    fn cells(&self) -> usize {
+        self.dims.iter().product()
+    }
+
+    fn index(&self, c: [usize; D]) -> usize {
+        (0..D).map(|a| c[a] * self.stride[a]).sum()
+    }
+
+    /// The halved grid of the next level (rounding up).
+    fn coarser(&self) -> Self {
+        Shape::new(self.dims.map(|d| d.div_ceil(2)))
+    }
+}
+
+/// A row's cell coordinates, stored so that no loop of the V-cycle divides.
+type At<const D: usize> = [u16; D];
+
+fn widen<const D: usize>(c: At<D>) -> [usize; D] {
+    c.map(usize::from)
+}
+
+/// The interpolation weight of corner `mask` of [`corners`]: `3/4` per axis not in the
+/// mask, `1/4` per axis in it.
+fn corner_weight<const D: usize>(mask: usize) -> f64 {
+    (0..D).fold(1.0, |w, a| w * if mask >> a & 1 == 0 { NEAR } else { FAR })
+}
+
+/// The `2^D` coarse cells fine cell `f` interpolates from: corner `mask` is the parent
+/// `f / 2` moved, along each axis in `mask`, one cell to `f`'s side. Returns the parent's
+/// index and the index step of each axis's move.
+fn corners<const D: usize>(f: [usize; D], coarse: &Shape<D>) -> (usize, [isize; D]) {
+    let parent = f.map(|v| v / 2);
+    let step = std::array::from_fn(|a| match f[a] % 2 {
+        1 => coarse.stride[a] as isize,
+        _ => -(coarse.stride[a] as isize),
+    });
+    (coarse.index(parent), step)
+}
+
+/// The axes along which the corners of fine cell `f` may move ([`corners`]): those whose
+/// move stays inside the coarse grid and crosses an open face of `coarse`.
+fn movable<const D: usize>(f: [usize; D], coarse: &Shape<D>, cells: &Cells) -> u8 {
+    let (parent, step) = corners(f, coarse);
+    let mut axes = 0;
+    for a in 0..D {
+        let p = f[a] / 2;
+        let lower = match f[a] % 2 {
+            1 if p + 1 < coarse.dims[a] => parent,
+            0 if p > 0 => parent.wrapping_add_signed(step[a]),
+            _ => continue,
+        };
+        if cells.open[lower] >> a & 1 == 1 {
+            axes |= 1 << a;
+        }
+    }
+    axes
+}
+
+/// The index of corner `mask` from [`corners`]' parent and steps.
+fn corner(parent: usize, step: &[isize], mask: usize) -> usize {
+    let moved: isize = (0..step.len())
+        .filter(|a| mask >> a & 1 == 1)
+        .map(|a| step[a])
+        .sum();
+    parent.wrapping_add_signed(moved)
+}
+
+/// One row of a level's matrix: its neighbours' rows and how many neighbours are not
+/// Neumann (the diagonal over the level's scale).
+#[derive(Clone, Copy, Debug)]
+struct Stencil<const D: usize> {
+    plus: [u32; D],
+    minus: [u32; D],
+    count: u8,
+}
+
+/// One level's matrix: `scale * count` on the diagonal, `-scale` to each unknown neighbour.
+struct Operator<const D: usize> {
+    shape: Shape<D>,
+    /// Row of each cell, or [`NONE`].
+    row: Vec<u32>,
+    /// Cell of each row: the red rows (even coordinate sum) first, then the black ones.
+    at: Vec<At<D>>,
+    /// How many rows are red.
+    red: usize,
+    stencil: Vec<Stencil<D>>,
+    scale: f64,
+    /// `1 / D'` by neighbour count: `1 / (scale * count)`, and `1 / scale` for none.
+    inverse: [f64; 7],
+}
+
+impl<const D: usize> Operator<D> {
+    fn new(shape: Shape<D>, cells: &Cells, scale: f64) -> Self {
+        let class = &cells.class;
+        let unknown: Vec<At<D>> = (0..class.len())
+            .into_par_iter()
+            .with_min_len(PAR_GRAIN)
+            .filter(|&c| class[c] == CellClass::Unknown)
+            .map(|c| coords(&shape.dims, c).map(|v| v as u16))
+            .collect();
+        let of_colour = |red: bool| {
+            (unknown.par_iter().with_min_len(PAR_GRAIN))
+                .filter(move |c| (c.iter().map(|&v| v as usize).sum::<usize>() % 2 == 0) == red)
+                .copied()
+        };
+        let mut at: Vec<At<D>> = of_colour(true).collect();
+        let red = at.len();
+        at.par_extend(of_colour(false));
+        let mut row = vec![NONE; class.len()];
+        for (r, &c) in at.iter().enumerate() {
+            row[shape.index(widen(c))] = r as u32;
+        }
+        let stencil = (at.par_iter().with_min_len(PAR_GRAIN))
+            .map(|&c| Self::stencil_of(&shape, cells, &row, widen(c)))
+            .collect();
+        Operator {
+            shape,
+            row,
+            at,
+            red,
+            stencil,
+            scale,
+            inverse: std::array::from_fn(|n| 1.0 / (scale * n.max(1) as f64)),
+        }
+    }
+
+    /// The row of cell `c`: its neighbours across open faces.
+    fn stencil_of(shape: &Shape<D>, cells: &Cells, row: &[u32], c: [usize; D]) -> Stencil<D> {
+        let i = shape.index(c);
+        let mut s = Stencil {
+            plus: [NONE; D],
+            minus: [NONE; D],
+            count: 0,
+        };
+        let open = |lower: usize, a: usize| cells.open[lower] >> a & 1 == 1;
+        for a in 0..D {
+            let below = (c[a] > 0)
+                .then(|| i - shape.stride[a])
+                .filter(|&b| open(b, a));
+            let above = open(i, a).then(|| i + shape.stride[a]);
+            for (nb, plus) in [(below, false), (above, true)] {
+                let Some(nb) = nb else { continue };
+                match cells.class[nb] {
+                    CellClass::Neumann => continue,
+                    CellClass::Unknown if plus => s.plus[a] = row[nb],
+                    CellClass::Unknown => s.minus[a] = row[nb],
+                    CellClass::Dirichlet => {}
+                }
+                s.count += 1;
+            }
+        }
+        s
+    }
+
+    fn len(&self) -> usize {
+        self.at.len()
+    }
+
+    /// `scale` times the sum of `x` over row `i`'s unknown neighbours.
+    #[inline]
+    fn coupling(&self, i: usize, x: &[f64], offset: usize) -> f64 {
+        let s = &self.stencil[i];
+        let mut sum = 0.0;
+        for a in 0..D {
+            for nb in [s.plus[a], s.minus[a]] {
+                if nb != NONE {
+                    sum += x[nb as usize - offset];
+                }
+            }
+        }
+        self.scale * sum
+    }
+
+    /// Gauss-Seidel on the rows of one colour, all at once (they read only the other
+    /// colour): `x_i += (b - A x)_i / D'_i`, which is `x_i = (b_i + coupling) / diagonal` on
+    /// a coupled row; on a row with a zero diagonal `D'_i` is the level's scale.
+    fn half_sweep(&self, red: bool, b: &[f64], x: &mut [f64]) {
+        let (xr, xb) = x.split_at_mut(self.red);
+        let (mine, other, first, other_first) = match red {
+            true => (xr, &*xb, 0, self.red),
+            false => (xb, &*xr, self.red, 0),
+        };
+        (mine.par_iter_mut().with_min_len(PAR_GRAIN))
+            .enumerate()
+            .for_each(|(k, xi)| {
+                let i = first + k;
+                match self.stencil[i].count {
+                    0 => *xi += b[i] * self.inverse[0],
+                    n => {
+                        let coupling = self.coupling(i, other, other_first);
+                        *xi = (b[i] + coupling) * self.inverse[n as usize]
+                    }
+                }
+            });
+    }
+
+    /// `r = b - A x`.
+    fn residual(&self, b: &[f64], x: &[f64], r: &mut [f64]) {
+        (r.par_iter_mut().with_min_len(PAR_GRAIN))
+            .enumerate()
+            .for_each(|(i, ri)| {
+                let diag = self.scale * self.stencil[i].count as f64;
+                *ri = b[i] - diag * x[i] + self.coupling(i, x, 0);
+            });
+    }
+}
+
+/// A level's cells as coarsening sees them: each one's class, and which of its faces are
+/// open: bit `a` for the face to the next cell along axis `a`, open if at least one face
+/// of the finest grid within it joins two cells that are not Neumann.
+struct Cells {
+    class: Vec<CellClass>,
+    open: Vec<u8>,
+}
+
+impl Cells {
+    fn finest<const D: usize>(shape: &Shape<D>, class: &[CellClass]) -> Self {
+        let wet = |c: usize| class[c] != CellClass::Neumann;
+        let open = map_cells(shape, 0, |c, cc| {
+            let joins = |a: usize| cc[a] + 1 < shape.dims[a] && wet(c) && wet(c + shape.stride[a]);
+            (0..D)
+                .filter(|&a| joins(a))
+                .fold(0, |bits, a| bits | 1 << a)
+        });
+        Cells {
+            class: class.to_vec(),
+            open,
+        }
+    }
+
+    /// The next coarser grid's cells: a coarse cell is unknown if any of its children is,
+    /// else Dirichlet if any is, else Neumann; a coarse face is open if any fine face in it
+    /// is.
+    fn coarsen<const D: usize>(&self, fine: &Shape<D>) -> Self {
+        let coarse = fine.coarser();
+        let (class, open) = map_cells(&coarse, (CellClass::Neumann, 0), |_, kc| {
+            let (mut class, mut open) = (CellClass::Neumann, 0);
+            for mask in 0..1usize << D {
+                let f: [usize; D] = std::array::from_fn(|a| 2 * kc[a] + (mask >> a & 1));
+                if (0..D).any(|a| f[a] >= fine.dims[a]) {
+                    continue;
+                }
+                let f = fine.index(f);
+                class = match (class, self.class[f]) {
+                    (CellClass::Unknown, _) | (_, CellClass::Unknown) => CellClass::Unknown,
+                    (CellClass::Dirichlet, _) | (_, CellClass::Dirichlet) => CellClass::Dirichlet,
+                    _ => CellClass::Neumann,
+                };
+                // The child on the upper side of each axis carries that face.
+                open |= self.open[f] & mask as u8;
+            }
+            (class, open)
+        })
+        .into_iter()
+        .unzip();
+        Cells { class, open }
+    }
+}
+
+/// The `4^D` fine cells that may interpolate from a coarse cell `k` ([`corners`] seen from
+/// the coarse side), per axis `2k - 1 + t` for `t` in `0..4`: each one's index offset from
+/// `2k`, weight (`1/4` for `t` = 0 or 3, `3/4` for the children `t` = 1, 2), and the axes
+/// along which its corner `k` moves from its parent (those with `t` = 0 or 3; none: a
+/// child).
+fn block<const D: usize>(fine: &Shape<D>) -> Vec<(isize, f64, u8)> {
+    (0..1usize << (2 * D))
+        .map(|code| {
+            let t = |a: usize| (code >> (2 * a) & 3) as isize;
+            let offset = (0..D).map(|a| (t(a) - 1) * fine.stride[a] as isize).sum();
+            let moved = (0..D).filter(|&a| t(a) % 3 == 0).fold(0, |m, a| m | 1 << a);
+            (offset, corner_weight::<D>(moved as usize), moved)
+        })
+        .collect()
+}
+
+/// A level: its matrix, its vectors, and (below the coarsest) how it exchanges with the next.
+struct Level<const D: usize> {
+    op: Operator<D>,
+    /// Per row, the axes its interpolation corners may move along ([`movable`]). Empty on
+    /// the coarsest level, as is `to_parent`.
+    movable: Vec<u8>,
+    /// Per row, the interpolation weight of the corners that are Neumann or cannot be
+    /// reached, which `P` gives the parent (exact in `f32`: sums of products of 1/4 and 3/4).
+    to_parent: Vec<f32>,
+    x: Vec<f64>,
+    b: Vec<f64>,
+    r: Vec<f64>,
+}
+
+impl<const D: usize> Level<D> {
+    fn new(op: Operator<D>) -> Self {
+        let n = op.len();
+        Level {
+            op,
+            movable: vec![],
+            to_parent: vec![],
+            x: vec![0.0; n],
+            b: vec![0.0; n],
+            r: vec![0.0; n],
+        }
+    }
+
+    /// Sets [`Level::movable`] and [`Level::to_parent`] from the next level's cells.
+    fn link(&mut self, coarse: &Cells) {
+        let shape = self.op.shape.coarser();
+        let at = self.op.at.par_iter().with_min_len(PAR_GRAIN);
+        self.movable = at.map(|&f| movable(widen(f), &shape, coarse)).collect();
+        let at = self.op.at.par_iter().with_min_len(PAR_GRAIN);
+        self.to_parent = (at.zip(&self.movable))
+            .map(|(&f, &axes)| {
+                let (parent, step) = corners(widen(f), &shape);
+                let neumann = |m: usize| {
+                    m & !axes as usize != 0
+                        || coarse.class[corner(parent, &step, m)] == CellClass::Neumann
+                };
+                let w: f64 = (0..1 << D)
+                    .filter(|&m| neumann(m))
+                    .map(corner_weight::<D>)
+                    .sum();
+                w as f32
+            })
+            .collect();
+    }
+
+    /// Pre-smoothing from `x = 0`: `SWEEPS` times red then black.
+    fn pre_smooth(&mut self) {
+        self.x.fill(0.0);
+        for _ in 0..SWEEPS {
+            self.op.half_sweep(true, &self.b, &mut self.x);
+            self.op.half_sweep(false, &self.b, &mut self.x);
+        }
+    }
+
+    /// Post-smoothing, the transpose of [`Level::pre_smooth`]: black then red.
+    fn post_smooth(&mut self) {
+        for _ in 0..SWEEPS {
+            self.op.half_sweep(false, &self.b, &mut self.x);
+            self.op.half_sweep(true, &self.b, &mut self.x);
+        }
+    }
+
+    /// `coarse.b = P^T r` (restriction of this level's residual), a gather over [`block`].
+    fn restrict(&self, coarse: &mut Level<D>) {
+        let (fine, cop) = (&self.op.shape, &coarse.op);
+        let block = block(fine);
+        (coarse.b.par_iter_mut().with_min_len(PAR_GRAIN))
+            .zip(&cop.at)
+            .for_each(|(b, &k)| {
+                let k = widen(k);
+                let base = fine.index(k.map(|v| 2 * v));
+                let inside = |code: usize| {
+                    (0..D)
+                        .all(|a| (2 * k[a] + (code >> (2 * a) & 3)).wrapping_sub(1) < fine.dims[a])
+                };
+                let interior = (0..D).all(|a| k[a] > 0 && 2 * k[a] + 2 < fine.dims[a]);
+                let mut sum = 0.0;
+                for (code, &(offset, w, moved)) in block.iter().enumerate() {
+                    if !interior && !inside(code) {
+                        continue;
+                    }
+                    let r = self.op.row[base.wrapping_add_signed(offset)] as usize;
+                    if r == NONE as usize || moved & !self.movable[r] != 0 {
+                        continue;
+                    }
+                    let w = if moved == 0 {
+                        w + self.to_parent[r] as f64
+                    } else {
+                        w
+                    };
+                    sum += w * self.r[r];
+                }
+                *b = sum;
+            });
+    }
+
+    /// `x += P coarse.x` (prolongation of the coarse correction).
+    fn prolong_add(&mut self, coarse: &Level<D>) {
+        let (cop, xc) = (&coarse.op, &coarse.x);
+        let (op, to_parent, movable) = (&self.op, &self.to_parent, &self.movable);
+        let weight: Vec<f64> = (0..1 << D).map(corner_weight::<D>).collect();
+        (self.x.par_iter_mut().with_min_len(PAR_GRAIN))
+            .enumerate()
+            .for_each(|(i, x)| {
+                let (parent, step) = corners(widen(op.at[i]), &cop.shape);
+                let inside = movable[i] as usize;
+                let mut sum = to_parent[i] as f64 * xc[cop.row[parent] as usize];
+                let mut cell = [parent; 8];
+                for m in 1usize..1 << D {
+                    let low = m.trailing_zeros() as usize;
+                    cell[m] = cell[m & (m - 1)].wrapping_add_signed(step[low]);
+                }
+                for m in 0..1 << D {
+                    if m & !inside == 0 {
+                        let r = cop.row[cell[m]];
+                        if r != NONE {
+                            sum += weight[m] * xc[r as usize];
+                        }
+                    }
+                }
+                *x += sum;
+            });
+    }
+}
+
+/// The coarsest level's exact solve: a dense Cholesky factor of its matrix, with
+/// `(scale / |K|) 1_K 1_K^T` added on every closed part `K` (see the module doc).
+struct Dense {
+    n: usize,
+    /// The lower factor, row-major.
+    l: Vec<f64>,
+}
+
+impl Dense {
+    fn new<const D: usize>(op: &Operator<D>) -> Self {
+        let n = op.len();
+        let mut a = vec![0.0; n * n];
+        for (i, s) in op.stencil.iter().enumerate() {
+            a[i * n + i] = op.scale * s.count as f64;
+            for &j in s.plus.iter().chain(&s.minus).filter(|&&j| j != NONE) {
+                a[i * n + j as usize] = -op.scale;
+            }
+        }
+        for part in closed_parts(op) {
+            let c = op.scale / part.len() as f64;
+            for &i in &part {
+                for &j in &part {
+                    a[i * n + j] += c;
+                }
+            }
+        }
+        cholesky(n, &mut a);
+        Dense { n, l: a }
+    }
+
+    /// `x = (L L^T)^-1 b`.
+    fn solve(&self, b: &[f64], x: &mut [f64]) {
+        let (n, l) = (self.n, &self.l);
+        for i in 0..n {
+            let s: f64 = (0..i).map(|k| l[i * n + k] * x[k]).sum();
+            x[i] = (b[i] - s) / l[i * n + i];
+        }
+        for i in (0..n).rev() {
+            let s: f64 = (i + 1..n).map(|k| l[k * n + i] * x[k]).sum();
+            x[i] = (x[i] - s) / l[i * n + i];
+        }
+    }
+}
+
+/// In-place Cholesky `A = L L^T` of a symmetric positive definite row-major `n x n` matrix;
+/// the lower triangle receives `L` (the upper is left as it was and never read).
+fn cholesky(n: usize, a: &mut [f64]) {
+    for j in 0..n {
+        let d = a[j * n + j] - (0..j).map(|k| a[j * n + k].powi(2)).sum::<f64>();
+        assert!(d > 0.0, "coarsest multigrid matrix not positive definite");
+        let d = d.sqrt();
+        a[j * n + j] = d;
+        for i in j + 1..n {
+            let s: f64 = (0..j).map(|k| a[i * n + k] * a[j * n + k]).sum();
+            a[i * n + j] = (a[i * n + j] - s) / d;
+        }
+    }
+}
+
+/// The connected parts of a level's rows that touch no Dirichlet cell, each as its rows.
+fn closed_parts<const D: usize>(op: &Operator<D>) -> Vec<Vec<usize>> {
+    let mut seen = vec![false; op.len()];
+    let mut parts = vec![];
+    for start in 0..op.len() {
+        if seen[start] {
+            continue;
+        }
+        seen[start] = true;
+        let (mut part, mut stack, mut open) = (vec![], vec![start], false);
+        while let Some(i) = stack.pop() {
+            part.push(i);
+            let s = &op.stencil[i];
+            let unknown = s.plus.iter().chain(&s.minus).filter(|&&j| j != NONE);
+            open |= unknown.clone().count() < s.count as usize;
+            for &j in unknown {
+                if !std::mem::replace(&mut seen[j as usize], true) {
+                    stack.push(j as usize);
+                }
+            }
+        }
+        if !open {
+            parts.push(part);
+        }
+    }
+    parts
+}
+
+/// The V-cycle of `levels[0]` on its `b`, into its `x`.
+fn v_cycle<const D: usize>(levels: &mut [Level<D>], coarsest: &Dense) {
+    let (fine, rest) = levels.split_first_mut().expect("at least one level");
+    let Some(coarse) = rest.first_mut() else {
+        coarsest.solve(&fine.b, &mut fine.x);
+        return;
+    };
+    fine.pre_smooth();
+    fine.op.residual(&fine.b, &fine.x, &mut fine.r);
+    fine.restrict(coarse);
+    v_cycle(rest, coarsest);
+    fine.prolong_add(&rest[0]);
+    fine.post_smooth();
+}
+
+/// The multigrid preconditioner of one system: the level hierarchy, built once per solve.
+pub struct Multigrid<const D: usize> {
+    levels: Vec<Level<D>>,
+    coarsest: Dense,
+    /// The finest level's row of each system row (unknown cells in ascending order).
+    level_row: Vec<u32>,
+    /// The system row of each finest-level row.
+    system_row: Vec<u32>,
+}
+
+impl<const D: usize> Multigrid<D> {
+    /// The hierarchy of the system whose cells are classed by `class` on a grid of `dims`
+    /// (see the module doc).
+    pub fn new(dims: [usize; D], class: &[CellClass]) -> Self {
+        assert_eq!(
+            class.len(),
+            dims.iter().product::<usize>(),
+            "one class per cell"
+        );
+        assert!(
+            dims.iter().all(|&d| d <= 1 << 16),
+            "at most 2^16 cells per axis"
+        );
+        let mut shape = Shape::new(dims);
+        let mut cells = Cells::finest(&shape, class);
+        let mut levels = vec![Level::new(Operator::new(shape, &cells, 1.0))];
+        let coarser = 2f64.powi(D as i32 - 2);
+        loop {
+            let fine = levels.last_mut().expect("the finest level");
+            if fine.op.len() <= COARSEST_ROWS {
+                break;
+            }
+            cells = cells.coarsen(&shape);
+            shape = shape.coarser();
+            fine.link(&cells);
+            let scale = fine.op.scale * coarser;
+            levels.push(Level::new(Operator::new(shape, &cells, scale)));
+        }
+        let coarsest = Dense::new(&levels.last().expect("the coarsest level").op);
+        let fine_rows = levels[0].op.row.iter().copied();
+        let level_row: Vec<u32> = fine_rows.filter(|&r| r != NONE).collect();
+        let mut system_row = vec![0; level_row.len()];
+        for (i, &r) in level_row.iter().enumerate() {
+            system_row[r as usize] = i as u32;
+        }
+        Multigrid {
+            levels,
+            coarsest,
+            level_row,
+            system_row,
+        }
+    }
+}
+
+impl<const D: usize> Precondition for Multigrid<D> {
+    /// `z = B r`, `B` one V-cycle from zero.
+    fn precondition(&mut self, r: &[f64], z: &mut [f64]) {
+        let fine = &mut self.levels[0];
+        (fine.b.par_iter_mut().with_min_len(PAR_GRAIN))
+            .zip(&self.system_row)
+            .for_each(|(b, &i)| *b = r[i as usize]);
+        v_cycle(&mut self.levels, &self.coarsest);
+        let x = &self.levels[0].x;
+        (z.par_iter_mut().with_min_len(PAR_GRAIN))
+            .zip(&self.level_row)
+            .for_each(|(z, &j)| *z = x[j as usize]);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::solvers::pcg::{self, PcgSettings, PcgStats, StencilMatrix};
+    use rand::rngs::StdRng;
+    use rand::{Rng, SeedableRng};
+
+    /// The system of the module doc, built directly (as `Poisson` builds it, and
+    /// independently of [`Operator`]).
+    fn system<const D: usize>(dims: [usize; D], class: &[CellClass]) -> StencilMatrix<D> {
+        let shape = Shape::new(dims);
+        let mut row = vec![NONE; class.len()];
+        let unknown = (0..class.len()).filter(|&c| class[c] == CellClass::Unknown);
+        for (r, c) in unknown.clone().enumerate() {
+            row[c] = r as u32;
+        }
+        let mut a = StencilMatrix::<D>::default();
+        for c in unknown {
+            let cc = coords(&dims, c);
+            let (mut diag, mut plus, mut minus) = (0.0, [NONE; D], [NONE; D]);
+            for k in 0..D {
+                if cc[k] > 0 && class[c - shape.stride[k]] != CellClass::Neumann {
+                    diag += 1.0;
+                    minus[k] = row[c - shape.stride[k]];
+                }
+                if cc[k] + 1 < dims[k] && class[c + shape.stride[k]] != CellClass::Neumann {
+                    diag += 1.0;
+                    plus[k] = row[c + shape.stride[k]];
+                }
+            }
+            a.diag.push(diag);
+            a.plus.push(plus);
+            a.minus.push(minus);
+            a.off_plus
+                .push(plus.map(|p| if p == NONE { 0.0 } else { -1.0 }));
+        }
+        a
+    }
+
+    /// Each cell solid with probability `solid`, else empty with probability `air`, else
+    /// fluid.
+    fn random_classes(cells: usize, solid: f64, air: f64, rng: &mut StdRng) -> Vec<CellClass> {
+        (0..cells)
+            .map(|_| match rng.random::<f64>() {
+                u if u < solid => CellClass::Neumann,
+                u if u < solid + air => CellClass::Dirichlet,
+                _ => CellClass::Unknown,
+            })
+            .collect()
+    }
+
+    fn random_vector(n: usize, rng: &mut StdRng) -> Vec<f64> {
+        (0..n).map(|_| rng.random::<f64>() - 0.5).collect()
+    }
+
+    fn dot(a: &[f64], b: &[f64]) -> f64 {
+        a.iter().zip(b).map(|(p, q)| p * q).sum()
+    }
+
+    fn max_abs(a: &[f64]) -> f64 {
+        a.iter().fold(0.0, |m, v| m.max(v.abs()))
+    }
+
+    /// MGPCG on the system of `class` to `tolerance`; checks the reported and the true
+    /// residual against it and returns `(x, A, stats)`.
+    fn solve<const D: usize>(
+        dims: [usize; D],
+        class: &[CellClass],
+        b: &[f64],
+        tolerance: f64,
+    ) -> (Vec<f64>, StencilMatrix<D>, PcgStats) {
+        let a = system(dims, class);
+        let mut x = vec![0.0; a.len()];
+        let settings = PcgSettings {
+            tolerance,
+            ..Default::default()
+        };
+        let stats = pcg::solve_with(&a, b, &mut x, &settings, || Multigrid::new(dims, class));
+        assert!(stats.converged, "{stats:?}");
+        let mut ax = vec![0.0; a.len()];
+        a.apply(&x, &mut ax);
+        let r: Vec<f64> = b.iter().zip(&ax).map(|(p, q)| p - q).collect();
+        assert!(
+            max_abs(&r) <= 1.01 * tolerance * max_abs(b),
+            "true residual {r:?}"
+        );
+        (x, a, stats)
+    }
+
+    #[test]
+    fn the_finest_level_is_the_system_2d_and_3d() {
+        fn check<const D: usize>(dims: [usize; D], seed: u64) {
+            let mut rng = StdRng::seed_from_u64(seed);
+            let class = random_classes(dims.iter().product(), 0.2, 0.2, &mut rng);
+            let a = system(dims, &class);
+            let mg = Multigrid::new(dims, &class);
+            let fine = &mg.levels[0].op;
+            let x = random_vector(a.len(), &mut rng);
+            let mut ax = vec![0.0; a.len()];
+            a.apply(&x, &mut ax);
+            // The level's residual of b = 0 is -A x, in the level's row order.
+            let xl: Vec<f64> = mg.system_row.iter().map(|&i| x[i as usize]).collect();
+            let mut r = vec![0.0; a.len()];
+            fine.residual(&vec![0.0; a.len()], &xl, &mut r);
+            for (i, &j) in mg.level_row.iter().enumerate() {
+                assert!((r[j as usize] + ax[i]).abs() <= 1e-12, "row {i}");
+            }
+        }
+        check([23, 17], 1);
+        check([9, 8, 7], 2);
+    }
+
+    #[test]
+    fn restriction_is_the_transpose_of_prolongation_2d_and_3d() {
+        fn check<const D: usize>(dims: [usize; D], seed: u64) {
+            let mut rng = StdRng::seed_from_u64(seed);
+            let class = random_classes(dims.iter().product(), 0.25, 0.2, &mut rng);
+            let mut mg = Multigrid::new(dims, &class);
+            assert!(mg.levels.len() >= 3, "{} levels", mg.levels.len());
+            for l in 0..mg.levels.len() - 1 {
+                let (fine, coarse) = mg.levels.split_at_mut(l + 1);
+                let (fine, coarse) = (&mut fine[l], &mut coarse[0]);
+                fine.r = random_vector(fine.r.len(), &mut rng);
+                coarse.x = random_vector(coarse.x.len(), &mut rng);
+                fine.restrict(coarse);
+                fine.x.fill(0.0);
+                fine.prolong_add(coarse);
+                let (rt, pt) = (dot(&coarse.x, &coarse.b), dot(&fine.x, &fine.r));
+                assert!((rt - pt).abs() <= 1e-12 * rt.abs().max(1.0), "{rt} {pt}");
+            }
+        }
+        check([70, 61], 3);
+        check([21, 18, 23], 4);
+    }
+
+    /// `x^T B y = y^T B x` to rounding and `x^T B x > 0` on random masks (with closed
+    /// pockets among the solids), `B` the V-cycle.
+    fn symmetric_positive_definite<const D: usize>(dims: [usize; D], seeds: std::ops::Range<u64>) {
+        for seed in seeds {
+            let mut rng = StdRng::seed_from_u64(seed);
+            let air = [0.0, 0.05, 0.3][seed as usize % 3];
+            let class = random_classes(dims.iter().product(), 0.2, air, &mut rng);
+            let mut mg = Multigrid::new(dims, &class);
+            assert!(mg.levels.len() >= 3, "{} levels", mg.levels.len());
+            let n = mg.level_row.len();
+            let (x, y) = (random_vector(n, &mut rng), random_vector(n, &mut rng));
+            let (mut bx, mut by) = (vec![0.0; n], vec![0.0; n]);
+            mg.precondition(&x, &mut bx);
+            mg.precondition(&y, &mut by);
+            let (ybx, xby) = (dot(&y, &bx), dot(&x, &by));
+            let size = dot(&x, &bx).abs().max(dot(&y, &by).abs());
+            assert!(
+                (ybx - xby).abs() <= 1e-12 * size,
+                "seed {seed}: {ybx} vs {xby}"
+            );
+            assert!(dot(&x, &bx) > 0.0 && dot(&y, &by) > 0.0, "seed {seed}");
+        }
+    }
+
+    #[test]
+    fn the_v_cycle_is_symmetric_positive_definite_2d() {
+        symmetric_positive_definite([64, 48], 0..6);
+    }
+
+    #[test]
+    fn the_v_cycle_is_symmetric_positive_definite_3d() {
+        symmetric_positive_definite([20, 17, 22], 10..16);
+    }
+
+    /// A known solution on random fluid, air and solid cells, solved to the tolerance; the
+    /// error is checked where it is determined: pressure differences between neighbours,
+    /// and values next to a Dirichlet cell (a closed pocket only up to a constant).
+    fn manufactured<const D: usize>(dims: [usize; D], seed: u64) {
+        let mut rng = StdRng::seed_from_u64(seed);
+        let class = random_classes(dims.iter().product(), 0.15, 0.1, &mut rng);
+        let exact = random_vector(
+            class.iter().filter(|&&c| c == CellClass::Unknown).count(),
+            &mut rng,
+        );
+        let a = system(dims, &class);
+        let mut b = vec![0.0; a.len()];
+        a.apply(&exact, &mut b);
+        let (x, a, _) = solve(dims, &class, &b, 1e-10);
+        let e: Vec<f64> = x.iter().zip(&exact).map(|(p, q)| p - q).collect();
+        for r in 0..a.len() {
+            let linked = a.plus[r].iter().filter(|&&p| p != NONE).count();
+            let neighbours = linked + a.minus[r].iter().filter(|&&m| m != NONE).count();
+            if (a.diag[r] as usize) > neighbours {
+                assert!(e[r].abs() < 1e-6, "row {r}: error {}", e[r]);
+            }
+            for &p in a.plus[r].iter().filter(|&&p| p != NONE) {
+                assert!((e[r] - e[p as usize]).abs() < 1e-6, "rows {r}, {p}");
+            }
+        }
+    }
+
+    #[test]
+    fn solves_a_manufactured_solution_with_air_and_solids_2d() {
+        manufactured([72, 56], 5);
+    }
+
+    #[test]
+    fn solves_a_manufactured_solution_with_air_and_solids_3d() {
+        manufactured([24, 20, 22], 6);
+    }
+
+    /// A closed tank full of fluid around a solid block: no Dirichlet cell at all, a singular
+    /// system whose right-hand side has zero mean.
+    fn closed_region<const D: usize>(dims: [usize; D]) {
+        let class: Vec<CellClass> = (0..dims.iter().product())
+            .map(|c| {
+                let cc = coords(&dims, c);
+                match (0..D).all(|a| cc[a] >= dims[a] / 3 && cc[a] < dims[a] / 2) {
+                    true => CellClass::Neumann,
+                    false => CellClass::Unknown,
+                }
+            })
+            .collect();
+        let mut rng = StdRng::seed_from_u64(7);
+        let mut b = random_vector(
+            class.iter().filter(|&&c| c == CellClass::Unknown).count(),
+            &mut rng,
+        );
+        let mean = b.iter().sum::<f64>() / b.len() as f64;
+        b.iter_mut().for_each(|v| *v -= mean);
+        let (_, _, stats) = solve(dims, &class, &b, 1e-9);
+        assert!(stats.iterations <= 30, "{stats:?}");
+    }
+
+    #[test]
+    fn solves_a_closed_region_2d() {
+        closed_region([64, 64]);
+    }
+
+    #[test]
+    fn solves_a_closed_region_3d() {
+        closed_region([24, 24, 24]);
+    }
+
+    /// A one-cell-wide channel winding through solid rows (walls one cell thick, so coarse
+    /// cells straddle neighbouring turns), open to air at its start, with a known solution.
+    fn channel<const D: usize>(dims: [usize; D]) {
+        let class: Vec<CellClass> = (0..dims.iter().product())
+            .map(|c| {
+                let cc = coords(&dims, c);
+                let (x, y) = (cc[0], cc[1]);
+                let deep = (2..D).all(|a| cc[a] == dims[a] / 2);
+                let turn = (y % 4 == 1 && x == dims[0] - 1) || (y % 4 == 3 && x == 0);
+                match (deep && (y % 2 == 0 || turn), x == 0 && y == 0) {
+                    (true, true) => CellClass::Dirichlet,
+                    (true, false) => CellClass::Unknown,
+                    (false, _) => CellClass::Neumann,
+                }
+            })
+            .collect();
+        let a = system(dims, &class);
+        assert!(a.len() > 4 * COARSEST_ROWS);
+        let mut rng = StdRng::seed_from_u64(8);
+        let exact = random_vector(a.len(), &mut rng);
+        let mut b = vec![0.0; a.len()];
+        a.apply(&exact, &mut b);
+        let (x, _, stats) = solve(dims, &class, &b, 1e-12);
+        // Coarse faces closed along the walls keep the turns apart (about 470 iterations
+        // without them).
+        assert!(stats.iterations <= 250, "{stats:?}");
+        let err = x
+            .iter()
+            .zip(&exact)
+            .map(|(p, q)| (p - q).abs())
+            .fold(0.0, f64::max);
+        // The channel's matrix has condition number ~ its length squared.
+        assert!(err < 1e-4, "error {err}");
+    }
+
+    #[test]
+    fn solves_a_one_cell_wide_channel_2d() {
+        channel([64, 64]);
+    }
+
+    #[test]
+    fn solves_a_one_cell_wide_channel_3d() {
+        channel([48, 48, 3]);
+    }
+
+    /// One fluid cell alone: among empty cells its pressure is `b / 2D`; among solid cells
+    /// its row is zero (closed), its right-hand side too, and any finite value solves it.
+    /// Beside a pool, so that the hierarchy has several levels.
+    fn isolated_cell<const D: usize>(dims: [usize; D], around: CellClass) {
+        let centre: [usize; D] = std::array::from_fn(|a| dims[a] / 2);
+        let c0 = Shape::new(dims).index(centre);
+        let class: Vec<CellClass> = (0..dims.iter().product())
+            .map(|c| {
+                let cc = coords(&dims, c);
+                let near = (0..D).all(|a| cc[a].abs_diff(centre[a]) <= 1);
+                match (c == c0, near, cc[D - 1] < dims[D - 1] / 4) {
+                    (true, _, _) => CellClass::Unknown,
+                    (false, true, _) => around,
+                    (false, false, true) => CellClass::Unknown,
+                    _ => CellClass::Dirichlet,
+                }
+            })
+            .collect();
+        let row = (0..c0).filter(|&c| class[c] == CellClass::Unknown).count();
+        let n = row
+            + 1
+            + (c0 + 1..class.len())
+                .filter(|&c| class[c] == CellClass::Unknown)
+                .count();
+        let mut b = vec![1.0; n];
+        let closed = around == CellClass::Neumann;
+        b[row] = if closed { 0.0 } else { 3.0 };
+        assert!(Multigrid::new(dims, &class).levels.len() >= 2);
+        let (x, _, _) = solve(dims, &class, &b, 1e-9);
+        let want = 3.0 / (2 * D) as f64;
+        match closed {
+            true => assert!(x[row].is_finite()),
+            false => assert!((x[row] - want).abs() <= 1e-8, "{} vs {want}", x[row]),
+        }
+    }
+
+    #[test]
+    fn solves_a_single_isolated_fluid_cell_2d_and_3d() {
+        for around in [CellClass::Dirichlet, CellClass::Neumann] {
+            isolated_cell([40, 40], around);
+            isolated_cell([16, 16, 16], around);
+        }
+    }
+
+    /// A dam-like tank: a fluid column `0.4 x 0.8` of the tank's width and height plus a
+    /// shallow pool, air above, a random right-hand side. Returns the iterations with
+    /// multigrid and with MIC(0).
+    fn dam_iterations(n: usize) -> (usize, usize) {
+        let dims = [n; 3];
+        let class: Vec<CellClass> = (0..n * n * n)
+            .map(|c| {
+                let [x, y, _] = coords(&dims, c);
+                match (5 * x < 2 * n && 5 * y < 4 * n) || 10 * y < n {
+                    true => CellClass::Unknown,
+                    false => CellClass::Dirichlet,
+                }
+            })
+            .collect();
+        let a = system(dims, &class);
+        let b = random_vector(a.len(), &mut StdRng::seed_from_u64(9));
+        let (_, _, mg) = solve(dims, &class, &b, 1e-9);
+        let mut x = vec![0.0; a.len()];
+        let mic = pcg::solve(&a, &b, &mut x, &PcgSettings::default());
+        assert!(mic.converged);
+        (mg.iterations, mic.iterations)
+    }
+
+    #[test]
+    fn multigrid_iterations_stay_nearly_constant_in_3d_while_mic0_grows() {
+        let (mg32, mic32) = dam_iterations(32);
+        let (mg64, mic64) = dam_iterations(64);
+        let counts = format!("multigrid {mg32} -> {mg64}, MIC(0) {mic32} -> {mic64}");
+        assert!(mg32 <= 30 && mg64 <= 30, "{counts}");
+        assert!(2 * mg64 <= 3 * mg32, "{counts}");
+        assert!(mic64 > mic32 && mg64 < mic64, "{counts}");
+    }
+}
