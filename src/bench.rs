@@ -44,6 +44,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
                 cells: Some(res),
                 method: args.method,
                 band: *band,
+                pressure: args.pressure,
                 ..Default::default()
             };
             let scene = Scene::load(&args.scene, &overrides)?;
@@ -94,13 +95,14 @@ fn bench_dim<const D: usize>(scene: &Scene, args: &BenchArgs) -> Result<Measured
     )?;
     let (sim, s) = (&runner.sim.state, &runner.summary);
     crate::outln!(
-        "\n{} at {:?} cells ({}), {} particles, {} fluid cells, median PCG iterations {}",
+        "\n{} at {:?} cells ({}), {} particles, {} fluid cells, median PCG iterations {} ({})",
         scene.name(),
         sim.grid.dims,
         scene.method.kind.name(),
         sim.particles.len(),
         sim.markings.fluid_cells(),
-        median(&s.pcg_iterations).unwrap_or(0)
+        median(&s.pcg_iterations).unwrap_or(0),
+        sim.config.pressure_preconditioner.name()
     );
     crate::outln!("  {:<10} {:>12}", "stage", "median ms");
     for st in Stage::ALL {

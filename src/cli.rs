@@ -4,6 +4,7 @@ use crate::methods::ccp::{BandMode, CcpArgs, Solver};
 use crate::methods::MethodKind;
 use crate::record::Moves;
 use crate::sim::solids::ObstacleMode;
+use crate::solvers::pcg::Preconditioner;
 use clap::{Args, Parser, Subcommand};
 use std::path::PathBuf;
 
@@ -121,6 +122,11 @@ pub struct RunArgs {
     /// the other methods naive (wait for free cells) or ignore (move regardless).
     #[arg(long, value_enum)]
     pub obstacle: Option<ObstacleMode>,
+    /// CG's preconditioner in the pressure solve (overrides
+    /// `simulation.pressure_preconditioner`): mic0 (modified incomplete Cholesky) or multigrid
+    /// (a geometric V-cycle).
+    #[arg(long, value_enum, value_name = "PRECONDITIONER")]
+    pub pressure: Option<Preconditioner>,
     /// Where to write the recording [default: recordings/<scene>.rrd].
     #[arg(long, conflicts_with = "no_record")]
     pub out: Option<PathBuf>,
@@ -168,6 +174,11 @@ pub struct BenchArgs {
     /// The fluid method.
     #[arg(long, value_enum)]
     pub method: Option<MethodKind>,
+    /// CG's preconditioner in the pressure solve (overrides
+    /// `simulation.pressure_preconditioner`): mic0 (modified incomplete Cholesky) or multigrid
+    /// (a geometric V-cycle).
+    #[arg(long, value_enum, value_name = "PRECONDITIONER")]
+    pub pressure: Option<Preconditioner>,
     /// Band methods of ccp to compare, comma-separated (none, paths, one-way, full); the
     /// step-time ratio to the first is printed [default: the scene's].
     #[arg(long, value_enum, value_delimiter = ',')]

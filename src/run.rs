@@ -26,6 +26,7 @@ impl RunArgs {
             band: self.ccp.band,
             band_r: self.band_r,
             obstacle: self.obstacle,
+            pressure: self.pressure,
         }
     }
 

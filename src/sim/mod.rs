@@ -17,6 +17,7 @@ pub mod transfer;
 use crate::grid::{Grid, MacField, Vector};
 use crate::metrics;
 use crate::particles::{self, Particles, Region};
+use crate::solvers::pcg::Preconditioner;
 use emit::Emitter;
 use markings::Markings;
 use rand::rngs::StdRng;
@@ -44,6 +45,8 @@ pub struct SimConfig<const D: usize> {
     pub max_speed: f64,
     /// Relative max-norm tolerance of the pressure solve.
     pub pressure_tolerance: f64,
+    /// CG's preconditioner in the pressure solve (and idp's second solve).
+    pub pressure_preconditioner: Preconditioner,
     pub seed: u64,
     pub fluid: Vec<Region<D>>,
     pub solids: Vec<Region<D>>,

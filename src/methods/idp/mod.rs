@@ -24,7 +24,8 @@
 //! 5. **Clamp** `s` to `[-CLAMP, CLAMP]` ([`CLAMP`] = 0.5: at most half a cell of correction
 //!    per step).
 //! 6. **Second solve** `A phi = s` with the projection's matrix and solver
-//!    ([`crate::sim::pressure::Poisson`]: MIC(0)-PCG, the scene's pressure tolerance).
+//!    ([`crate::sim::pressure::Poisson`]: PCG with the scene's pressure preconditioner and
+//!    tolerance).
 //! 7. **Displacement**: on faces between two non-solid cells `D_f = phi_R - phi_L`, on faces
 //!    touching a solid or the walls the push-out value (or 0); each particle moves by `D`
 //!    interpolated at its position, clamped into the domain and never into a solid

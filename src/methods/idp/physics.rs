@@ -51,6 +51,7 @@ impl<const D: usize> FluidMethod<D> for IdpSim<D> {
     ) -> anyhow::Result<()> {
         let settings = PcgSettings {
             tolerance: s.config.pressure_tolerance,
+            preconditioner: s.config.pressure_preconditioner,
             ..Default::default()
         };
         let inputs = Inputs {
@@ -531,5 +532,50 @@ impl ErrorClass {
             (5, "under-dense (0.05 < s < 0.5)", [110, 150, 240, 160]),
             (6, "under-dense, clamped (s >= 0.5)", [30, 60, 200, 200]),
         ]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::methods::MethodKind;
+    use crate::scene::{Overrides, Scene};
+    use crate::simulation::Simulation;
+    use crate::solvers::pcg::Preconditioner;
+
+    /// Particle positions and the second solve after a dam-2d step of idp, the steps before
+    /// it with MIC(0) and that one with `last` (both solves of the step take it).
+    fn idp_step(last: Preconditioner) -> (Vec<Vector<2>>, PcgStats) {
+        let o = Overrides {
+            cells: Some(80),
+            method: Some(MethodKind::Idp),
+            ..Default::default()
+        };
+        let scene = Scene::load("dam-2d", &o).unwrap();
+        let mut sim = Simulation::<2>::new(scene.config(), &scene.method);
+        for _ in 0..8 {
+            sim.step().unwrap();
+        }
+        sim.state.config.pressure_preconditioner = last;
+        let rep = sim.step().unwrap();
+        let idp = rep.method_report::<IdpReport<2>>().expect("an idp step");
+        (sim.state.particles.pos, idp.pcg)
+    }
+
+    #[test]
+    fn the_second_solve_takes_the_scenes_preconditioner() {
+        let (mic, mic_pcg) = idp_step(Preconditioner::Mic0);
+        let (mg, mg_pcg) = idp_step(Preconditioner::Multigrid);
+        assert!(mic_pcg.converged && mg_pcg.converged);
+        assert_ne!(
+            mic_pcg.iterations, mg_pcg.iterations,
+            "two different solves"
+        );
+        let worst = mic
+            .iter()
+            .zip(&mg)
+            .map(|(p, q)| (p - q).amax())
+            .fold(0.0, f64::max);
+        assert!(worst <= 1e-6, "particles {worst} cells apart");
     }
 }
