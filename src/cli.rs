@@ -76,6 +76,12 @@ pub struct ReportArgs {
     /// Output folder
     #[arg(long, default_value = "report")]
     pub out: PathBuf,
+    /// Regenerate the manual's results: the default matrix with every method, written to
+    /// docs/results.md, docs/results/ (PNG plots, report.csv) and README.md's headline table,
+    /// each headed by the date, commit, machine and command. Run from the repository's root;
+    /// if interrupted, the runs done go to --out and the docs are left as they were
+    #[arg(long, conflicts_with_all = ["scenes", "methods", "res", "seeds", "duration", "stability", "no_stability"])]
+    pub docs: bool,
     /// No progress bar and no closing line
     #[arg(long, short)]
     pub quiet: bool,

@@ -1,6 +1,6 @@
 //! One run of the report's matrix, measured: the errors and costs of [`COLUMNS`] and the time
-//! series the plots and the comparison recording show. Each error's formula is in the README
-//! (section "Speed against error").
+//! series the plots and the comparison recording show. Each error's formula is in docs/report.md
+//! (section "The figures").
 
 use super::RunSpec;
 use crate::bench::peak_memory_mib;

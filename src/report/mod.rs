@@ -8,6 +8,7 @@
 //! registered method takes part unless `--methods` says otherwise: a new method appears here
 //! without changes to this code.
 
+pub mod docs;
 pub mod measure;
 mod output;
 pub mod plots;
@@ -198,13 +199,22 @@ pub fn load(spec: &RunSpec) -> Result<Scene> {
 /// `cellflip report`.
 pub fn report(args: &ReportArgs) -> Result<()> {
     let specs = matrix(args)?;
+    let docs = match args.docs {
+        true => Some(docs::DocsTarget::at(Path::new("."))?),
+        false => None,
+    };
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create the output folder '{}'", args.out.display()))?;
     crate::interrupt::install()?;
     let stop = || crate::interrupt::signal().is_some();
     let results = run_all(&specs, args.quiet, &stop);
     let interrupted = stop();
-    write_all(&args.out, &specs, &results)?;
+    match &docs {
+        // An interrupted matrix would leave the manual with half its runs: keep the pages.
+        Some(_) if interrupted => write_all(&args.out, &specs, &results)?,
+        Some(target) => write_docs(target, &specs, &results)?,
+        None => write_all(&args.out, &specs, &results)?,
+    }
     if !args.quiet {
         let failed = results
             .iter()
@@ -214,7 +224,15 @@ pub fn report(args: &ReportArgs) -> Result<()> {
             results.len(),
             specs.len(),
             failed.count(),
-            args.out.display()
+            match &docs {
+                Some(t) if !interrupted => format!(
+                    "{}, {} and {}",
+                    t.page.display(),
+                    t.plots.display(),
+                    t.readme.display()
+                ),
+                _ => args.out.display().to_string(),
+            }
         );
     }
     if interrupted {
@@ -262,13 +280,38 @@ fn write_all(dir: &Path, specs: &[RunSpec], results: &[Measured]) -> Result<()> 
     let csv = dir.join("report.csv");
     std::fs::write(&csv, output::csv(results))
         .with_context(|| format!("cannot write '{}'", csv.display()))?;
-    let figures = plots::all(dir, results)?;
+    let figures = plots::all(dir, results, true)?;
     let md = dir.join("report.md");
-    let command: Vec<String> = std::env::args().skip(1).collect();
-    let text = output::markdown(specs, results, &figures, &command.join(" "));
+    let header = docs::provenance(&command());
+    let text = output::markdown(specs, results, &figures, "cellflip report", &header);
     std::fs::write(&md, text).with_context(|| format!("cannot write '{}'", md.display()))?;
     let rrd = dir.join("report.rrd");
     crate::record::write_comparison(&rrd, &measure::comparison_series(results))
         .with_context(|| format!("cannot write '{}'", rrd.display()))?;
     Ok(())
+}
+
+/// The command line as typed after `cellflip`.
+fn command() -> String {
+    std::env::args().skip(1).collect::<Vec<_>>().join(" ")
+}
+
+/// `--docs`: the manual's results page, its plots and CSV, and the README's headline table,
+/// all under one provenance line.
+fn write_docs(target: &docs::DocsTarget, specs: &[RunSpec], results: &[Measured]) -> Result<()> {
+    let csv = target.plots.join("report.csv");
+    std::fs::write(&csv, output::csv(results))
+        .with_context(|| format!("cannot write '{}'", csv.display()))?;
+    let figures: Vec<String> = plots::all(&target.plots, results, false)?
+        .into_iter()
+        .map(|f| format!("{}/{f}", docs::PLOTS))
+        .collect();
+    let header = docs::provenance(&command());
+    let mut text = output::markdown(specs, results, &figures, "Results", &header);
+    for f in &figures {
+        text += &format!("![{f}]({f})\n\n");
+    }
+    std::fs::write(&target.page, text)
+        .with_context(|| format!("cannot write '{}'", target.page.display()))?;
+    target.write_headline(&docs::headline(results, &header))
 }

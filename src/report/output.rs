@@ -66,7 +66,7 @@ fn number(x: f64) -> String {
 }
 
 /// A figure for a table, with `digits` decimals; a dash when the run has none.
-fn cell(x: f64, digits: usize) -> String {
+pub(super) fn cell(x: f64, digits: usize) -> String {
     if x.is_nan() {
         "-".into()
     } else {
@@ -79,18 +79,17 @@ pub fn markdown(
     specs: &[RunSpec],
     results: &[Measured],
     figures: &[String],
-    command: &str,
+    title: &str,
+    provenance: &str,
 ) -> String {
     let mut s = String::new();
-    let _ = writeln!(s, "# cellflip report\n");
+    let _ = writeln!(s, "# {title}\n\n{provenance}\n");
     let _ = writeln!(
         s,
-        "{} of {} runs, {} threads, {}; `cellflip {}`. Formulas of every figure: README, section \"Speed against error\". Plots: {}.\n",
+        "{} of {} runs, {}. Every column and formula: `docs/report.md` in cellflip's repository. Plots: {}.\n",
         results.len(),
         specs.len(),
-        rayon::current_num_threads(),
         crate::sim::transfer::grid_to_particles_mode(),
-        command,
         figures.iter().map(|f| format!("[{f}]({f})")).collect::<Vec<_>>().join(", ")
     );
     volume_table(&mut s, results);

@@ -43,7 +43,7 @@ fn color(k: MethodKind) -> RGBColor {
 }
 
 /// Writes every plot the results allow into `dir`; returns the file names.
-pub fn all(dir: &Path, results: &[Measured]) -> Result<Vec<String>> {
+pub fn all(dir: &Path, results: &[Measured], svg: bool) -> Result<Vec<String>> {
     let _ = plotters::style::register_font("sans-serif", FontStyle::Normal, FONT);
     let mut charts: Vec<(String, Chart)> = vec![];
     charts.extend(pareto(results));
@@ -51,17 +51,19 @@ pub fn all(dir: &Path, results: &[Measured]) -> Result<Vec<String>> {
     charts.extend(martin_moyce(results)?);
     let mut names = vec![];
     for (stem, chart) in &charts {
-        write(dir, stem, chart)?;
+        write(dir, stem, chart, svg)?;
         names.push(format!("{stem}.png"));
-        names.push(format!("{stem}.svg"));
+        if svg {
+            names.push(format!("{stem}.svg"));
+        }
     }
     Ok(names)
 }
 
-/// Writes `stem.svg` and `stem.png`.
-pub fn write(dir: &Path, stem: &str, chart: &Chart) -> Result<()> {
+/// Writes `stem.png`, and `stem.svg` when asked.
+pub fn write(dir: &Path, stem: &str, chart: &Chart, with_svg: bool) -> Result<()> {
     let svg = dir.join(format!("{stem}.svg"));
-    {
+    if with_svg {
         let root = SVGBackend::new(&svg, SIZE).into_drawing_area();
         draw(&root, chart).map_err(|e| anyhow!("{e}"))?;
         root.present()
