@@ -1,5 +1,5 @@
 #!/bin/sh
-# Remakes the README's recording screenshots (docs/recording-*.png) in the real viewer, headless:
+# Remakes the recording screenshots of the README and docs/recordings.md (docs/img/recording-*.png) in the real viewer, headless:
 # each recording is opened in `rerun --headless` and, once the viewer's start-up notices have
 # faded, a screenshot is asked for through the viewer's gRPC client (it shows the last step).
 # Needs: a release build, `pip install rerun-sdk==0.36.3` (viewer and client, with Pillow) and,
@@ -26,11 +26,11 @@ EOF
     sleep 2
     # A palette of 192 colours keeps each image near 150 KB.
     python3 -c "from PIL import Image; import sys; Image.open(sys.argv[1]).convert('RGB').quantize(192).save(sys.argv[2], optimize=True)" \
-        "$tmp/$name.png" "docs/recording-$name.png"
+        "$tmp/$name.png" "docs/img/recording-$name.png"
 }
 shoot dam-2d dam-2d --steps 60
 shoot band-2d dam-2d --band paths --res 40 --steps 60
 shoot obstacle-2d falling-obstacle-2d --steps 80
 shoot dam-3d dam-3d --steps 40
 rm -r "$tmp"
-ls -l docs/recording-*.png
+ls -l docs/img/recording-*.png

@@ -1,6 +1,6 @@
 //! Validation against measurements nobody here wrote: the Martin & Moyce (1952) dam break
 //! (surge front and residual column height) and water at rest. Used by the tests and by
-//! `cellflip validate`, so the README's figures and the tests come from the same code.
+//! `cellflip validate`, so the docs' figures and the tests come from the same code.
 
 use crate::runner::{Limit, Runner};
 use crate::scene::{Overrides, Scene};

@@ -2,7 +2,7 @@
 //!
 //! [`Recorder`] writes a run: its identity (application `cellflip`, a recording name and
 //! properties), its default layout ([`layout`]), its legend ([`legend`]) and, step by step, what
-//! the [`Canvas`] draws. Entity paths are listed in the README.
+//! the [`Canvas`] draws. Entity paths are listed in docs/recordings.md.
 //!
 //! Methods log their own reports through the drawing vocabulary's [`Log`] trait
 //! ([`crate::draw`]), which the [`Canvas`] implements.

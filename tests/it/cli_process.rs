@@ -105,14 +105,17 @@ fn recordings_log_exactly_the_documented_entities() {
         &[&every_step[..], &["--method", "powerpic"]].concat(),
     ));
     let documented = common::documented_entities();
-    assert!(documented.len() > 30, "the README's table: {documented:?}");
+    assert!(
+        documented.len() > 30,
+        "docs/recordings.md's table: {documented:?}"
+    );
     let undocumented: Vec<&String> = logged
         .iter()
         .filter(|l| !documented.iter().any(|d| common::matches(d, l)))
         .collect();
     assert!(
         undocumented.is_empty(),
-        "logged but not in the README: {undocumented:?}"
+        "logged but not in docs/recordings.md: {undocumented:?}"
     );
     let missing: Vec<&String> = documented
         .iter()
@@ -120,7 +123,7 @@ fn recordings_log_exactly_the_documented_entities() {
         .collect();
     assert!(
         missing.is_empty(),
-        "in the README but never logged: {missing:?}"
+        "in docs/recordings.md but never logged: {missing:?}"
     );
     let mps = std::fs::read_to_string(dir.join("dam-2d-ccp-50x50-ppc4-seed1-step3.mps")).unwrap();
     assert!(

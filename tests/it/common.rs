@@ -250,27 +250,10 @@ pub fn logged_entities(path: &Path) -> BTreeSet<String> {
     out
 }
 
-/// The entity paths the README's recording table documents (`<name>` placeholders kept).
+/// The entity paths docs/recordings.md documents (`<name>` placeholders kept).
 pub fn documented_entities() -> Vec<String> {
-    let readme = include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/README.md"));
-    let table = readme
-        .split("| entity | when | what |")
-        .nth(1)
-        .expect("the README's entity table");
-    table
-        .lines()
-        .skip(2)
-        .take_while(|l| l.starts_with('|'))
-        .flat_map(|l| {
-            let first = l.split('|').nth(1).unwrap_or("");
-            first
-                .split('`')
-                .skip(1)
-                .step_by(2)
-                .map(str::to_string)
-                .collect::<Vec<_>>()
-        })
-        .collect()
+    let page = include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/docs/recordings.md"));
+    crate::docs::first_column(page, "| entity | when | what |")
 }
 
 /// Whether a logged path matches a documented one, where `<...>` stands for one path part.

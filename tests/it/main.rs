@@ -7,6 +7,7 @@ mod common;
 mod band;
 mod cli_process;
 mod correction;
+mod docs;
 mod fuzz;
 mod golden;
 mod idp;

@@ -102,17 +102,28 @@ fn the_csv_has_every_documented_column_and_a_row_per_run() {
     let dir = tiny_report();
     let text = std::fs::read_to_string(dir.join("report.csv")).unwrap();
     let header = fields(text.lines().next().unwrap());
-    // The README documents exactly the columns the code declares.
-    let readme = include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/README.md"));
+    // The manual documents exactly the columns the code declares, and every method figure.
+    let page = include_str!(concat!(env!("CARGO_MANIFEST_DIR"), "/docs/report.md"));
     for (c, _) in COLUMNS {
         assert!(header.contains(&c.to_string()), "{c} missing from the CSV");
         assert!(
-            readme.contains(&format!("| `{c}` |")),
-            "{c} not documented in the README"
+            page.contains(&format!("| `{c}` |")),
+            "{c} not documented in docs/report.md"
         );
     }
+    let documented = crate::docs::first_column(page, "| column | what |");
+    assert_eq!(
+        documented.len(),
+        COLUMNS.len(),
+        "docs/report.md's columns: {documented:?}"
+    );
     for c in figure_columns() {
         assert!(header.contains(&c), "{c} missing");
+        let figure = c.trim_end_matches("_median");
+        assert!(
+            page.contains(&format!("`{figure}`")),
+            "the figure {figure} is not documented in docs/report.md"
+        );
     }
     // 4 scenes x 2 resolutions x every method.
     assert_eq!(rows(&dir).len(), 4 * 2 * MethodKind::ALL.len());

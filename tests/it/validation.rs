@@ -15,7 +15,7 @@ fn hydrostatic_2d_stays_at_rest_for_500_steps() {
 }
 
 /// Shift of the simulated dimensionless time T, as Lethe's dam-break example does (0.175):
-/// the experiment's t = 0 is uncertain. Without it the mean error is about 11% (see README).
+/// the experiment's t = 0 is uncertain. Without it the mean error is about 11% (see docs/validation.md).
 const MM_SHIFT_T: f64 = 0.175;
 
 #[test]

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# build.sh — a headless MantaFlow (thunil/mantaflow) with OpenMP, for bench.py and volume.py.
+# build.sh — a headless MantaFlow (thunil/mantaflow) with OpenMP, for bench.py and manta_dam.py.
 #
 # The caller provides the source tree (tested: master 4944451, 2022-07-21; e.g.
 # `git archive master | tar -x -C SRC` from a clone of thunil/mantaflow). Needs cmake, g++ and
@@ -8,7 +8,7 @@
 #
 # usage (from the project root): MANTA_SRC=SRC tools/mantaflow/build.sh   (or: build.sh SRC)
 #   builds in $MANTA_BUILD (default $OUT/manta-build, $OUT default: a new temp dir)
-# Prints last: "MANTA_BIN=<path of the built manta binary>" (use it for bench.py / volume.py).
+# Prints last: "MANTA_BIN=<path of the built manta binary>" (use it for bench.py and manta_dam.py).
 set -eu
 SRC=${1:-${MANTA_SRC:?set MANTA_SRC (or pass it as the argument) to a thunil/mantaflow source tree}}
 [ -f "$SRC/CMakeLists.txt" ] || { echo "build: $SRC has no CMakeLists.txt"; exit 1; }
