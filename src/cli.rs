@@ -23,6 +23,9 @@ pub enum Command {
     List,
     /// Run a scene and write a Rerun recording.
     Run(RunArgs),
+    /// Run several methods on one scene into one recording: their worlds side by side, drawn
+    /// at the same simulated times, with their volumes and kinetic energies in one plot.
+    Compare(CompareArgs),
     /// Measure per-stage step times, peak memory and (ccp) the solvers on a scene.
     Bench(BenchArgs),
     /// Compare with experiment: Martin & Moyce's dam break and water at rest.
@@ -33,6 +36,83 @@ pub enum Command {
     /// Time the correction's solvers on exported problems (`run --export-lp`), the same files
     /// a peer solver (HiGHS, LEMON) reads, and check their optimum.
     Solve(SolveArgs),
+}
+
+#[derive(Args, Debug, Clone)]
+pub struct CompareArgs {
+    /// A built-in scene (see `cellflip list`) or a scene file.
+    pub scene: String,
+    /// The runs, comma-separated: a method, or a method and its obstacle mode
+    /// (`flip:naive,flip:ignore,idp:naive,ccp`) [default: every method].
+    #[arg(long, value_delimiter = ',', value_parser = parse_compared)]
+    pub methods: Vec<(MethodKind, Option<ObstacleMode>)>,
+    /// Simulated seconds between the frames drawn (particles, cells, labels); every run is
+    /// drawn at the first of its steps that reaches each frame's time.
+    #[arg(long, value_name = "SECS", default_value_t = 0.04)]
+    pub frame_dt: f64,
+    /// Simulated seconds [default: the scene's duration].
+    #[arg(long)]
+    pub duration: Option<f64>,
+    /// Cells along the longest axis [default: the scene's].
+    #[arg(long)]
+    pub res: Option<usize>,
+    /// Particles per cell, k^dim [default: the scene's].
+    #[arg(long)]
+    pub ppc: Option<usize>,
+    /// Random seed, the same for every run [default: the scene's].
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Where the recording goes [default: recordings/<scene>-compare.rrd].
+    #[command(flatten)]
+    pub sink: SinkArgs,
+    /// No progress bar and no summaries.
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
+/// `method[:obstacle]`, as `--methods` takes it.
+fn parse_compared(s: &str) -> Result<(MethodKind, Option<ObstacleMode>), String> {
+    use clap::ValueEnum;
+    let (m, o) = match s.split_once(':') {
+        Some((m, o)) => (m, Some(o)),
+        None => (s, None),
+    };
+    let method = MethodKind::from_str(m, false).map_err(|_| {
+        let names: Vec<&str> = MethodKind::ALL.iter().map(|k| k.name()).collect();
+        format!("unknown method '{m}' (methods: {})", names.join(", "))
+    })?;
+    let obstacle = o
+        .map(|o| {
+            ObstacleMode::from_str(o, false)
+                .map_err(|_| format!("unknown obstacle mode '{o}' (couple, naive or ignore)"))
+        })
+        .transpose()?;
+    Ok((method, obstacle))
+}
+
+/// Where a recording goes, as Rerun's own examples take it (`rerun::clap::RerunArgs`), and by
+/// default a file under `recordings/`. At most one.
+#[derive(Args, Debug, Clone, Default)]
+#[group(multiple = false)]
+pub struct SinkArgs {
+    /// Write the recording to this .rrd file [default: recordings/<scene>.rrd].
+    #[arg(long, visible_alias = "out", value_name = "PATH")]
+    pub save: Option<PathBuf>,
+    /// Start a Rerun viewer (`rerun` on the PATH: pip install rerun-sdk==0.36.3) and stream
+    /// the run to it as it goes; no file is written.
+    #[arg(long)]
+    pub spawn: bool,
+    /// Stream the run as it goes to a viewer already running [default URL:
+    /// rerun+http://127.0.0.1:9876/proxy].
+    #[arg(long, value_name = "URL", num_args = 0..=1)]
+    pub connect: Option<Option<String>>,
+    /// Write the recording to standard output, for `| rerun -`; the summary goes to
+    /// standard error.
+    #[arg(long)]
+    pub stdout: bool,
+    /// Do not record.
+    #[arg(long)]
+    pub no_record: bool,
 }
 
 #[derive(Args, Debug, Clone)]
@@ -133,12 +213,9 @@ pub struct RunArgs {
     /// (a geometric V-cycle).
     #[arg(long, value_enum, value_name = "PRECONDITIONER")]
     pub pressure: Option<Preconditioner>,
-    /// Where to write the recording [default: recordings/<scene>.rrd].
-    #[arg(long, conflicts_with = "no_record")]
-    pub out: Option<PathBuf>,
-    /// Do not write a recording.
-    #[arg(long)]
-    pub no_record: bool,
+    /// Where the recording goes.
+    #[command(flatten)]
+    pub sink: SinkArgs,
     /// Record particles, markings and correction moves every N steps (metrics: every step)
     /// [default: 2D every step; 3D every 1/25 s of simulated time, which keeps a 50^3 run
     /// near 1 MB per recorded step and a whole built-in run under about 200 MB].

@@ -14,6 +14,7 @@ pub const PAR_GRAIN_PARTICLES: usize = 1024;
 
 pub mod bench;
 pub mod cli;
+pub mod compare;
 pub mod draw;
 pub mod grid;
 pub mod interrupt;

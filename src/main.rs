@@ -2,7 +2,7 @@
 
 use anyhow::Result;
 use cellflip::cli::{Cli, Command, ValidateArgs};
-use cellflip::{bench, interrupt, report, run, scene, solve, validation};
+use cellflip::{bench, compare, interrupt, report, run, scene, solve, validation};
 use clap::Parser;
 use std::io::Write;
 
@@ -48,6 +48,7 @@ fn dispatch(cli: Cli) -> Result<()> {
             Ok(())
         }
         Command::Run(args) => run::run(&args),
+        Command::Compare(args) => compare::compare(&args),
         Command::Bench(args) => bench::bench(&args),
         Command::Validate(args) => validate(&args),
         Command::Report(args) => report::report(&args),

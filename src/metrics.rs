@@ -25,6 +25,13 @@ pub fn volume_cells(markings: &Markings, mu: u32) -> f64 {
     v
 }
 
+/// Kinetic energy per unit mass of the particles held, `1/2 mean |v|^2`, in m^2/s^2 (`h`: the
+/// cell size in metres; velocities are in cells per second).
+pub fn kinetic_energy<const D: usize>(vel: &[Vector<D>], h: f64) -> f64 {
+    let sum: f64 = vel.iter().map(|v| v.norm_squared()).sum();
+    0.5 * sum * h * h / vel.len().max(1) as f64
+}
+
 /// The median of some values (the upper one of an even count); `None` when empty.
 pub fn median<T: Copy + PartialOrd>(values: &[T]) -> Option<T> {
     let mut v = values.to_vec();

@@ -7,9 +7,20 @@ use std::io::Write;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 static FAILED: AtomicBool = AtomicBool::new(false);
+static TO_STDERR: AtomicBool = AtomicBool::new(false);
+
+/// From now on, what [`line`] writes goes to standard error: standard output carries the
+/// recording (`--stdout`).
+pub fn to_stderr() {
+    TO_STDERR.store(true, Ordering::Relaxed);
+}
 
 /// Writes one line to standard output (see the module doc).
 pub fn line(args: std::fmt::Arguments) {
+    if TO_STDERR.load(Ordering::Relaxed) {
+        let _ = writeln!(std::io::stderr(), "{args}");
+        return;
+    }
     if FAILED.load(Ordering::Relaxed) {
         return;
     }

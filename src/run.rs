@@ -4,7 +4,8 @@
 use crate::cli::RunArgs;
 use crate::interrupt::{self, Watchdog};
 use crate::methods::MethodOption;
-use crate::record::{Drawing, Recorder};
+use crate::cli::SinkArgs;
+use crate::record::{Drawing, Recorder, Sink};
 use crate::runner::{Limit, Runner};
 use crate::scene::{Overrides, Scene};
 use crate::simulation::Simulation;
@@ -55,20 +56,11 @@ pub fn run(args: &RunArgs) -> Result<()> {
     };
     check_export_step(args.ccp.export_lp, limit)?;
     parse_slice(args.slice.as_deref(), scene.dim())?;
-    let out = if args.no_record {
-        None
-    } else if let Some(p) = &args.out {
-        Some(p.clone())
-    } else {
-        let dir = PathBuf::from("recordings");
-        std::fs::create_dir_all(&dir)
-            .with_context(|| format!("cannot create directory '{}'", dir.display()))?;
-        Some(dir.join(format!("{}.rrd", scene.name())))
-    };
+    let sink = args.sink.choice(scene.name())?;
     interrupt::install()?;
     match scene.dim() {
-        2 => run_dim::<2>(&scene, limit, out.as_deref(), args),
-        3 => run_dim::<3>(&scene, limit, out.as_deref(), args),
+        2 => run_dim::<2>(&scene, limit, sink.as_ref(), args),
+        3 => run_dim::<3>(&scene, limit, sink.as_ref(), args),
         d => unreachable!("scene checks the dimension, got {d}"),
     }
 }
@@ -76,18 +68,22 @@ pub fn run(args: &RunArgs) -> Result<()> {
 fn run_dim<const D: usize>(
     scene: &Scene,
     limit: Limit,
-    out: Option<&Path>,
+    sink: Option<&Sink>,
     args: &RunArgs,
 ) -> Result<()> {
+    let out = match sink {
+        Some(Sink::File(p)) => Some(p.as_path()),
+        _ => None,
+    };
     let drawing = Drawing {
         moves: args.moves,
         slice: parse_slice(args.slice.as_deref(), D)?,
     };
-    let recorder = out
-        .map(|p| Recorder::create(p, scene, args.ccp.cross_check, drawing))
+    let recorder = sink
+        .map(|s| Recorder::create(s, scene, args.ccp.cross_check, drawing))
         .transpose()?;
     match simulate::<D>(scene, limit, recorder.as_ref(), out, args) {
-        Ok((runner, result)) => finish(scene, runner, result, recorder, out, args),
+        Ok((runner, result)) => finish(scene, runner, result, recorder, sink, args),
         Err(e) => {
             if let Some(r) = recorder {
                 r.abandon();
@@ -160,7 +156,7 @@ fn finish<const D: usize>(
     runner: Runner<D>,
     result: Result<()>,
     recorder: Option<Recorder>,
-    out: Option<&Path>,
+    sink: Option<&Sink>,
     args: &RunArgs,
 ) -> Result<()> {
     if let Some(r) = recorder {
@@ -171,9 +167,7 @@ fn finish<const D: usize>(
             (Ok(()), None) => {}
         }
         match &result {
-            Ok(()) => r.finish().with_context(|| {
-                format!("cannot finish the recording '{}'", out.unwrap().display())
-            })?,
+            Ok(()) => r.finish().context("cannot finish the recording")?,
             Err(_) => r.abandon(),
         }
     }
@@ -189,17 +183,48 @@ fn finish<const D: usize>(
         }
         title += ")";
         runner.summary.print(&title);
-        if let Some(p) = out.filter(|p| p.exists()) {
+        let cadence = Cadence::of(args.record_every, D).describe();
+        if let Some(s @ (Sink::Spawn | Sink::Connect(_) | Sink::Stdout)) = sink {
+            crate::outln!("recording: streamed to {}, particles and cells {cadence}", s.describe());
+        }
+        if let Some(Sink::File(p)) = sink.filter(|s| matches!(s, Sink::File(p) if p.exists())) {
             let mb = std::fs::metadata(p).map_or(0.0, |m| m.len() as f64 / 1e6);
             crate::outln!(
                 "recording: {}, {mb:.1} MB, particles and cells {}  (open with: rerun {})",
                 p.display(),
-                Cadence::of(args.record_every, D).describe(),
+                cadence,
                 p.display()
             );
         }
     }
     result.and_then(|()| check_export_written(args.ccp.export_lp, runner.sim.state.steps))
+}
+
+impl SinkArgs {
+    /// Where the recording goes: `None` without one; by default a file
+    /// `recordings/<name>.rrd` (the folder is made here, so that it fails before the run).
+    pub fn choice(&self, name: &str) -> Result<Option<Sink>> {
+        if self.stdout {
+            crate::out::to_stderr();
+        }
+        Ok(match self {
+            s if s.no_record => None,
+            s if s.spawn => Some(Sink::Spawn),
+            s if s.stdout => Some(Sink::Stdout),
+            SinkArgs {
+                connect: Some(url), ..
+            } => Some(Sink::Connect(url.clone())),
+            SinkArgs {
+                save: Some(p), ..
+            } => Some(Sink::File(p.clone())),
+            _ => {
+                let dir = PathBuf::from("recordings");
+                std::fs::create_dir_all(&dir)
+                    .with_context(|| format!("cannot create directory '{}'", dir.display()))?;
+                Some(Sink::File(dir.join(format!("{name}.rrd"))))
+            }
+        })
+    }
 }
 
 /// When a step's particles, cells and moves are recorded (its metrics always are).

@@ -10,7 +10,7 @@
 use crate::draw::legend::MOVE_COLOR;
 use crate::draw::{Layer, Log, Style};
 use crate::grid::{Grid, Vector};
-use rerun::RecordingStream;
+use super::Stream;
 
 /// A plane of cells drawn as an image: cell axis `u` to the right, `v` up, `cols` x `rows`
 /// cells; in 3D it cuts the layer of cells `layer` across `axis`.
@@ -78,7 +78,7 @@ pub(super) struct PointLook {
 
 /// Draws on the recording at one step, in 2D or 3D; keeps the first error.
 pub struct Canvas<'a, const D: usize> {
-    pub(super) rec: &'a RecordingStream,
+    pub(super) rec: &'a Stream,
     pub(super) dims: [usize; D],
     pub(super) step: u64,
     /// Draw the correction's moves as cell hops (`--moves hops`).

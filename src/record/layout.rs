@@ -161,6 +161,8 @@ pub enum Pane {
     Row(Vec<(f32, Pane)>),
     Column(Vec<(f32, Pane)>),
     Tabs(Vec<Pane>),
+    /// Equal cells, as square as the viewer can make them.
+    Grid(Vec<Pane>),
     View(View),
 }
 
@@ -248,23 +250,8 @@ fn world_column(f: &RunFacts<'_>) -> Pane {
     let layer_views = f.method.layer_views.iter().filter(|l| f.has(l.needs));
     let (in_world, apart): (Vec<&LayerView>, Vec<&LayerView>) =
         layer_views.partition(|l| l.origin == "world");
-    let cell_layers = in_world.iter().flat_map(|l| l.layers.iter());
-    let (kind, plane) = match three_d {
-        true => (Kind::Spatial3D, Plane::slice(&f.dims, f.slice_axis, 0)),
-        false => (Kind::Spatial2D, Plane::world_2d(&f.dims)),
-    };
-    let bounds = Some([0.0, plane.cols as f32, 0.0, plane.rows as f32]);
-    let mut world = View::new(kind, "world", "world", vec!["+ world/**".into()]);
-    if three_d {
-        world.hidden = ["world/grid/markings", "world/corrector/moved"]
-            .map(String::from)
-            .into();
-        world.hidden.extend(cell_layers.map(|e| e.to_string()));
-        world.eye = Some(eye(&f.dims));
-    } else {
-        world.contents.extend(cell_layers.map(|e| format!("- {e}")));
-        world.bounds = bounds;
-    }
+    let bounds = world_bounds(f);
+    let world = world_view(f, "world", "");
     // Where the layer views draw: the world plane in 2D, the slice in 3D.
     let (origin, on_plane): (&str, fn(&str) -> String) = match three_d {
         true => ("slice", |e| e.replacen("world/", "slice/", 1)),
@@ -303,6 +290,101 @@ fn world_column(f: &RunFacts<'_>) -> Pane {
     }
 }
 
+/// One run of a comparison: its label (a path part), its title and what it has.
+pub struct Compared<'a> {
+    pub label: String,
+    pub title: String,
+    pub facts: RunFacts<'a>,
+}
+
+/// The layout of `cellflip compare`: every run's world in a grid, each under its label and
+/// with the same camera; beside them the volume, the kinetic energy and (with obstacles) each
+/// obstacle's height, a line per run; the legend and every run's log in tabs.
+pub fn compare_layout(runs: &[Compared<'_>], obstacles: &[String]) -> Pane {
+    let worlds = runs
+        .iter()
+        .map(|r| Pane::View(world_view(&r.facts, &r.title, &format!("{}/", r.label))))
+        .collect();
+    let lines = |title: &str, series: &dyn Fn(&str) -> Vec<String>| {
+        let contents = runs
+            .iter()
+            .flat_map(|r| series(&r.label))
+            .map(|p| format!("+ {p}"))
+            .collect();
+        let mut v = View::new(Kind::TimeSeries, title, "/", contents);
+        v.legend = true;
+        Pane::View(v)
+    };
+    let mut right = vec![
+        (
+            1.0,
+            lines("volume (% of V*)", &|l| vec![format!("{l}/metrics/volume_percent")]),
+        ),
+        (
+            1.0,
+            lines("kinetic energy per unit mass (m^2/s^2)", &|l| {
+                vec![format!("{l}/metrics/kinetic_energy")]
+            }),
+        ),
+    ];
+    if !obstacles.is_empty() {
+        let height = |l: &str| {
+            let names = obstacles.iter();
+            names.map(|o| format!("{l}/metrics/obstacle/{o}/height")).collect()
+        };
+        right.push((1.0, lines("obstacles: lowest point (m)", &height)));
+    }
+    let logs = runs.iter().map(|r| format!("+ {}/log", r.label)).collect();
+    right.push((
+        1.0,
+        Pane::Tabs(vec![
+            Pane::View(View::new(Kind::TextLog, "log", "/", logs)),
+            Pane::View(View::new(
+                Kind::TextDocument,
+                "legend",
+                "legend",
+                vec!["+ legend".into()],
+            )),
+        ]),
+    ));
+    Pane::Row(vec![(2.6, Pane::Grid(worlds)), (1.0, Pane::Column(right))])
+}
+
+/// What the 2D world (or the 3D slice) spans, for a 2D view's bounds.
+fn world_bounds(f: &RunFacts<'_>) -> Option<[f32; 4]> {
+    let plane = match f.dims.len() {
+        3 => Plane::slice(&f.dims, f.slice_axis, 0),
+        _ => Plane::world_2d(&f.dims),
+    };
+    Some([0.0, plane.cols as f32, 0.0, plane.rows as f32])
+}
+
+/// The world view of a run whose paths start with `prefix` (empty, or `<label>/`): in 3D the
+/// markings, the moved-particle highlight and the method's cell layers hidden until switched
+/// on, in 2D the cell layers left to their own views.
+fn world_view(f: &RunFacts<'_>, name: &str, prefix: &str) -> View {
+    let layer_views = f.method.layer_views.iter().filter(|l| f.has(l.needs));
+    let in_world = layer_views.filter(|l| l.origin == "world");
+    let cell_layers = in_world.flat_map(|l| l.layers.iter().map(|e| format!("{prefix}{e}")));
+    let kind = match f.dims.len() {
+        3 => Kind::Spatial3D,
+        _ => Kind::Spatial2D,
+    };
+    let origin = format!("{prefix}world");
+    let mut world = View::new(kind, name, &origin, vec![format!("+ {origin}/**")]);
+    if kind == Kind::Spatial3D {
+        world.hidden = ["world/grid/markings", "world/corrector/moved"]
+            .map(|e| format!("{prefix}{e}"))
+            .into();
+        world.hidden.extend(cell_layers);
+        world.eye = Some(eye(&f.dims));
+    } else {
+        world.contents.extend(cell_layers.map(|e| format!("- {e}")));
+        world.bounds = world_bounds(f);
+    }
+    world
+}
+
 /// A 3D eye that frames the tank: in front of it (+z), a little above and to the right, far
 /// enough to see it whole, looking at its centre.
 fn eye(dims: &[usize]) -> ([f32; 3], [f32; 3]) {
@@ -316,8 +398,9 @@ fn eye(dims: &[usize]) -> ([f32; 3], [f32; 3]) {
     (position, centre)
 }
 
-/// Writes `root` as the recording's blueprint, made active and default.
-pub fn send(rec: &RecordingStream, root: &Pane) -> RecordingStreamResult<()> {
+/// Writes `root` as the recording's blueprint, made active and default, its time panel on
+/// `timeline`.
+pub fn send(rec: &RecordingStream, root: &Pane, timeline: &str) -> RecordingStreamResult<()> {
     let (bp_rec, storage) = RecordingStreamBuilder::new("cellflip")
         .recording_id(RecordingId::random())
         .blueprint()
@@ -334,7 +417,7 @@ pub fn send(rec: &RecordingStream, root: &Pane) -> RecordingStreamResult<()> {
     bp_rec.log("selection_panel", &collapsed)?;
     let time = bp::TimePanelBlueprint::new()
         .with_state(bpc::PanelState::Collapsed)
-        .with_timeline("step");
+        .with_timeline(timeline);
     bp_rec.log("time_panel", &time)?;
     let msgs = storage.take();
     let Some(LogMsg::SetStoreInfo(info)) = msgs.first() else {
@@ -373,6 +456,10 @@ fn write_pane(rec: &RecordingStream, pane: &Pane) -> RecordingStreamResult<Uuid>
         ),
         Pane::Tabs(p) => (
             bpc::ContainerKind::Tabs,
+            p.iter().map(|p| (1.0, p)).collect(),
+        ),
+        Pane::Grid(p) => (
+            bpc::ContainerKind::Grid,
             p.iter().map(|p| (1.0, p)).collect(),
         ),
     };

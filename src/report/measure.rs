@@ -161,7 +161,7 @@ fn observe<const D: usize>(
 ) {
     let s = &sim.state;
     m.volume.push((s.time_secs, rep.volume_percent));
-    m.ke.push((s.time_secs, kinetic_energy(&s.particles.vel, h)));
+    m.ke.push((s.time_secs, crate::metrics::kinetic_energy(&s.particles.vel, h)));
     let most = s.markings.count.iter().max().copied().unwrap_or(0) as f64;
     g.compression = g.compression.max(most / mu);
     g.held += rep.blocked.first().copied().unwrap_or(false) as u64;
@@ -176,12 +176,6 @@ fn observe<const D: usize>(
 /// The simulation as a 2D one, when it is.
 fn as_2d<const D: usize>(sim: &Simulation<D>) -> Option<&Simulation<2>> {
     (sim as &dyn std::any::Any).downcast_ref::<Simulation<2>>()
-}
-
-/// Kinetic energy per unit mass, `1/2 mean |v|^2`, m^2/s^2.
-fn kinetic_energy<const D: usize>(vel: &[crate::grid::Vector<D>], h: f64) -> f64 {
-    let sum: f64 = vel.iter().map(|v| v.norm_squared()).sum();
-    0.5 * sum * h * h / vel.len().max(1) as f64
 }
 
 /// The lowest the first obstacle can get, cells: the floor, or for a lid as wide as the tank

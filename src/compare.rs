@@ -1,0 +1,243 @@
+//! `cellflip compare`: several methods on one scene, in one process, into one recording.
+//!
+//! Every run loads the same scene with the same seed and its own method (and obstacle mode).
+//! The runs advance frame by frame: to each frame's simulated time (every `--frame-dt`
+//! seconds) each run takes its own steps until it reaches it, and the step that reaches it is
+//! drawn. Stepping in frames changes nothing in a run (the step does not depend on where the
+//! runner stops), so each run's series equal those of `cellflip run` with the same scene,
+//! method and seed. A run that fails stops alone: its world says why and when, the others go
+//! on; a signal ends them all after the current step and finishes the recording.
+
+use crate::cli::CompareArgs;
+use crate::interrupt::{self, Watchdog};
+use crate::methods::MethodKind;
+use crate::record::{ComparedRun, Comparison};
+use crate::runner::{Limit, Runner};
+use crate::scene::{Overrides, Scene};
+use crate::sim::solids::ObstacleMode;
+use crate::simulation::Simulation;
+use anyhow::{bail, Result};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use std::cell::RefCell;
+use std::time::{Duration, Instant};
+
+/// One run of the comparison: what it runs and how the recording names it.
+struct Entry {
+    scene: Scene,
+    label: String,
+    title: String,
+}
+
+/// `cellflip compare`.
+pub fn compare(args: &CompareArgs) -> Result<()> {
+    if !(args.frame_dt.is_finite() && args.frame_dt > 0.0) {
+        bail!("--frame-dt {}: must be a positive number of seconds", args.frame_dt);
+    }
+    let entries = entries(args)?;
+    let sink = args.sink.choice(&format!("{}-compare", entries[0].scene.name()))?;
+    interrupt::install()?;
+    match entries[0].scene.dim() {
+        2 => compare_dim::<2>(&entries, sink.as_ref(), args),
+        3 => compare_dim::<3>(&entries, sink.as_ref(), args),
+        d => unreachable!("scene checks the dimension, got {d}"),
+    }
+}
+
+/// The runs `--methods` asks for, each scene loaded and checked before anything runs.
+fn entries(args: &CompareArgs) -> Result<Vec<Entry>> {
+    let specs: Vec<(MethodKind, Option<ObstacleMode>)> = match args.methods.is_empty() {
+        true => MethodKind::ALL.iter().map(|&k| (k, None)).collect(),
+        false => args.methods.clone(),
+    };
+    let mut out: Vec<Entry> = vec![];
+    for (method, obstacle) in specs {
+        let o = Overrides {
+            method: Some(method),
+            obstacle,
+            duration: args.duration,
+            cells: args.res,
+            ppc: args.ppc,
+            seed: args.seed,
+            ..Default::default()
+        };
+        let scene = Scene::load(&args.scene, &o)?;
+        scene.ensure_fits_in_memory()?;
+        let (label, title) = match obstacle {
+            Some(m) => (
+                format!("{}-{}", method.name(), m.name()),
+                format!("{} ({})", method.name(), m.name()),
+            ),
+            None => (method.name().to_string(), method.name().to_string()),
+        };
+        if out.iter().any(|e| e.label == label) {
+            bail!("--methods: '{title}' is given twice");
+        }
+        out.push(Entry {
+            scene,
+            label,
+            title,
+        });
+    }
+    Ok(out)
+}
+
+/// How a run stands.
+enum Status {
+    Running,
+    Failed { at: f64, why: String },
+}
+
+fn compare_dim<const D: usize>(
+    entries: &[Entry],
+    sink: Option<&crate::record::Sink>,
+    args: &CompareArgs,
+) -> Result<()> {
+    let runs: Vec<ComparedRun<'_>> = entries
+        .iter()
+        .map(|e| ComparedRun {
+            label: e.label.clone(),
+            title: e.title.clone(),
+            scene: &e.scene,
+            color: e.scene.method.kind.rgb(),
+        })
+        .collect();
+    let labels: Vec<&str> = entries.iter().map(|e| e.title.as_str()).collect();
+    let name = format!("{} compare {}", entries[0].scene.name(), labels.join(" "));
+    let recording = sink
+        .map(|s| Comparison::create(s, &name, &runs))
+        .transpose()?;
+    let mut runners = vec![];
+    for (i, e) in entries.iter().enumerate() {
+        let sim = Simulation::<D>::new(e.scene.config::<D>(), &e.scene.method);
+        if let Some(r) = &recording {
+            r.log_setup(i, &sim);
+            r.log_step(i, &sim, None, true)?;
+        }
+        runners.push((Runner::new(sim), Status::Running));
+    }
+    let duration = entries[0].scene.duration_secs();
+    let watchdog = Watchdog::start(recording.as_ref().map(|r| Box::new(r.finisher()) as _));
+    let stepped = step_frames(&mut runners, &labels, recording.as_ref(), duration, args);
+    watchdog.done();
+    match (&stepped, recording) {
+        (Ok(()), Some(r)) => r.finish()?,
+        (Err(_), Some(r)) => r.abandon(),
+        (_, None) => {}
+    }
+    stepped?;
+    summarise(entries, &runners, args.quiet)
+}
+
+/// Steps every running run frame by frame to `duration` (or a signal), drawing each frame.
+/// A run's own failure stops it alone; a recording that cannot be written stops them all.
+fn step_frames<const D: usize>(
+    runners: &mut [(Runner<D>, Status)],
+    titles: &[&str],
+    recording: Option<&Comparison>,
+    duration: f64,
+    args: &CompareArgs,
+) -> Result<()> {
+    let bar = progress_bar(duration);
+    let t0 = Instant::now();
+    let interrupted = || interrupt::signal().is_some();
+    let mut frame = 1u64;
+    loop {
+        let t_frame = (frame as f64 * args.frame_dt).min(duration);
+        for (i, (runner, status)) in runners.iter_mut().enumerate() {
+            if !matches!(status, Status::Running) {
+                continue;
+            }
+            let write_error = RefCell::new(None);
+            let stepped = runner.run(Limit::SimSeconds(t_frame), interrupted, |sim, rep| {
+                let Some(r) = recording else { return Ok(()) };
+                let frame = sim.state.time_secs >= t_frame;
+                r.log_step(i, sim, Some(rep), frame).inspect_err(|e| {
+                    *write_error.borrow_mut() = Some(format!("{e:#}"));
+                })
+            });
+            if let Some(e) = write_error.into_inner() {
+                bail!("{e}");
+            }
+            if let Err(e) = stepped {
+                let sim = &runner.sim;
+                let why = format!("{e:#}");
+                if let Some(r) = recording {
+                    r.failed(i, sim, &why);
+                }
+                *status = Status::Failed {
+                    at: sim.state.time_secs,
+                    why,
+                };
+            }
+        }
+        let visible = !args.quiet && t0.elapsed() > Duration::from_secs(1);
+        show_progress(&bar, runners, titles, visible);
+        let running = runners.iter().any(|(_, s)| matches!(s, Status::Running));
+        if t_frame >= duration || interrupted() || !running {
+            break;
+        }
+        frame += 1;
+    }
+    bar.finish_and_clear();
+    Ok(())
+}
+
+/// Each run's summary, as `cellflip run` prints it; an error naming the runs that stopped.
+fn summarise<const D: usize>(
+    entries: &[Entry],
+    runners: &[(Runner<D>, Status)],
+    quiet: bool,
+) -> Result<()> {
+    let mut failed = vec![];
+    for (e, (runner, status)) in entries.iter().zip(runners) {
+        if !quiet {
+            runner.summary.print(&format!("{} ({})", e.scene.name(), e.title));
+            crate::outln!();
+        }
+        if let Status::Failed { at, why } = status {
+            failed.push(format!("{} stopped at t = {at:.3} s: {why}", e.title));
+        }
+    }
+    if !failed.is_empty() {
+        bail!(
+            "{} of {} runs stopped early (the others ran to the end):\n  {}",
+            failed.len(),
+            runners.len(),
+            failed.join("\n  ")
+        );
+    }
+    Ok(())
+}
+
+fn progress_bar(duration: f64) -> ProgressBar {
+    let len = (duration * 1000.0).ceil() as u64;
+    let bar = ProgressBar::with_draw_target(Some(len), ProgressDrawTarget::hidden());
+    let style = ProgressStyle::with_template("{bar:30} {pos}/{len} ms simulated  {msg}  ETA {eta}")
+        .expect("a valid progress template");
+    bar.set_style(style);
+    bar
+}
+
+/// The slowest run's simulated time, and every run's volume (or that it stopped).
+fn show_progress<const D: usize>(
+    bar: &ProgressBar,
+    runners: &[(Runner<D>, Status)],
+    titles: &[&str],
+    visible: bool,
+) {
+    if visible && bar.is_hidden() {
+        bar.set_draw_target(ProgressDrawTarget::stderr());
+    }
+    let running = runners.iter().filter(|(_, s)| matches!(s, Status::Running));
+    let slowest = running.map(|(r, _)| r.sim.state.time_secs).fold(f64::INFINITY, f64::min);
+    if slowest.is_finite() {
+        bar.set_position((slowest * 1000.0) as u64);
+    }
+    let volumes: Vec<String> = (runners.iter().zip(titles))
+        .map(|((r, s), t)| match s {
+            Status::Running => format!("{t} {:.1}%", r.sim.state.volume_percent()),
+            Status::Failed { .. } => format!("{t} stopped"),
+        })
+        .collect();
+    bar.set_message(volumes.join("  "));
+}

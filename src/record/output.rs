@@ -1,0 +1,163 @@
+//! Where a recording goes: our crash-safe file (the default), or live to a viewer (`--spawn`,
+//! `--connect`) or to standard output (`--stdout`), the flags of Rerun's own examples
+//! (`rerun::clap::RerunArgs`).
+//!
+//! A live stream that breaks (the viewer closed mid-run) does not stop the simulation: rerun's
+//! gRPC sink drops what it cannot send, and the end of the run waits at most
+//! [`LIVE_FLUSH_TIMEOUT`] for the rest and then says the stream was lost.
+
+use super::RrdFile;
+use anyhow::{anyhow, Result};
+use rerun::{RecordingStream, RecordingStreamBuilder};
+use std::cell::Cell;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+/// Where a recording goes.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Sink {
+    /// A file, written by [`RrdFile`] (`--save`, or the default under `recordings/`).
+    File(PathBuf),
+    /// A new viewer process (`rerun` on the `PATH`), fed as the run goes.
+    Spawn,
+    /// A viewer already running, at this URL (rerun's default when `None`:
+    /// `rerun+http://127.0.0.1:9876/proxy`).
+    Connect(Option<String>),
+    /// Standard output, to pipe into `rerun -`.
+    Stdout,
+}
+
+impl Sink {
+    /// How the summary names it.
+    pub fn describe(&self) -> String {
+        match self {
+            Sink::File(p) => p.display().to_string(),
+            Sink::Spawn => "a new viewer".into(),
+            Sink::Connect(url) => format!(
+                "the viewer at {}",
+                url.as_deref().unwrap_or("rerun+http://127.0.0.1:9876/proxy")
+            ),
+            Sink::Stdout => "standard output".into(),
+        }
+    }
+}
+
+/// How long the end of a run waits for a live stream to drain before saying it was lost.
+pub const LIVE_FLUSH_TIMEOUT: Duration = Duration::from_secs(10);
+
+/// A recording being written: the stream and, for a file, our sink's handle on it.
+pub struct Output {
+    pub(super) rec: RecordingStream,
+    file: Option<RrdFile>,
+    sink: Sink,
+    last_flush: Cell<Instant>,
+}
+
+impl Output {
+    /// Opens the stream with the recording's `name`; fails, naming the file or the viewer,
+    /// before anything is simulated.
+    pub fn open(sink: &Sink, name: &str) -> Result<Self> {
+        let builder = RecordingStreamBuilder::new("cellflip").recording_name(name);
+        let cannot = |e: &dyn std::fmt::Display| {
+            anyhow!("cannot write the recording to {}: {e}", sink.describe())
+        };
+        let (rec, file) = match sink {
+            Sink::File(path) => {
+                let file = RrdFile::create(path)?;
+                let s: Box<dyn rerun::sink::LogSink> = Box::new(file.clone());
+                let rec = builder.set_sinks(vec![s]).map_err(|e| cannot(&e))?;
+                (rec, Some(file))
+            }
+            Sink::Spawn => (builder.spawn().map_err(|e| cannot(&e))?, None),
+            Sink::Connect(None) => (builder.connect_grpc().map_err(|e| cannot(&e))?, None),
+            Sink::Connect(Some(url)) => {
+                let rec = builder.connect_grpc_opts(url.clone());
+                (rec.map_err(|e| cannot(&e))?, None)
+            }
+            Sink::Stdout => (builder.stdout().map_err(|e| cannot(&e))?, None),
+        };
+        rec.set_log_time_enabled(false);
+        Ok(Self {
+            rec,
+            file,
+            sink: sink.clone(),
+            last_flush: Cell::new(Instant::now()),
+        })
+    }
+
+    /// After a step was logged: everything logged more than two seconds ago is on its way;
+    /// a file takes its name at the first step (`committed`) and a failed write stops the run.
+    pub fn step_logged(&self, committed: bool) -> Result<()> {
+        if self.last_flush.get().elapsed() > Duration::from_secs(2) {
+            let _ = match self.file {
+                Some(_) => self.rec.flush_blocking(),
+                None => self.rec.flush_async(),
+            };
+            self.last_flush.set(Instant::now());
+        }
+        let Some(file) = &self.file else {
+            return Ok(());
+        };
+        if committed {
+            file.commit()?;
+        }
+        file.check()
+    }
+
+    /// Flushes everything; a file gets its footer and its name even if no step was recorded
+    /// (an interrupted run). A live stream that cannot be drained is reported, not an error:
+    /// the run itself went well.
+    pub fn finish(self) -> Result<()> {
+        match &self.file {
+            Some(file) => {
+                let _ = self.rec.flush_blocking();
+                file.commit()?;
+                file.finish()
+            }
+            None => {
+                if let Err(e) = self.rec.flush_with_timeout(LIVE_FLUSH_TIMEOUT) {
+                    eprintln!(
+                        "warning: the stream to {} was lost ({e}); the run finished",
+                        self.sink.describe()
+                    );
+                }
+                Ok(())
+            }
+        }
+    }
+
+    /// After a run that failed: a file is finished as far as it goes, or removed if it never
+    /// took its name (no step was recorded).
+    pub fn abandon(self) {
+        let _ = self.rec.flush_with_timeout(LIVE_FLUSH_TIMEOUT);
+        if let Some(file) = &self.file {
+            let _ = file.finish();
+            file.discard();
+        }
+    }
+
+    /// A closure that finishes the recording from another thread with what was logged so far
+    /// (the signal watchdog: a step that does not end in time is not waited for).
+    pub fn finisher(&self) -> impl FnOnce() -> Result<()> + Send + 'static {
+        let (rec, file) = (self.rec.clone(), self.file.clone());
+        move || match file {
+            Some(file) => {
+                let _ = rec.flush_blocking();
+                file.commit()?;
+                file.finish()
+            }
+            None => {
+                let _ = rec.flush_with_timeout(LIVE_FLUSH_TIMEOUT);
+                Ok(())
+            }
+        }
+    }
+
+    /// The file written, if the recording goes to one.
+    pub fn file_path(&self) -> Option<&std::path::Path> {
+        match &self.sink {
+            Sink::File(p) => Some(p),
+            _ => None,
+        }
+    }
+}
