@@ -31,10 +31,15 @@ struct Entry {
 /// `cellflip compare`.
 pub fn compare(args: &CompareArgs) -> Result<()> {
     if !(args.frame_dt.is_finite() && args.frame_dt > 0.0) {
-        bail!("--frame-dt {}: must be a positive number of seconds", args.frame_dt);
+        bail!(
+            "--frame-dt {}: must be a positive number of seconds",
+            args.frame_dt
+        );
     }
     let entries = entries(args)?;
-    let sink = args.sink.choice(&format!("{}-compare", entries[0].scene.name()))?;
+    let sink = args
+        .sink
+        .choice(&format!("{}-compare", entries[0].scene.name()))?;
     interrupt::install()?;
     match entries[0].scene.dim() {
         2 => compare_dim::<2>(&entries, sink.as_ref(), args),
@@ -81,8 +86,9 @@ fn entries(args: &CompareArgs) -> Result<Vec<Entry>> {
     Ok(out)
 }
 
-/// How a run stands.
-enum Status {
+/// How a run of a comparison stands.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Status {
     Running,
     Failed { at: f64, why: String },
 }
@@ -117,7 +123,12 @@ fn compare_dim<const D: usize>(
     }
     let duration = entries[0].scene.duration_secs();
     let watchdog = Watchdog::start(recording.as_ref().map(|r| Box::new(r.finisher()) as _));
-    let stepped = step_frames(&mut runners, &labels, recording.as_ref(), duration, args);
+    let frames = Frames {
+        dt: args.frame_dt,
+        until: duration,
+        progress: !args.quiet,
+    };
+    let stepped = step_frames(&mut runners, &labels, recording.as_ref(), frames);
     watchdog.done();
     match (&stepped, recording) {
         (Ok(()), Some(r)) => r.finish()?,
@@ -128,21 +139,31 @@ fn compare_dim<const D: usize>(
     summarise(entries, &runners, args.quiet)
 }
 
-/// Steps every running run frame by frame to `duration` (or a signal), drawing each frame.
-/// A run's own failure stops it alone; a recording that cannot be written stops them all.
-fn step_frames<const D: usize>(
+/// How a comparison advances: a frame every `dt` simulated seconds until `until`.
+#[derive(Clone, Copy, Debug)]
+pub struct Frames {
+    pub dt: f64,
+    pub until: f64,
+    /// Show a progress bar (after a second).
+    pub progress: bool,
+}
+
+/// Steps every running run frame by frame to `frames.until` (or a signal), drawing each
+/// frame. A run's own failure stops it alone; a recording that cannot be written stops them
+/// all.
+pub fn step_frames<const D: usize>(
     runners: &mut [(Runner<D>, Status)],
     titles: &[&str],
     recording: Option<&Comparison>,
-    duration: f64,
-    args: &CompareArgs,
+    frames: Frames,
 ) -> Result<()> {
+    let duration = frames.until;
     let bar = progress_bar(duration);
     let t0 = Instant::now();
     let interrupted = || interrupt::signal().is_some();
     let mut frame = 1u64;
     loop {
-        let t_frame = (frame as f64 * args.frame_dt).min(duration);
+        let t_frame = (frame as f64 * frames.dt).min(duration);
         for (i, (runner, status)) in runners.iter_mut().enumerate() {
             if !matches!(status, Status::Running) {
                 continue;
@@ -170,7 +191,7 @@ fn step_frames<const D: usize>(
                 };
             }
         }
-        let visible = !args.quiet && t0.elapsed() > Duration::from_secs(1);
+        let visible = frames.progress && t0.elapsed() > Duration::from_secs(1);
         show_progress(&bar, runners, titles, visible);
         let running = runners.iter().any(|(_, s)| matches!(s, Status::Running));
         if t_frame >= duration || interrupted() || !running {
@@ -191,7 +212,9 @@ fn summarise<const D: usize>(
     let mut failed = vec![];
     for (e, (runner, status)) in entries.iter().zip(runners) {
         if !quiet {
-            runner.summary.print(&format!("{} ({})", e.scene.name(), e.title));
+            runner
+                .summary
+                .print(&format!("{} ({})", e.scene.name(), e.title));
             crate::outln!();
         }
         if let Status::Failed { at, why } = status {
@@ -229,7 +252,9 @@ fn show_progress<const D: usize>(
         bar.set_draw_target(ProgressDrawTarget::stderr());
     }
     let running = runners.iter().filter(|(_, s)| matches!(s, Status::Running));
-    let slowest = running.map(|(r, _)| r.sim.state.time_secs).fold(f64::INFINITY, f64::min);
+    let slowest = running
+        .map(|(r, _)| r.sim.state.time_secs)
+        .fold(f64::INFINITY, f64::min);
     if slowest.is_finite() {
         bar.set_position((slowest * 1000.0) as u64);
     }

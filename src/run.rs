@@ -2,9 +2,9 @@
 //! handling and the summary at the end.
 
 use crate::cli::RunArgs;
+use crate::cli::SinkArgs;
 use crate::interrupt::{self, Watchdog};
 use crate::methods::MethodOption;
-use crate::cli::SinkArgs;
 use crate::record::{Drawing, Recorder, Sink};
 use crate::runner::{Limit, Runner};
 use crate::scene::{Overrides, Scene};
@@ -185,7 +185,10 @@ fn finish<const D: usize>(
         runner.summary.print(&title);
         let cadence = Cadence::of(args.record_every, D).describe();
         if let Some(s @ (Sink::Spawn | Sink::Connect(_) | Sink::Stdout)) = sink {
-            crate::outln!("recording: streamed to {}, particles and cells {cadence}", s.describe());
+            crate::outln!(
+                "recording: streamed to {}, particles and cells {cadence}",
+                s.describe()
+            );
         }
         if let Some(Sink::File(p)) = sink.filter(|s| matches!(s, Sink::File(p) if p.exists())) {
             let mb = std::fs::metadata(p).map_or(0.0, |m| m.len() as f64 / 1e6);
@@ -214,9 +217,7 @@ impl SinkArgs {
             SinkArgs {
                 connect: Some(url), ..
             } => Some(Sink::Connect(url.clone())),
-            SinkArgs {
-                save: Some(p), ..
-            } => Some(Sink::File(p.clone())),
+            SinkArgs { save: Some(p), .. } => Some(Sink::File(p.clone())),
             _ => {
                 let dir = PathBuf::from("recordings");
                 std::fs::create_dir_all(&dir)

@@ -7,10 +7,10 @@
 //! plane under `slice/` (issue 15, item 5): a 2D image of the classes with the particles, moves
 //! and paths that lie in that layer, so what happens inside the fluid can be seen.
 
+use super::Stream;
 use crate::draw::legend::MOVE_COLOR;
 use crate::draw::{Layer, Log, Style};
 use crate::grid::{Grid, Vector};
-use super::Stream;
 
 /// A plane of cells drawn as an image: cell axis `u` to the right, `v` up, `cols` x `rows`
 /// cells; in 3D it cuts the layer of cells `layer` across `axis`.

@@ -45,7 +45,10 @@ impl Comparison {
         let rec = &output.rec;
         let cannot = |e| anyhow!("cannot write the recording to {}: {e}", sink.describe());
         let compared: Vec<Compared<'_>> = runs.iter().map(compared).collect();
-        let first = runs.first().ok_or_else(|| anyhow!("no run to compare"))?.scene;
+        let first = runs
+            .first()
+            .ok_or_else(|| anyhow!("no run to compare"))?
+            .scene;
         let obstacles: Vec<String> = first.file.obstacle.iter().map(|o| o.name.clone()).collect();
         let root = layout::compare_layout(&compared, &obstacles);
         layout::send(rec, &root, "sim_time").map_err(cannot)?;
@@ -60,7 +63,11 @@ impl Comparison {
                 .into_iter()
                 .map(String::from)
                 .collect::<Vec<_>>();
-            series.extend(obstacles.iter().map(|o| format!("metrics/obstacle/{o}/height")));
+            series.extend(
+                obstacles
+                    .iter()
+                    .map(|o| format!("metrics/obstacle/{o}/height")),
+            );
             for s in series {
                 let line = rerun::SeriesLines::new()
                     .with_colors([r.color])
@@ -110,7 +117,10 @@ impl Comparison {
         let (title, run) = &self.runs[i];
         run.error(sim, why);
         let mut c = run.canvas(sim);
-        let text = format!("{title}: stopped at t = {:.3} s: {why}", sim.state.time_secs);
+        let text = format!(
+            "{title}: stopped at t = {:.3} s: {why}",
+            sim.state.time_secs
+        );
         label(&mut c, sim, text);
         run.report(c.result);
     }

@@ -318,7 +318,9 @@ pub fn compare_layout(runs: &[Compared<'_>], obstacles: &[String]) -> Pane {
     let mut right = vec![
         (
             1.0,
-            lines("volume (% of V*)", &|l| vec![format!("{l}/metrics/volume_percent")]),
+            lines("volume (% of V*)", &|l| {
+                vec![format!("{l}/metrics/volume_percent")]
+            }),
         ),
         (
             1.0,
@@ -330,7 +332,9 @@ pub fn compare_layout(runs: &[Compared<'_>], obstacles: &[String]) -> Pane {
     if !obstacles.is_empty() {
         let height = |l: &str| {
             let names = obstacles.iter();
-            names.map(|o| format!("{l}/metrics/obstacle/{o}/height")).collect()
+            names
+                .map(|o| format!("{l}/metrics/obstacle/{o}/height"))
+                .collect()
         };
         right.push((1.0, lines("obstacles: lowest point (m)", &height)));
     }

@@ -16,7 +16,7 @@ mod run_log;
 mod stream;
 
 pub use canvas::{Canvas, Plane};
-pub use compare::{Comparison, ComparedRun};
+pub use compare::{ComparedRun, Comparison};
 pub use file::RrdFile;
 pub use output::{Output, Sink};
 pub use run_log::RunLog;

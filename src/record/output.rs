@@ -35,7 +35,8 @@ impl Sink {
             Sink::Spawn => "a new viewer".into(),
             Sink::Connect(url) => format!(
                 "the viewer at {}",
-                url.as_deref().unwrap_or("rerun+http://127.0.0.1:9876/proxy")
+                url.as_deref()
+                    .unwrap_or("rerun+http://127.0.0.1:9876/proxy")
             ),
             Sink::Stdout => "standard output".into(),
         }

@@ -46,9 +46,13 @@ impl RunLog {
 
     pub(super) fn canvas<const D: usize>(&self, sim: &Simulation<D>) -> Canvas<'_, D> {
         if !self.compared {
-            self.out.rec.set_time_sequence("step", sim.state.steps as i64);
+            self.out
+                .rec
+                .set_time_sequence("step", sim.state.steps as i64);
         }
-        self.out.rec.set_duration_secs("sim_time", sim.state.time_secs);
+        self.out
+            .rec
+            .set_duration_secs("sim_time", sim.state.time_secs);
         let (axis, at) = self.drawing.slice;
         let slice = (D == 3 && !self.compared).then(|| {
             let layer = ((at * self.dims[axis] as f64) as usize).min(self.dims[axis] - 1);

@@ -161,7 +161,10 @@ fn observe<const D: usize>(
 ) {
     let s = &sim.state;
     m.volume.push((s.time_secs, rep.volume_percent));
-    m.ke.push((s.time_secs, crate::metrics::kinetic_energy(&s.particles.vel, h)));
+    m.ke.push((
+        s.time_secs,
+        crate::metrics::kinetic_energy(&s.particles.vel, h),
+    ));
     let most = s.markings.count.iter().max().copied().unwrap_or(0) as f64;
     g.compression = g.compression.max(most / mu);
     g.held += rep.blocked.first().copied().unwrap_or(false) as u64;

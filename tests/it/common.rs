@@ -343,7 +343,12 @@ pub fn arrows_2d_per_step(path: &Path, entity: &str) -> Vec<(i64, usize)> {
 
 /// Per step, the values of the scalar `entity`.
 pub fn scalars_per_step(path: &Path, entity: &str) -> Vec<(i64, f64)> {
-    per_step(path, entity, |c| {
+    scalars_on(path, entity, "step")
+}
+
+/// The values of the scalar `entity` on `timeline` (`sim_time` in nanoseconds).
+pub fn scalars_on(path: &Path, entity: &str, timeline: &str) -> Vec<(i64, f64)> {
+    on_timeline(path, entity, timeline, |c| {
         let d = "Scalars:scalars".into();
         c.iter_slices::<f64>(d).map(|s| s[0]).collect()
     })
@@ -354,12 +359,31 @@ fn per_step<T>(
     entity: &str,
     values: impl Fn(&rerun::log::Chunk) -> Vec<T>,
 ) -> Vec<(i64, T)> {
+    on_timeline(path, entity, "step", values)
+}
+
+/// What `values` reads from each row of `entity`, with the row's time on `timeline`.
+pub fn on_timeline<T>(
+    path: &Path,
+    entity: &str,
+    timeline: &str,
+    values: impl Fn(&rerun::log::Chunk) -> Vec<T>,
+) -> Vec<(i64, T)> {
     let mut out = vec![];
     for c in chunks(path, rerun::StoreKind::Recording) {
         if c.entity_path().to_string().trim_start_matches('/') != entity {
             continue;
         }
-        let steps = c.timelines()[&"step".into()].times_raw().to_vec();
+        let name: &'static str = match timeline {
+            "step" => "step",
+            "sim_time" => "sim_time",
+            t => panic!("cellflip records no timeline '{t}'"),
+        };
+        // Static rows (a series' colour and name) have no time.
+        let Some(times) = c.timelines().get(&name.into()) else {
+            continue;
+        };
+        let steps = times.times_raw().to_vec();
         out.extend(steps.into_iter().zip(values(&c)));
     }
     out.sort_by_key(|(s, _)| *s);

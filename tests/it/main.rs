@@ -6,6 +6,7 @@ mod common;
 
 mod band;
 mod cli_process;
+mod compare;
 mod correction;
 mod docs;
 mod fuzz;
