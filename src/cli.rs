@@ -70,6 +70,14 @@ pub struct CompareArgs {
     pub quiet: bool,
 }
 
+/// A positive, finite number of seconds.
+fn positive_secs(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(x) if x.is_finite() && x > 0.0 => Ok(x),
+        _ => Err(format!("'{s}' is not a positive number of seconds")),
+    }
+}
+
 /// `method[:obstacle]`, as `--methods` takes it.
 fn parse_compared(s: &str) -> Result<(MethodKind, Option<ObstacleMode>), String> {
     use clap::ValueEnum;
@@ -153,6 +161,10 @@ pub struct ReportArgs {
     /// Leave out the stability runs
     #[arg(long)]
     pub no_stability: bool,
+    /// Wall seconds each run may take; a run past them stops and its row says so, "over
+    /// budget" (the others are unaffected) [default: no limit]
+    #[arg(long, value_name = "SECS", value_parser = positive_secs)]
+    pub budget: Option<f64>,
     /// Output folder
     #[arg(long, default_value = "report")]
     pub out: PathBuf,

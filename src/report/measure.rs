@@ -139,12 +139,20 @@ fn measure<const D: usize>(scene: &Scene, stop: &dyn Fn() -> bool, m: &mut Measu
     let lowest = obstacle_lowest(&sim) * h;
     let mut runner = Runner::new(sim);
     let limit = Limit::SimSeconds(scene.duration_secs());
-    let result = runner.run(limit, stop, |sim, rep| {
+    let t0 = std::time::Instant::now();
+    let budget = m.spec.budget.unwrap_or(f64::INFINITY);
+    let over = || t0.elapsed().as_secs_f64() > budget;
+    let result = runner.run(limit, || stop() || over(), |sim, rep| {
         observe(sim, rep, mu, h, &mut g, m);
         Ok(())
     });
     m.status = match (&result, runner.summary.interrupted) {
         (Err(e), _) => one_line(&format!("failed: {e:#}")),
+        (Ok(()), true) if !stop() => format!(
+            "over budget: stopped after {budget} s wall at t = {:.3} of {} s",
+            runner.sim.state.time_secs,
+            scene.duration_secs()
+        ),
         (Ok(()), true) => "interrupted".into(),
         (Ok(()), false) => "ok".into(),
     };

@@ -45,6 +45,8 @@ pub struct RunSpec {
     /// In the accuracy tables, in the stability table.
     pub accuracy: bool,
     pub stability: bool,
+    /// Wall seconds the run may take; past them it stops, and its row says so (`--budget`).
+    pub budget: Option<f64>,
 }
 
 /// A scene of the matrix with the resolutions, duration and tables it is run for.
@@ -171,6 +173,7 @@ pub fn matrix(args: &ReportArgs) -> Result<Vec<RunSpec>> {
                         duration,
                         accuracy: e.accuracy,
                         stability: e.stability,
+                        budget: args.budget,
                     });
                 }
             }

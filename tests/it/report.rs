@@ -266,3 +266,39 @@ fn plots_are_valid_png_and_svg_and_the_recording_reads_back() {
         );
     }
 }
+
+#[test]
+fn a_run_over_its_budget_stops_and_says_so() {
+    let dir = common::scratch_dir("report_budget");
+    let out = common::cellflip_in(
+        &dir,
+        &[
+            "report", "--scenes", "dam-2d", "--methods", "flip,ccp", "--duration", "1",
+            "--budget", "0.05", "-q", "--out", "out",
+        ],
+    );
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    for row in rows(&dir.join("out")) {
+        let status = &row["status"];
+        assert!(
+            status.starts_with("over budget: stopped after 0.05 s wall at t = "),
+            "{}: {status}",
+            row["method"]
+        );
+        let t: f64 = row["sim_s"].parse().unwrap();
+        assert!(t > 0.0 && t < 1.0, "{}: {t} s simulated", row["method"]);
+    }
+}
+
+#[test]
+fn docs_mode_refuses_a_folder_without_the_readme_markers_before_running() {
+    let dir = common::scratch_dir("report_docs_refused");
+    std::fs::write(dir.join("README.md"), "# not cellflip\n").unwrap();
+    let t0 = std::time::Instant::now();
+    let out = common::cellflip_in(&dir, &["report", "--docs", "-q"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("README.md") && err.contains("results markers"), "{err}");
+    assert!(t0.elapsed().as_secs() < 10, "refused before running the matrix");
+    assert!(!dir.join("docs").exists(), "nothing written");
+}
