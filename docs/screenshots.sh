@@ -7,10 +7,10 @@
 set -eu
 bin=target/release/cellflip
 tmp=$(mktemp -d)
-shoot() { # name, then the arguments of `cellflip run`
+shoot() { # name, then a cellflip command (run or compare) and its arguments
     name=$1
     shift
-    "$bin" run "$@" -q --out "$tmp/$name.rrd"
+    "$bin" "$@" -q --save "$tmp/$name.rrd"
     # In its own process group: `rerun` may be a wrapper that starts the viewer as a child.
     setsid rerun "$tmp/$name.rrd" --headless --window-size 1600x900 >"$tmp/$name.log" 2>&1 &
     viewer=$!
@@ -28,9 +28,11 @@ EOF
     python3 -c "from PIL import Image; import sys; Image.open(sys.argv[1]).convert('RGB').quantize(192).save(sys.argv[2], optimize=True)" \
         "$tmp/$name.png" "docs/img/recording-$name.png"
 }
-shoot dam-2d dam-2d --steps 60
-shoot band-2d dam-2d --band paths --res 40 --steps 60
-shoot obstacle-2d falling-obstacle-2d --steps 80
-shoot dam-3d dam-3d --steps 40
+shoot dam-2d run dam-2d --steps 60
+shoot band-2d run dam-2d --band paths --res 40 --steps 60
+shoot obstacle-2d run falling-obstacle-2d --steps 80
+shoot dam-3d run dam-3d --steps 40
+shoot compare-2d compare dam-2d --duration 1.2
+shoot compare-3d compare dam-3d --res 32 --methods flip,idp,ccp --duration 0.8
 rm -r "$tmp"
 ls -l docs/img/recording-*.png
