@@ -31,4 +31,5 @@ pub mod sim;
 pub mod simulation;
 pub mod solve;
 pub mod solvers;
+pub mod surface;
 pub mod validation;

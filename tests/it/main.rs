@@ -20,4 +20,5 @@ mod report;
 mod scene_refusals;
 mod scenes;
 mod solids;
+mod surface;
 mod validation;
