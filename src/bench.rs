@@ -45,6 +45,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
                 method: args.method,
                 band: *band,
                 pressure: args.pressure,
+                air: args.air,
                 ..Default::default()
             };
             let scene = Scene::load(&args.scene, &overrides)?;
@@ -52,6 +53,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
             let given = [
                 (MethodOption::Band, band.is_some()),
                 (MethodOption::CrossCheck, args.cross_check),
+                (MethodOption::PowerPicAir, args.air.is_some()),
             ];
             let given: Vec<_> = given.iter().filter(|g| g.1).map(|g| g.0).collect();
             scene

@@ -1,6 +1,7 @@
 //! Command-line definitions (clap) and nothing else.
 
 use crate::methods::ccp::{BandMode, CcpArgs, Solver};
+use crate::methods::powerpic::AirForm;
 use crate::methods::MethodKind;
 use crate::record::Moves;
 use crate::sim::solids::ObstacleMode;
@@ -225,6 +226,11 @@ pub struct RunArgs {
     /// (a geometric V-cycle).
     #[arg(long, value_enum, value_name = "PRECONDITIONER")]
     pub pressure: Option<Preconditioner>,
+    /// Method powerpic: how the free surface's air is costed (overrides
+    /// `simulation.powerpic.air`): baseline (pulled towards the air baseline estimated from the
+    /// markings) or capacity (free).
+    #[arg(long, value_enum)]
+    pub air: Option<AirForm>,
     /// Where the recording goes.
     #[command(flatten)]
     pub sink: SinkArgs,
@@ -274,6 +280,11 @@ pub struct BenchArgs {
     /// (a geometric V-cycle).
     #[arg(long, value_enum, value_name = "PRECONDITIONER")]
     pub pressure: Option<Preconditioner>,
+    /// Method powerpic: how the free surface's air is costed (overrides
+    /// `simulation.powerpic.air`): baseline (pulled towards the air baseline estimated from the
+    /// markings) or capacity (free).
+    #[arg(long, value_enum)]
+    pub air: Option<AirForm>,
     /// Band methods of ccp to compare, comma-separated (none, paths, one-way, full); the
     /// step-time ratio to the first is printed [default: the scene's].
     #[arg(long, value_enum, value_delimiter = ',')]

@@ -6,23 +6,25 @@ use crate::PAR_GRAIN;
 use rayon::prelude::*;
 use std::time::Duration;
 
-/// Total fluid volume `V = sum_c V_c` in cells (paper eq. volume):
-/// `V_c = 0` for non-fluid cells (depth > 0), `min(1, |gamma_c| / mu)` for cells at depth -1
-/// or 0, and 1 for deeper fluid cells. Solid cells count as pure solid, whatever they hold.
+/// Total fluid volume `V = sum_c V_c` in cells (paper eq. volume), each cell's `V_c` from
+/// [`cell_volume`].
 pub fn volume_cells(markings: &Markings, mu: u32) -> f64 {
-    let mut v = 0.0;
-    for c in 0..markings.kind.len() {
-        if markings.kind[c] != CellKind::Fluid {
-            continue;
-        }
-        let d = markings.depth[c];
-        v += if d >= -1 {
-            (markings.count[c] as f64 / mu as f64).min(1.0)
-        } else {
-            1.0
-        };
+    (0..markings.kind.len())
+        .map(|c| cell_volume(markings, mu, c))
+        .sum()
+}
+
+/// Cell `c`'s fluid volume `V_c` in cells (paper eq. volume): 0 for non-fluid cells (depth >
+/// 0), `min(1, |gamma_c| / mu)` for cells at depth -1 or 0, and 1 for deeper fluid cells.
+/// Solid cells count as pure solid, whatever they hold.
+pub fn cell_volume(markings: &Markings, mu: u32, c: usize) -> f64 {
+    if markings.kind[c] != CellKind::Fluid {
+        return 0.0;
     }
-    v
+    match markings.depth[c] {
+        d if d >= -1 => (markings.count[c] as f64 / mu as f64).min(1.0),
+        _ => 1.0,
+    }
 }
 
 /// Kinetic energy per unit mass of the particles held, `1/2 mean |v|^2`, in m^2/s^2 (`h`: the

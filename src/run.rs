@@ -28,6 +28,7 @@ impl RunArgs {
             band_r: self.band_r,
             obstacle: self.obstacle,
             pressure: self.pressure,
+            air: self.air,
         }
     }
 
@@ -36,6 +37,9 @@ impl RunArgs {
         let mut given = self.ccp.given();
         if self.band_r.is_some() {
             given.push(MethodOption::BandR);
+        }
+        if self.air.is_some() {
+            given.push(MethodOption::PowerPicAir);
         }
         given
     }

@@ -27,6 +27,7 @@ pub enum MethodOption {
     ExportLp,
     IdpResample,
     PowerPic,
+    PowerPicAir,
 }
 
 impl MethodOption {
@@ -48,6 +49,7 @@ impl MethodOption {
             MethodOption::Directions => "--directions",
             MethodOption::CrossCheck => "--cross-check",
             MethodOption::ExportLp => "--export-lp",
+            MethodOption::PowerPicAir => "--air",
             MethodOption::IdpResample | MethodOption::PowerPic => return None,
         })
     }
@@ -61,7 +63,9 @@ impl MethodOption {
             MethodOption::Directions => "directions",
             MethodOption::IdpResample => "idp_resample",
             MethodOption::PowerPic => "powerpic",
-            MethodOption::CrossCheck | MethodOption::ExportLp => return None,
+            MethodOption::CrossCheck | MethodOption::ExportLp | MethodOption::PowerPicAir => {
+                return None
+            }
         })
     }
 }

@@ -13,7 +13,7 @@ use crate::grid::Vector;
 use crate::methods::ccp::{BandMode, CcpSettings, Directions, Solver};
 use crate::methods::idp::IdpSettings;
 use crate::methods::nbflip::NbflipSettings;
-use crate::methods::powerpic::PowerPicSettings;
+use crate::methods::powerpic::{AirForm, PowerPicSettings};
 use crate::methods::{MethodKind, MethodOption, MethodSettings};
 use crate::particles::{Region, SpiralBlock};
 use crate::sim::emit::Emitter;
@@ -347,6 +347,8 @@ pub struct Overrides {
     pub obstacle: Option<ObstacleMode>,
     /// `simulation.pressure_preconditioner`.
     pub pressure: Option<Preconditioner>,
+    /// `simulation.powerpic.air`.
+    pub air: Option<AirForm>,
 }
 
 /// A scene ready to run: its source, the file with overrides applied, and its checked values.
@@ -397,6 +399,9 @@ impl Overrides {
         }
         if let Some(p) = self.pressure {
             sim.pressure_preconditioner = p;
+        }
+        if let Some(air) = self.air {
+            sim.powerpic.get_or_insert_with(Default::default).air = air;
         }
         if let Some(c) = self.cells {
             file.domain.cells = c;

@@ -1,33 +1,74 @@
 //! Entropy-regularised optimal transport between points of equal volume and the cells of a
-//! regular grid that may be partly empty, by Sinkhorn's scaling iterations in the log domain
-//! (Cuturi 2013; the partial, "capacity" form of Benamou et al. 2015, sec. 5.2).
+//! regular grid that may be partly empty, by Sinkhorn's scaling iterations (Cuturi 2013), with
+//! two models of the empty part ("air") of a cell.
 //!
 //! Points `p` (volume `V_p` each) and cells `j` (centre `x_j`, capacity `V_j`): the plan `T`
-//! minimises `sum T_pj |x_p - x_j|^2 + eps sum T_pj (log T_pj - 1)` subject to
-//! `sum_j T_pj = V_p` for every point and `sum_p T_pj + a_j = V_j` with a slack `a_j >= 0` (the
-//! empty part of the cell). Its solution is `T_pj = exp(f_p + g_j - |x_p - x_j|^2 / eps)` with
-//! `g_j <= 0`, `g_j = 0` where the cell is not full. The iterations are block-coordinate ascent
-//! on the dual:
+//! minimises
 //!
-//! - rows: `f_p = log V_p - LSE_j (g_j - |x_p - x_j|^2 / eps)` (every point's volume exact);
-//! - columns: `g_j = min(0, log V_j - LSE_p (f_p - |x_p - x_j|^2 / eps))`,
+//! `sum T_pj |x_p - x_j|^2 + eps sum T_pj (log T_pj - 1) + A(a)`
 //!
-//! each log-sum-exp (LSE) taken with its maximum shifted out, so that small `eps` neither
-//! underflows nor overflows. The kernel is cut where it falls below `exp(-KERNEL_CUTOFF)` of
-//! its peak, so every point sees only cells within `sqrt(KERNEL_CUTOFF eps)`: the plan is
-//! never a dense point x cell matrix. The iteration stops, after a row update, when every
-//! column meets its marginal to a relative `delta`: `|col_j / V_j - 1|` for a full cell
-//! (`g_j < 0`), `col_j / V_j - 1` above its capacity for the others.
+//! subject to `sum_j T_pj = V_p` for every point and `sum_p T_pj + a_j = V_j` for every cell,
+//! with an air slack `a_j >= 0` whose cost `A` is one of ([`Air`]):
 //!
-//! Every pass is a gather (per point or per cell), so results are the same whatever the
-//! thread count.
+//! - **capacity**: `A = 0`, air is free (the partial transport of Benamou et al. 2015, sec.
+//!   5.2): a cell holds at most its capacity;
+//! - **baseline**: `A = eta eps sum_j KL(a_j | b_j)`, `KL(a | b) = a log(a / b) - a + b`, which
+//!   pulls the air towards a given baseline `b_j` (`0 <= b_j <= V_j`) with weight `eta`.
+//!
+//! **The dual and its updates.** With multipliers `eps f_p` (rows) and `eps g_j` (columns),
+//! stationarity in `T_pj` gives `|x_p - x_j|^2 + eps log T_pj - eps f_p - eps g_j = 0`, so
+//! `T_pj = u_p K_pj v_j` with `u_p = e^(f_p)`, `v_j = e^(g_j)`, `K_pj = e^(-|x_p - x_j|^2 / eps)`.
+//! Block-coordinate ascent on the dual alternates:
+//!
+//! - rows: `u_p = V_p / sum_j K_pj v_j` (every point's volume exact);
+//! - columns, with `C_j = sum_p K_pj u_p` (so that `sum_p T_pj = v_j C_j`):
+//!   - capacity: the complementary slackness of `a_j >= 0` with multiplier `-eps g_j >= 0`
+//!     gives `v_j = min(1, V_j / C_j)` (a cell is either full, `v_j < 1`, or holds its
+//!     kernels as they come, `v_j = 1`);
+//!   - baseline: stationarity in `a_j`, `eta eps log(a_j / b_j) - eps g_j = 0`, gives
+//!     `a_j = b_j v_j^(1 / eta)`, and the column constraint becomes
+//!     `v_j C_j + b_j v_j^(1 / eta) = V_j`. At `eta = 1` it is closed-form,
+//!     `v_j = V_j / (C_j + b_j)`; otherwise its left side is increasing and, as a function of
+//!     `g_j`, convex in `log`, so Newton's method on `log(C_j e^g + b_j e^(g / eta)) = log V_j`
+//!     from the upper bound `g = min(log(V_j / C_j), eta log(V_j / b_j))` converges
+//!     monotonically. Deep inside the liquid (`b_j = 0`) the cell must be exactly full; far
+//!     outside (`b_j = V_j`) a cell reached by little kernel stays nearly empty; a larger
+//!     `eta` holds the air closer to `b_j`.
+//!
+//! The iteration stops, after a row update, when every column meets its marginal to a relative
+//! `delta`: for capacity, `|v_j C_j / V_j - 1|` for a full cell and `v_j C_j / V_j - 1` above
+//! the capacity for the others; for the baseline, `|(v_j C_j + a_j) / V_j - 1|`.
+//!
+//! **How it is computed.** The kernel is cut where `|x_p - x_j|^2 / eps` exceeds
+//! [`KERNEL_CUTOFF`], so every point sees only the cells of a ball of radius
+//! `sqrt(KERNEL_CUTOFF eps)`. On the regular grid `K_pj` is a product of per-axis factors
+//! `e^(-(x_p,k - x_j,k)^2 / eps)`: each point computes `d (2 r + 1)` exponentials (not one per
+//! cell) and lists its ball's cells with their kernel values once per solve; every iteration
+//! then streams these lists, a sparse matrix-vector product each way (Qu et al.'s "localized
+//! Gaussian convolutions"). The scalings are kept as `u`, `v` rather than their logs: with the
+//! cut, every kept `K_pj` is at least `1e-12`, far inside the range of `f64`, and a scaling
+//! that leaves it is reported ([`SinkhornError::Diverged`]). Columns are summed by scattering
+//! fixed chunks of spatially sorted points into their own windows of cells, added in chunk
+//! order: results are the same whatever the thread count.
 
-use crate::grid::{Cell, Grid, Vector};
+use crate::grid::{Grid, Vector};
 use rayon::prelude::*;
+use std::ops::{AddAssign, Mul, Range};
 
 /// The kernel is cut where `|x_p - x_j|^2 / eps` exceeds this: `exp(-27.63) = 1e-12`, far
 /// below the tolerances `delta` the iteration is run to.
 pub const KERNEL_CUTOFF: f64 = 27.631_021_115_928_547;
+
+/// Points per chunk of the column sums (fixed, so that the summation order does not depend on
+/// the thread count; large enough that the chunks' windows of cells overlap little).
+const CHUNK_POINTS: usize = 4096;
+
+/// Newton's method for the baseline column update stops when a step moves `g_j` by less than
+/// this (a relative change of `1e-13` in `v_j`, far below any `delta`) ...
+const NEWTON_TOLERANCE: f64 = 1e-13;
+/// ... or after this many steps (it converges monotonically and quadratically; 60 is never
+/// reached in practice and only guards against a non-finite input).
+const NEWTON_STEPS: u32 = 60;
 
 /// How far the iteration goes.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -47,13 +88,24 @@ impl SinkhornSettings {
     }
 }
 
+/// The cost of a cell's empty part (see the module doc).
+#[derive(Clone, Debug, PartialEq)]
+pub enum Air {
+    /// Free: a cell holds at most its capacity.
+    Capacity,
+    /// `eta eps KL(a_j | b_j)`: the air pulled towards `baseline[j]` (one per cell).
+    Baseline { eta: f64, baseline: Vec<f64> },
+}
+
 /// The cells points are transported to: a regular grid of cells of side `h` (in the points'
-/// units; cell `c` covers `[c h, (c + 1) h)`) and the capacity of each (zero: not available).
+/// units; cell `c` covers `[c h, (c + 1) h)`), the capacity of each (zero: not available) and
+/// the cost of their air.
 #[derive(Clone, Debug)]
 pub struct TransportGrid<const D: usize> {
     pub grid: Grid<D>,
     pub h: f64,
     pub capacity: Vec<f64>,
+    pub air: Air,
 }
 
 impl<const D: usize> TransportGrid<D> {
@@ -61,31 +113,55 @@ impl<const D: usize> TransportGrid<D> {
         self.grid.center(self.grid.cell_coords(j)) * self.h
     }
 
-    /// The cell holding `x` (clamped onto the grid).
-    fn cell_of(&self, x: &Vector<D>) -> Cell<D> {
-        std::array::from_fn(|k| ((x[k] / self.h).max(0.0) as usize).min(self.grid.dims[k] - 1))
-    }
-
-    /// Calls `f(j, x_j)` for every cell of the box of half-width `reach` cells around cell `c`.
-    #[inline]
-    fn for_each_in_box(&self, c: Cell<D>, reach: usize, mut f: impl FnMut(usize, Vector<D>)) {
-        let lo: Cell<D> = std::array::from_fn(|k| c[k].saturating_sub(reach));
-        let hi: Cell<D> = std::array::from_fn(|k| (c[k] + reach).min(self.grid.dims[k] - 1));
-        let mut at = lo;
-        loop {
-            let x = Vector::<D>::from_fn(|k, _| (at[k] as f64 + 0.5) * self.h);
-            f(self.grid.cell_index(at), x);
-            let mut k = 0;
-            while k < D && at[k] == hi[k] {
-                at[k] = lo[k];
-                k += 1;
-            }
-            if k == D {
-                return;
-            }
-            at[k] += 1;
+    /// The column scaling `v_j` that makes cell `j`'s column meet its marginal, given
+    /// `C_j = sum_p K_pj u_p > 0` (the module doc derives it); `v` is the current one, kept
+    /// where the marginal says nothing (an empty baseline and no kernel).
+    fn column_scaling(&self, j: usize, c: f64, v: f64) -> f64 {
+        let cap = self.capacity[j];
+        match &self.air {
+            Air::Capacity => (cap / c).min(1.0),
+            Air::Baseline { eta, baseline } => match (baseline[j], *eta) {
+                (b, _) if c == 0.0 && b == 0.0 => v,
+                (b, eta) if eta == 1.0 => cap / (c + b),
+                (b, eta) => baseline_newton(cap, c, b, eta),
+            },
         }
     }
+
+    /// Cell `j`'s relative column error when its kernels fill `fill = v_j C_j` of it and its
+    /// column scaling is `v`.
+    pub fn column_error(&self, j: usize, fill: f64, v: f64) -> f64 {
+        let ratio = fill / self.capacity[j];
+        match &self.air {
+            Air::Capacity if v < 1.0 => (ratio - 1.0).abs(),
+            Air::Capacity => (ratio - 1.0).max(0.0),
+            Air::Baseline { eta, baseline } => {
+                let air = baseline[j] * if *eta == 1.0 { v } else { v.powf(1.0 / eta) };
+                (ratio + air / self.capacity[j] - 1.0).abs()
+            }
+        }
+    }
+}
+
+/// Solves `c e^g + b e^(g / eta) = cap` for `v = e^g` by Newton's method on
+/// `phi(g) = log(c e^g + b e^(g / eta)) - log cap`, increasing and convex, from the upper bound
+/// `min(log(cap / c), eta log(cap / b))` (each term alone at most `cap`): the iterates
+/// decrease monotonically to the root.
+fn baseline_newton(cap: f64, c: f64, b: f64, eta: f64) -> f64 {
+    let bound = |x: f64, scale: f64| match x > 0.0 {
+        true => scale * (cap / x).ln(),
+        false => f64::INFINITY,
+    };
+    let mut g = bound(c, 1.0).min(bound(b, eta));
+    for _ in 0..NEWTON_STEPS {
+        let (kc, kb) = (c * g.exp(), b * (g / eta).exp());
+        let step = ((kc + kb).ln() - cap.ln()) * (kc + kb) / (kc + kb / eta);
+        g -= step;
+        if step.abs() < NEWTON_TOLERANCE {
+            break;
+        }
+    }
+    g.exp()
 }
 
 /// Why no plan was found.
@@ -103,46 +179,26 @@ pub enum SinkhornError {
          transport grid"
     )]
     Overfull { volume: f64, capacity: f64 },
-    /// A scaling became infinite or NaN.
+    /// A scaling became infinite, zero or NaN.
     #[error("the scalings left the finite range at iteration {iteration}")]
     Diverged { iteration: u32 },
 }
 
-/// A running log-sum-exp: `log sum exp(v)` over the values added, with the largest shifted out.
-#[derive(Clone, Copy, Debug)]
-struct LogSumExp {
-    max: f64,
-    sum: f64,
+/// A chunk of the column sums: points `order[points]`, whose cells are the slots `window`.
+#[derive(Clone, Debug)]
+struct Chunk {
+    points: Range<usize>,
+    window: Range<usize>,
 }
 
-impl LogSumExp {
-    const EMPTY: Self = Self {
-        max: f64::NEG_INFINITY,
-        sum: 0.0,
-    };
-
-    #[inline]
-    fn add(&mut self, v: f64) {
-        if v <= self.max {
-            self.sum += (v - self.max).exp();
-        } else {
-            self.sum = self.sum * (self.max - v).exp() + 1.0;
-            self.max = v;
-        }
-    }
-
-    fn value(self) -> f64 {
-        self.max + self.sum.ln()
-    }
-}
-
-/// The solved plan: the log scalings and what the iteration did, with the neighbour lists
-/// that let it be read row by row or column by column.
+/// The solved plan `T_pj = u_p K_pj v_j`: the scalings, what the iteration did, and every
+/// point's row (its ball's cells and their kernel values) to read it by.
+///
+/// The cells some point reaches are numbered in grid order by *slots*; [`Self::active_cells`]
+/// gives each slot's cell.
 #[derive(Clone, Debug)]
 pub struct Transport<const D: usize> {
-    /// `f_p`, one per point.
-    pub f: Vec<f64>,
-    /// `g_j`, one per cell (0 for cells no point reaches).
+    /// `g_j = log v_j`, one per cell of the grid (0 for cells no point reaches).
     pub g: Vec<f64>,
     /// Row updates done.
     pub iterations: u32,
@@ -152,15 +208,19 @@ pub struct Transport<const D: usize> {
     pub converged: bool,
     /// The points' volume `V_p`.
     pub volume: f64,
-    /// `1 / eps`, the squared reach and the reach in cells.
-    inv_eps: f64,
-    radius2: f64,
-    reach: usize,
-    /// Points bucketed by cell: those of cell `j` are `order[start[j]..start[j + 1]]`.
-    start: Vec<u32>,
-    order: Vec<u32>,
-    /// Cells with capacity within the reach of some point.
+    /// `u_p`, one per point, and `v_j`, one per slot.
+    u: Vec<f64>,
+    v: Vec<f64>,
+    /// Point `p`'s row is `slot[row[p]..row[p + 1]]`, `kernel[..]` the same range.
+    row: Vec<usize>,
+    slot: Vec<u32>,
+    kernel: Vec<f64>,
+    /// Each slot's cell and centre.
     active: Vec<u32>,
+    centre: Vec<Vector<D>>,
+    /// The points sorted by cell, cut into the chunks of the column sums.
+    order: Vec<u32>,
+    chunks: Vec<Chunk>,
 }
 
 impl<const D: usize> Transport<D> {
@@ -181,201 +241,283 @@ impl<const D: usize> Transport<D> {
                 capacity,
             });
         }
-        let mut t = Self::neighbourhoods(tg, points, volume, s);
-        if let Some(g) = warm.filter(|g| g.len() == t.g.len()) {
-            t.g = g;
+        let mut t = Self::rows(tg, points, volume, s)?;
+        if let Some(g) = warm.filter(|g| g.len() == tg.grid.num_cells()) {
+            t.v = t.active.iter().map(|&j| g[j as usize].exp()).collect();
         }
-        let log_v = volume.ln();
         loop {
-            t.update_rows(tg, points, log_v)?;
-            let lse = t.column_lse(tg, points);
-            t.error = t.column_error(tg, &lse);
+            t.update_rows()?;
+            let c = t.kernel_columns(0.0, |p| t.u[p]);
+            t.error = (0..c.len())
+                .map(|k| tg.column_error(t.active[k] as usize, t.v[k] * c[k], t.v[k]))
+                .fold(0.0, f64::max);
             t.converged = t.error <= s.delta;
             if t.converged || t.iterations >= s.max_iterations {
-                return Ok(t);
+                break;
             }
-            for (&j, l) in t.active.iter().zip(&lse) {
-                let j = j as usize;
-                t.g[j] = (tg.capacity[j].ln() - l).min(0.0);
+            for (k, &c) in c.iter().enumerate() {
+                t.v[k] = tg.column_scaling(t.active[k] as usize, c, t.v[k]);
+            }
+            if t.v.iter().any(|v| !v.is_normal()) {
+                return Err(SinkhornError::Diverged {
+                    iteration: t.iterations,
+                });
             }
         }
+        t.g = vec![0.0; tg.grid.num_cells()];
+        for (&j, v) in t.active.iter().zip(&t.v) {
+            t.g[j as usize] = v.ln();
+        }
+        Ok(t)
     }
 
-    /// Buckets the points by cell and lists the cells within their reach.
-    fn neighbourhoods(
+    /// Every point's row: the cells with capacity in the ball of its kernel, with their
+    /// `K_pj`; then the slots and the chunks of the column sums.
+    fn rows(
         tg: &TransportGrid<D>,
         points: &[Vector<D>],
         volume: f64,
         s: &SinkhornSettings,
-    ) -> Self {
-        let n = tg.grid.num_cells();
-        let cells: Vec<usize> = points
-            .iter()
-            .map(|x| tg.grid.cell_index(tg.cell_of(x)))
+    ) -> Result<Self, SinkhornError> {
+        let lists: Vec<(Vec<usize>, Vec<u32>, Vec<f64>)> = points
+            .par_chunks(CHUNK_POINTS)
+            .map(|chunk| {
+                let (mut row, mut cells, mut kernel) = (vec![], vec![], vec![]);
+                let mut axes = Axes::default();
+                for x in chunk {
+                    axes.ball(tg, x, s, |j, k| {
+                        cells.push(j as u32);
+                        kernel.push(k);
+                    });
+                    row.push(cells.len());
+                }
+                (row, cells, kernel)
+            })
             .collect();
-        let mut start = vec![0u32; n + 1];
-        for &c in &cells {
-            start[c + 1] += 1;
+        let (mut row, mut slot, mut kernel) = (vec![0], vec![], vec![]);
+        for (r, c, k) in lists {
+            let base = slot.len();
+            row.extend(r.into_iter().map(|e| e + base));
+            slot.extend(c);
+            kernel.extend(k);
         }
-        for j in 0..n {
-            start[j + 1] += start[j];
+        if let Some(p) = (0..points.len()).find(|&p| row[p] == row[p + 1]) {
+            return Err(SinkhornError::KernelVanishes { point: p });
         }
-        let mut next = start.clone();
-        let mut order = vec![0u32; points.len()];
-        for (p, &c) in cells.iter().enumerate() {
-            order[next[c] as usize] = p as u32;
-            next[c] += 1;
+        let mut index = vec![u32::MAX; tg.grid.num_cells()];
+        for &j in &slot {
+            index[j as usize] = 0;
         }
-        let radius = s.radius();
-        let reach = (radius / tg.h).ceil() as usize;
-        let mut reached = vec![false; n];
-        for j in (0..n).filter(|&j| start[j + 1] > start[j]) {
-            tg.for_each_in_box(tg.grid.cell_coords(j), reach, |k, _| reached[k] = true);
-        }
-        let active = (0..n)
-            .filter(|&j| reached[j] && tg.capacity[j] > 0.0)
-            .map(|j| j as u32)
+        let active: Vec<u32> = (0..index.len() as u32)
+            .filter(|&j| index[j as usize] == 0)
             .collect();
-        Self {
-            f: vec![0.0; points.len()],
-            g: vec![0.0; n],
+        for (k, &j) in active.iter().enumerate() {
+            index[j as usize] = k as u32;
+        }
+        slot.par_iter_mut().for_each(|j| *j = index[*j as usize]);
+        let centre = active.iter().map(|&j| tg.center(j as usize)).collect();
+        let order = sorted_by_cell(tg, points);
+        let chunks = order
+            .chunks(CHUNK_POINTS)
+            .enumerate()
+            .map(|(n, ps)| {
+                let slots = ps.iter().flat_map(|&p| {
+                    let p = p as usize;
+                    slot[row[p]..row[p + 1]].iter().map(|&k| k as usize)
+                });
+                let (lo, hi) = slots.fold((usize::MAX, 0), |(lo, hi), k| (lo.min(k), hi.max(k)));
+                Chunk {
+                    points: n * CHUNK_POINTS..n * CHUNK_POINTS + ps.len(),
+                    window: lo..hi + 1,
+                }
+            })
+            .collect();
+        Ok(Self {
+            g: vec![],
             iterations: 0,
             error: f64::INFINITY,
             converged: false,
             volume,
-            inv_eps: 1.0 / s.epsilon,
-            radius2: radius * radius,
-            reach,
-            start,
-            order,
+            u: vec![0.0; points.len()],
+            v: vec![1.0; active.len()],
+            row,
+            slot,
+            kernel,
             active,
-        }
-    }
-
-    /// Calls `f(j, x_j, log K_pj + g_j)` for the cells with capacity within the reach of point
-    /// `x`.
-    #[inline]
-    fn for_each_cell(
-        &self,
-        tg: &TransportGrid<D>,
-        x: &Vector<D>,
-        mut f: impl FnMut(usize, Vector<D>, f64),
-    ) {
-        tg.for_each_in_box(tg.cell_of(x), self.reach, |j, xj| {
-            let d2 = (xj - x).norm_squared();
-            if d2 <= self.radius2 && tg.capacity[j] > 0.0 {
-                f(j, xj, self.g[j] - d2 * self.inv_eps);
-            }
-        });
-    }
-
-    /// Calls `f(p, log K_pj + f_p)` for the points within the reach of cell `j`.
-    #[inline]
-    fn for_each_point(
-        &self,
-        tg: &TransportGrid<D>,
-        points: &[Vector<D>],
-        j: usize,
-        mut f: impl FnMut(usize, f64),
-    ) {
-        let xj = tg.center(j);
-        tg.for_each_in_box(tg.grid.cell_coords(j), self.reach, |k, _| {
-            for &p in &self.order[self.start[k] as usize..self.start[k + 1] as usize] {
-                let p = p as usize;
-                let d2 = (points[p] - xj).norm_squared();
-                if d2 <= self.radius2 {
-                    f(p, self.f[p] - d2 * self.inv_eps);
-                }
-            }
-        });
+            centre,
+            order,
+            chunks,
+        })
     }
 
     /// Row update: every point's volume exact.
-    fn update_rows(
-        &mut self,
-        tg: &TransportGrid<D>,
-        points: &[Vector<D>],
-        log_v: f64,
-    ) -> Result<(), SinkhornError> {
-        let f: Vec<Option<f64>> = points
-            .par_iter()
-            .map(|x| {
-                let mut lse = LogSumExp::EMPTY;
-                self.for_each_cell(tg, x, |_, _, v| lse.add(v));
-                (lse.sum > 0.0).then(|| log_v - lse.value())
+    fn update_rows(&mut self) -> Result<(), SinkhornError> {
+        let (v, volume) = (&self.v, self.volume);
+        self.u = (0..self.u.len())
+            .into_par_iter()
+            .map(|p| {
+                let r = self.row[p]..self.row[p + 1];
+                let sum: f64 = (self.slot[r.clone()].iter())
+                    .zip(&self.kernel[r])
+                    .map(|(&k, &kpj)| kpj * v[k as usize])
+                    .sum();
+                volume / sum
             })
             .collect();
         self.iterations += 1;
-        for (p, v) in f.into_iter().enumerate() {
-            match v {
-                None => return Err(SinkhornError::KernelVanishes { point: p }),
-                Some(v) if !v.is_finite() => {
-                    return Err(SinkhornError::Diverged {
-                        iteration: self.iterations,
-                    })
-                }
-                Some(v) => self.f[p] = v,
-            }
+        match self.u.iter().all(|u| u.is_normal()) {
+            true => Ok(()),
+            false => Err(SinkhornError::Diverged {
+                iteration: self.iterations,
+            }),
         }
-        Ok(())
     }
 
-    /// `LSE_p (f_p - |x_p - x_j|^2 / eps)` of every active cell.
-    fn column_lse(&self, tg: &TransportGrid<D>, points: &[Vector<D>]) -> Vec<f64> {
-        self.active
+    /// `sum_p K_pj w(p)` for every slot: each chunk scatters into its window, and the windows
+    /// are added in chunk order.
+    fn kernel_columns<T>(&self, zero: T, w: impl Fn(usize) -> T + Sync) -> Vec<T>
+    where
+        T: Copy + Send + Sync + AddAssign + Mul<f64, Output = T>,
+    {
+        let parts: Vec<Vec<T>> = self
+            .chunks
             .par_iter()
-            .map(|&j| {
-                let mut lse = LogSumExp::EMPTY;
-                self.for_each_point(tg, points, j as usize, |_, v| lse.add(v));
-                lse.value()
-            })
-            .collect()
-    }
-
-    /// The largest relative column error, given each active cell's column LSE.
-    fn column_error(&self, tg: &TransportGrid<D>, lse: &[f64]) -> f64 {
-        self.active
-            .iter()
-            .zip(lse)
-            .map(|(&j, l)| {
-                let j = j as usize;
-                let ratio = (self.g[j] + l).exp() / tg.capacity[j];
-                if self.g[j] < 0.0 {
-                    (ratio - 1.0).abs()
-                } else {
-                    (ratio - 1.0).max(0.0)
+            .map(|c| {
+                let mut acc = vec![zero; c.window.len()];
+                for &p in &self.order[c.points.clone()] {
+                    let (p, wp) = (p as usize, w(p as usize));
+                    let r = self.row[p]..self.row[p + 1];
+                    for (&k, &kpj) in self.slot[r.clone()].iter().zip(&self.kernel[r]) {
+                        acc[k as usize - c.window.start] += wp * kpj;
+                    }
                 }
+                acc
             })
-            .fold(0.0, f64::max)
+            .collect();
+        const BLOCK: usize = 4096;
+        let mut out = vec![zero; self.active.len()];
+        out.par_chunks_mut(BLOCK).enumerate().for_each(|(b, out)| {
+            let block = b * BLOCK..b * BLOCK + out.len();
+            for (c, part) in self.chunks.iter().zip(&parts) {
+                let (lo, hi) = (block.start.max(c.window.start), block.end.min(c.window.end));
+                for k in lo..hi {
+                    out[k - block.start] += part[k - c.window.start];
+                }
+            }
+        });
+        out
     }
 
-    /// Calls `f(j, x_j, T_pj)` for every cell of point `p`'s row (`x_j` its centre).
-    pub fn for_each_in_row(
-        &self,
-        tg: &TransportGrid<D>,
-        points: &[Vector<D>],
-        p: usize,
-        mut f: impl FnMut(usize, Vector<D>, f64),
-    ) {
-        let fp = self.f[p];
-        self.for_each_cell(tg, &points[p], |j, xj, v| f(j, xj, (fp + v).exp()));
+    /// `sum_p T_pj w(p)` for every slot (e.g. `w = 1`: the volume the kernels put in each
+    /// cell).
+    pub fn columns<T>(&self, zero: T, w: impl Fn(usize) -> T + Sync) -> Vec<T>
+    where
+        T: Copy + Send + Sync + AddAssign + Mul<f64, Output = T>,
+    {
+        let mut c = self.kernel_columns(zero, |p| w(p) * self.u[p]);
+        c.iter_mut().zip(&self.v).for_each(|(c, &v)| *c = *c * v);
+        c
     }
 
-    /// Calls `f(p, T_pj)` for every point of cell `j`'s column.
-    pub fn for_each_in_column(
-        &self,
+    /// Calls `f(k, x_j, T_pj)` for every cell of point `p`'s row (`k` its slot, `x_j` its
+    /// centre).
+    #[inline]
+    pub fn for_each_in_row(&self, p: usize, mut f: impl FnMut(usize, Vector<D>, f64)) {
+        let r = self.row[p]..self.row[p + 1];
+        for (&k, &kpj) in self.slot[r.clone()].iter().zip(&self.kernel[r]) {
+            let k = k as usize;
+            f(k, self.centre[k], self.u[p] * kpj * self.v[k]);
+        }
+    }
+
+    /// Each slot's cell: the cells with capacity within the reach of some point.
+    pub fn active_cells(&self) -> &[u32] {
+        &self.active
+    }
+
+    /// `v_j` of every slot.
+    pub fn column_scalings(&self) -> &[f64] {
+        &self.v
+    }
+}
+
+/// The points' indices sorted by the cell holding them (stably).
+fn sorted_by_cell<const D: usize>(tg: &TransportGrid<D>, points: &[Vector<D>]) -> Vec<u32> {
+    let mut order: Vec<u32> = (0..points.len() as u32).collect();
+    order.sort_by_cached_key(|&p| tg.grid.cell_index(cell_of(tg, &points[p as usize])));
+    order
+}
+
+/// The cell holding `x` (clamped onto the grid).
+fn cell_of<const D: usize>(tg: &TransportGrid<D>, x: &Vector<D>) -> [usize; D] {
+    std::array::from_fn(|k| ((x[k] / tg.h).max(0.0) as usize).min(tg.grid.dims[k] - 1))
+}
+
+/// One point's kernel along each axis: the first cell of its box, and per cell of the box the
+/// squared distance and factor `e^(-d^2 / eps)` (reused from point to point).
+#[derive(Default)]
+struct Axes {
+    lo: Vec<usize>,
+    d2: Vec<Vec<f64>>,
+    factor: Vec<Vec<f64>>,
+}
+
+impl Axes {
+    /// Calls `f(j, K_pj)` for the cells with capacity within the kernel's ball around `x`, in
+    /// grid order: `K_pj` is the product of the per-axis factors (the outer axes' first), and
+    /// the ball test is on the sum of the per-axis squares.
+    fn ball<const D: usize>(
+        &mut self,
         tg: &TransportGrid<D>,
-        points: &[Vector<D>],
-        j: usize,
+        x: &Vector<D>,
+        s: &SinkhornSettings,
         mut f: impl FnMut(usize, f64),
     ) {
-        let gj = self.g[j];
-        self.for_each_point(tg, points, j, |p, v| f(p, (gj + v).exp()));
-    }
-
-    /// The cells with capacity within the reach of some point.
-    pub fn active_cells(&self) -> impl Iterator<Item = usize> + '_ {
-        self.active.iter().map(|&j| j as usize)
+        let r = s.radius();
+        let (r2, reach) = (r * r, (r / tg.h).ceil() as usize);
+        let c = cell_of(tg, x);
+        self.lo.clear();
+        self.d2.resize(D, vec![]);
+        self.factor.resize(D, vec![]);
+        for k in 0..D {
+            let (lo, hi) = (
+                c[k].saturating_sub(reach),
+                (c[k] + reach).min(tg.grid.dims[k] - 1),
+            );
+            self.lo.push(lo);
+            self.d2[k].clear();
+            self.d2[k].extend((lo..=hi).map(|i| ((i as f64 + 0.5) * tg.h - x[k]).powi(2)));
+            self.factor[k].clear();
+            self.factor[k].extend(self.d2[k].iter().map(|d2| (-d2 / s.epsilon).exp()));
+        }
+        // An odometer over the outer axes 1..D, the innermost axis 0 run along a grid row.
+        let mut at = [0usize; D];
+        loop {
+            let (mut d2, mut kernel) = (0.0, 1.0);
+            for k in (1..D).rev() {
+                d2 += self.d2[k][at[k]];
+                kernel *= self.factor[k][at[k]];
+            }
+            if d2 <= r2 {
+                let base = tg
+                    .grid
+                    .cell_index(std::array::from_fn(|k| self.lo[k] + at[k]));
+                for (i, (dx2, fx)) in self.d2[0].iter().zip(&self.factor[0]).enumerate() {
+                    if d2 + dx2 <= r2 && tg.capacity[base + i] > 0.0 {
+                        f(base + i, kernel * fx);
+                    }
+                }
+            }
+            let mut k = 1;
+            while k < D && at[k] + 1 == self.d2[k].len() {
+                at[k] = 0;
+                k += 1;
+            }
+            if k == D {
+                return;
+            }
+            at[k] += 1;
+        }
     }
 }
 
@@ -385,21 +527,14 @@ mod tests {
     use rand::rngs::StdRng;
     use rand::{Rng, SeedableRng};
 
-    /// `sum_p T_pj` of every cell (zero where no point reaches), through the columns.
-    fn column_sums<const D: usize>(
-        t: &Transport<D>,
-        tg: &TransportGrid<D>,
-        points: &[Vector<D>],
-    ) -> Vec<f64> {
-        let mut out = vec![0.0; tg.grid.num_cells()];
-        for j in t.active_cells() {
-            t.for_each_in_column(tg, points, j, |_, v| out[j] += v);
-        }
-        out
-    }
+    const S: SinkhornSettings = SinkhornSettings {
+        epsilon: 0.1,
+        delta: 0.1,
+        max_iterations: 10_000,
+    };
 
     /// `n` random points in a box of `cells` transport cells of side 0.5, the middle cell
-    /// blocked, their volumes together `fill` times the free volume.
+    /// blocked, their volumes together `fill` times the free volume; air free.
     fn instance<const D: usize>(
         cells: [usize; D],
         n: usize,
@@ -410,25 +545,91 @@ mod tests {
         let grid = Grid::new(cells);
         let mut capacity = vec![h.powi(D as i32); grid.num_cells()];
         capacity[grid.num_cells() / 2] = 0.0;
-        let tg = TransportGrid { grid, h, capacity };
-        let mut rng = StdRng::seed_from_u64(seed);
-        let points: Vec<Vector<D>> = (0..n)
-            .map(|_| loop {
-                let x = Vector::<D>::from_fn(|k, _| rng.random::<f64>() * cells[k] as f64 * h);
-                if tg.capacity[tg.grid.cell_index(tg.cell_of(&x))] > 0.0 {
-                    break x;
-                }
-            })
-            .collect();
+        let tg = TransportGrid {
+            grid,
+            h,
+            capacity,
+            air: Air::Capacity,
+        };
+        let points = random_points(&tg, n, 1.0, seed);
         let free: f64 = tg.capacity.iter().sum();
         (tg, points, fill * free / n as f64)
     }
 
-    /// Both marginals, recounted entry by entry through the rows and through the columns.
+    /// `n` random points in the free cells of `tg` below `height` times its height (axis 1).
+    fn random_points<const D: usize>(
+        tg: &TransportGrid<D>,
+        n: usize,
+        height: f64,
+        seed: u64,
+    ) -> Vec<Vector<D>> {
+        let mut rng = StdRng::seed_from_u64(seed);
+        let dims = tg.grid.dims;
+        (0..n)
+            .map(|_| loop {
+                let x = Vector::<D>::from_fn(|k, _| {
+                    let side = dims[k] as f64 * tg.h * if k == 1 { height } else { 1.0 };
+                    rng.random::<f64>() * side
+                });
+                if tg.capacity[tg.grid.cell_index(cell_of(tg, &x))] > 0.0 {
+                    break x;
+                }
+            })
+            .collect()
+    }
+
+    /// A tank of `cells` transport cells of side 0.5, half full: a solid wall (the cells of
+    /// axis 0 index 2, below three quarters of the height), `n` random points below half its
+    /// height carrying its free volume there, the air baseline zero below 3/8 of the height,
+    /// half the cell volume up to 5/8 (the surface) and the cell volume above. (A baseline
+    /// that is zero in exactly the cells the points' volume fills leaves no room for the
+    /// kernels' tails: those cells must be full, and the plan only tends to that as the air
+    /// cells' scalings go to zero.)
+    fn half_full<const D: usize>(
+        cells: [usize; D],
+        n: usize,
+        eta: f64,
+        seed: u64,
+    ) -> (TransportGrid<D>, Vec<Vector<D>>, f64) {
+        let h: f64 = 0.5;
+        let grid = Grid::new(cells);
+        let cell = h.powi(D as i32);
+        let at = |j: usize| grid.cell_coords(j);
+        let capacity: Vec<f64> = (0..grid.num_cells())
+            .map(|j| match at(j)[0] == 2 && 4 * at(j)[1] < 3 * cells[1] {
+                true => 0.0,
+                false => cell,
+            })
+            .collect();
+        let below = |j: usize| 2 * at(j)[1] < cells[1];
+        let baseline = (0..grid.num_cells())
+            .map(|j| match 8 * at(j)[1] {
+                y if y < 3 * cells[1] => 0.0,
+                y if y < 5 * cells[1] => cell / 2.0,
+                _ => cell,
+            })
+            .collect();
+        let liquid: f64 = (0..grid.num_cells())
+            .filter(|&j| below(j))
+            .map(|j| capacity[j])
+            .sum();
+        let air = Air::Baseline { eta, baseline };
+        let tg = TransportGrid {
+            grid,
+            h,
+            capacity,
+            air,
+        };
+        let points = random_points(&tg, n, 0.5, seed);
+        (tg, points, liquid / n as f64)
+    }
+
+    /// Both marginals, recounted entry by entry through the rows and through the columns, and
+    /// each column's, with the air its model gives, met to `delta`.
     fn check_marginals<const D: usize>(
         tg: &TransportGrid<D>,
-        pts: &[Vector<D>],
         t: &Transport<D>,
+        n: usize,
         delta: f64,
     ) {
         assert!(
@@ -436,69 +637,98 @@ mod tests {
             "stopped at {} iterations, error {}",
             t.iterations, t.error
         );
-        for p in 0..pts.len() {
+        let cols = t.columns(0.0, |_| 1.0);
+        let mut by_rows = vec![0.0; cols.len()];
+        for p in 0..n {
             let mut row = 0.0;
-            t.for_each_in_row(tg, pts, p, |_, _, v| row += v);
+            t.for_each_in_row(p, |k, _, v| {
+                row += v;
+                by_rows[k] += v;
+            });
             assert!(
                 (row / t.volume - 1.0).abs() < 1e-12,
                 "row {p}: {row} for {}",
                 t.volume
             );
         }
-        let cols = column_sums(t, tg, pts);
-        let mut by_rows = vec![0.0; cols.len()];
-        for p in 0..pts.len() {
-            t.for_each_in_row(tg, pts, p, |j, _, v| by_rows[j] += v);
-        }
-        for j in 0..cols.len() {
-            assert!((cols[j] - by_rows[j]).abs() <= 1e-12 * (1.0 + cols[j]));
-            let ratio = cols[j] / tg.capacity[j].max(f64::MIN_POSITIVE);
-            assert!(ratio <= 1.0 + delta, "cell {j} over-full: {ratio}");
-            if t.g[j] < 0.0 {
-                assert!(ratio >= 1.0 - delta, "full cell {j} at {ratio}");
-            }
-            if tg.capacity[j] == 0.0 {
-                assert_eq!(by_rows[j], 0.0, "a blocked cell holds volume");
+        for (k, &j) in t.active_cells().iter().enumerate() {
+            let (j, v) = (j as usize, t.column_scalings()[k]);
+            assert!((cols[k] - by_rows[k]).abs() <= 1e-12 * (1.0 + cols[k]));
+            assert!(tg.capacity[j] > 0.0, "a blocked cell holds volume");
+            let ratio = cols[k] / tg.capacity[j];
+            match &tg.air {
+                Air::Capacity => {
+                    assert!(ratio <= 1.0 + delta, "cell {j} over-full: {ratio}");
+                    assert!(v >= 1.0 || ratio >= 1.0 - delta, "full cell {j} at {ratio}");
+                }
+                Air::Baseline { eta, baseline } => {
+                    let air = baseline[j] * v.powf(1.0 / eta) / tg.capacity[j];
+                    let e = ratio + air - 1.0;
+                    assert!(e.abs() <= delta, "cell {j}: {ratio} kernels + {air} air");
+                }
             }
         }
     }
 
     #[test]
     fn random_instances_meet_both_marginals_to_delta_in_2d_and_3d() {
-        let s = SinkhornSettings {
-            epsilon: 0.1,
-            delta: 0.1,
-            max_iterations: 10_000,
-        };
         for seed in 0..4 {
             // Half full (a free surface) and nearly full (most cells full).
             for fill in [0.5, 0.9] {
                 let (tg, pts, v) = instance([16, 12], 150, fill, seed);
-                let t = Transport::solve(&tg, &pts, v, &s, None).unwrap();
-                check_marginals(&tg, &pts, &t, s.delta);
+                let t = Transport::solve(&tg, &pts, v, &S, None).unwrap();
+                check_marginals(&tg, &t, pts.len(), S.delta);
                 let (tg, pts, v) = instance([8, 6, 7], 300, fill, seed);
-                let t = Transport::solve(&tg, &pts, v, &s, None).unwrap();
-                check_marginals(&tg, &pts, &t, s.delta);
+                let t = Transport::solve(&tg, &pts, v, &S, None).unwrap();
+                check_marginals(&tg, &t, pts.len(), S.delta);
             }
         }
         // A tighter delta is met as well.
-        let tight = SinkhornSettings { delta: 1e-6, ..s };
+        let tight = SinkhornSettings { delta: 1e-6, ..S };
         let (tg, pts, v) = instance([16, 12], 150, 0.9, 7);
-        check_marginals(
-            &tg,
-            &pts,
-            &Transport::solve(&tg, &pts, v, &tight, None).unwrap(),
-            1e-6,
-        );
+        let t = Transport::solve(&tg, &pts, v, &tight, None).unwrap();
+        check_marginals(&tg, &t, pts.len(), 1e-6);
+    }
+
+    #[test]
+    fn with_an_air_baseline_both_marginals_are_met_to_delta_in_2d_and_3d() {
+        // Half full with a free surface and a solid wall, at eta = 1 (closed form) and 3
+        // (Newton), to Levi's delta and to a tight one.
+        for (seed, eta, delta) in [(0, 1.0, 0.1), (1, 3.0, 0.1), (2, 1.0, 1e-6), (3, 0.5, 1e-6)] {
+            let s = SinkhornSettings { delta, ..S };
+            let (tg, pts, v) = half_full([16, 12], 200, eta, seed);
+            let t = Transport::solve(&tg, &pts, v, &s, None).unwrap();
+            check_marginals(&tg, &t, pts.len(), delta);
+            let (tg, pts, v) = half_full([8, 8, 6], 400, eta, seed);
+            let t = Transport::solve(&tg, &pts, v, &s, None).unwrap();
+            check_marginals(&tg, &t, pts.len(), delta);
+        }
+    }
+
+    #[test]
+    fn the_baseline_column_update_solves_its_equation() {
+        // At eta = 1 the closed form; otherwise Newton meets v c + b v^(1/eta) = cap.
+        for (cap, c, b, eta) in [
+            (0.25, 0.3, 0.1, 2.0),
+            (0.25, 1e-6, 0.25, 3.0),
+            (0.125, 5.0, 0.0, 0.5),
+            (0.125, 0.0, 0.1, 0.5),
+            (1.0, 0.5, 0.5, 1.0 + 1e-9),
+        ] {
+            let v = baseline_newton(cap, c, b, eta);
+            let lhs = v * c + b * v.powf(1.0 / eta);
+            assert!(
+                (lhs / cap - 1.0).abs() < 1e-12,
+                "{cap} {c} {b} {eta}: {lhs}"
+            );
+        }
+        let v = baseline_newton(1.0, 0.5, 0.5, 1.0 + 1e-9);
+        assert!((v - 1.0).abs() < 1e-8, "{v}");
     }
 
     #[test]
     fn the_plan_is_the_same_whatever_the_thread_count() {
-        let s = SinkhornSettings {
-            epsilon: 0.1,
-            delta: 1e-3,
-            max_iterations: 10_000,
-        };
+        let s = SinkhornSettings { delta: 1e-3, ..S };
         let (tg, pts, v) = instance([10, 8, 6], 200, 0.8, 3);
         let solve = |threads| {
             let pool = rayon::ThreadPoolBuilder::new()
@@ -508,7 +738,30 @@ mod tests {
             pool.install(|| Transport::solve(&tg, &pts, v, &s, None).unwrap())
         };
         let (a, b) = (solve(1), solve(2));
-        assert_eq!((a.f, a.g, a.iterations), (b.f, b.g, b.iterations));
+        assert_eq!((&a.g, a.iterations), (&b.g, b.iterations));
+        assert_eq!(a.columns(0.0, |_| 1.0), b.columns(0.0, |_| 1.0));
+    }
+
+    /// Point `x`'s row alone on `tg`: its volume, barycentre and largest entry.
+    fn lone_row<const D: usize>(
+        tg: &TransportGrid<D>,
+        x: Vector<D>,
+        v: f64,
+    ) -> (f64, Vector<D>, f64) {
+        let s = SinkhornSettings {
+            delta: 1e-12,
+            max_iterations: 50,
+            ..S
+        };
+        let t = Transport::solve(tg, &[x], v, &s, None).unwrap();
+        check_marginals(tg, &t, 1, 1e-10);
+        let (mut mass, mut centre, mut peak) = (0.0, Vector::<D>::zeros(), 0.0f64);
+        t.for_each_in_row(0, |_, xj, v| {
+            mass += v;
+            centre += v * xj;
+            peak = peak.max(v);
+        });
+        (mass, centre / mass, peak)
     }
 
     #[test]
@@ -520,37 +773,51 @@ mod tests {
             capacity: vec![0.25; grid.num_cells()],
             grid,
             h: 0.5,
+            air: Air::Capacity,
         };
         let x = Vector::<2>::new(5.25, 4.75);
-        let s = SinkhornSettings {
-            epsilon: 0.1,
-            delta: 1e-12,
-            max_iterations: 5,
-        };
-        let t = Transport::solve(&tg, &[x], 0.2, &s, None).unwrap();
-        assert_eq!(t.iterations, 1);
-        let (mut mass, mut centre, mut peak) = (0.0, Vector::<2>::zeros(), 0.0f64);
-        t.for_each_in_row(&tg, &[x], 0, |_, xj, v| {
-            mass += v;
-            centre += v * xj;
-            peak = peak.max(v);
-        });
+        let (mass, centre, peak) = lone_row(&tg, x, 0.2);
         assert!((mass - 0.2).abs() < 1e-15);
-        assert!((centre / mass - x).norm() < 1e-12);
+        assert!((centre - x).norm() < 1e-12);
         // The peak cell holds 1 / sum_j exp(-|x - x_j|^2 / eps) of the volume.
         let z: f64 = (-8i32..=8)
             .flat_map(|a| (-8i32..=8).map(move |b| (a, b)))
+            .filter(|(a, b)| 0.25 * (a * a + b * b) as f64 <= S.radius().powi(2))
             .map(|(a, b)| (-0.25 * (a * a + b * b) as f64 / 0.1).exp())
             .sum();
         assert!((peak - 0.2 / z).abs() < 1e-12, "{peak} vs {}", 0.2 / z);
     }
 
     #[test]
+    fn a_lone_point_in_a_half_full_region_keeps_its_volume_and_its_centre_2d_and_3d() {
+        // Every cell's baseline is half its volume: the air takes half of each cell, the
+        // kernel stays a symmetric Gaussian holding exactly V_p, and both marginals hold.
+        fn check<const D: usize>(x: Vector<D>) {
+            let grid = Grid::new([16; D]);
+            let cell = 0.5f64.powi(D as i32);
+            let n = grid.num_cells();
+            let tg = TransportGrid {
+                capacity: vec![cell; n],
+                grid,
+                h: 0.5,
+                air: Air::Baseline {
+                    eta: 1.0,
+                    baseline: vec![cell / 2.0; n],
+                },
+            };
+            let (mass, centre, _) = lone_row(&tg, x, 0.3 * cell);
+            assert!((mass / (0.3 * cell) - 1.0).abs() < 1e-12, "{D}D: {mass}");
+            assert!((centre - x).norm() < 1e-12, "{D}D: {centre:?}");
+        }
+        check(Vector::<2>::new(4.25, 3.75));
+        check(Vector::<3>::new(4.25, 3.75, 4.25));
+    }
+
+    #[test]
     fn refuses_overfull_and_out_of_reach_points() {
         let s = SinkhornSettings {
-            epsilon: 0.1,
-            delta: 0.1,
             max_iterations: 100,
+            ..S
         };
         let (tg, pts, v) = instance([6, 6], 20, 1.0, 1);
         let e = Transport::solve(&tg, &pts, v * 1.01, &s, None).unwrap_err();

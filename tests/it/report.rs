@@ -11,8 +11,8 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 /// A scene whose emitter velocity makes the grid velocity overflow in the first step.
-/// A full tank whose particles are 1.5 times too large for Power PIC's transport cells: its
-/// powerpic runs fail at step 1 (the Sinkhorn solve cannot place them), the others run. (An
+/// A full tank whose particles are 1.44 times too large for Power PIC's transport cells
+/// (`tau = 0.3`: `V_p = 0.6^2` cells at 4 per cell): its powerpic runs fail at step 1 (the Sinkhorn solve cannot place them), the others run. (An
 /// emitter at 1e300 m/s used to be the failing scene; it is now refused before it runs.)
 const OVERFLOW: &str = r#"
 name = "overflow"
@@ -21,7 +21,7 @@ dim = 2
 size = [1.0, 1.0]
 cells = 16
 [simulation.powerpic]
-eta = 1.5
+tau = 0.3
 [[fluid]]
 shape = "box"
 min = [0.0, 0.0]
@@ -147,7 +147,7 @@ fn failing_runs_are_rows_that_say_why() {
         let s = &r["status"];
         match r["method"].as_str() {
             "powerpic" => assert!(
-                s.starts_with("failed: step 1: ") && s.contains("simulation.powerpic.eta"),
+                s.starts_with("failed: step 1: ") && s.contains("simulation.powerpic.tau"),
                 "{s}"
             ),
             m => assert!(

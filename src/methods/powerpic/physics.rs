@@ -1,19 +1,20 @@
 //! Method powerpic's step: the hooks it implements (see the module doc of `super`).
 
-use super::settings::PowerPicSettings;
+use super::air::air_baseline;
+use super::settings::{AirForm, PowerPicSettings};
 use crate::grid::{Grid, MacField, Vector};
 use crate::methods::seam::{FluidMethod, MethodRecording, MethodReport};
 use crate::metrics::InvariantViolation;
 use crate::sim::advect::displace;
 use crate::sim::transfer::{self, Known};
 use crate::sim::State;
-use crate::solvers::sinkhorn::{SinkhornError, Transport, TransportGrid};
+use crate::solvers::sinkhorn::{Air, SinkhornError, Transport, TransportGrid};
 use rayon::prelude::*;
 
 /// Power PIC in a running simulation.
 pub struct PowerPicSim<const D: usize> {
     settings: PowerPicSettings,
-    /// `V_p`, cells.
+    /// `V_p = (2 tau)^d`, cells.
     volume: f64,
     tg: TransportGrid<D>,
     /// This step's plan, for the particles' positions at its start.
@@ -35,6 +36,7 @@ impl<const D: usize> PowerPicSim<D> {
                 grid: Grid::new([1; D]),
                 h: 1.0,
                 capacity: vec![],
+                air: Air::Capacity,
             },
             plan: None,
             fill: vec![],
@@ -43,8 +45,9 @@ impl<const D: usize> PowerPicSim<D> {
         }
     }
 
-    /// Transport cells in solid cells have no capacity (the solids of this step).
-    fn update_capacity(&mut self, s: &State<D>) {
+    /// Transport cells in solid cells have no capacity (the solids of this step); the air's
+    /// cost from the settings, with the baseline of this step's markings.
+    fn update_cells(&mut self, s: &State<D>) {
         let tg = &mut self.tg;
         let cell_volume = tg.h.powi(D as i32);
         let solid = &s.solids.solid;
@@ -54,13 +57,20 @@ impl<const D: usize> PowerPicSim<D> {
                 .cell_index_of(&(tg.grid.center(tg.grid.cell_coords(j)) * tg.h));
             *v = if solid[c] { 0.0 } else { cell_volume };
         });
+        tg.air = match self.settings.air {
+            AirForm::Capacity => Air::Capacity,
+            AirForm::Baseline => Air::Baseline {
+                eta: self.settings.eta,
+                baseline: air_baseline(tg, &s.grid, &s.markings, s.config.mu()),
+            },
+        };
     }
 
     /// A solver failure as an error naming the setting that causes it.
     fn explain(&self, e: SinkhornError) -> anyhow::Error {
         let key = match e {
             SinkhornError::KernelVanishes { .. } => "simulation.powerpic.epsilon",
-            SinkhornError::Overfull { .. } => "simulation.powerpic.eta",
+            SinkhornError::Overfull { .. } => "simulation.powerpic.tau",
             SinkhornError::Diverged { .. } => "simulation.powerpic",
         };
         anyhow::anyhow!("{key}: Sinkhorn failed: {e}")
@@ -72,14 +82,12 @@ impl<const D: usize> PowerPicSim<D> {
             .expect("the plan is made in particles_to_grid")
     }
 
-    /// Empty volume of the transport cells of the liquid's cells.
+    /// Empty volume of the transport cells of the liquid's cells (every one of them is within
+    /// the reach of its particles, so among the plan's).
     fn air_in_liquid(&self, s: &State<D>) -> f64 {
         let tg = &self.tg;
-        (0..tg.capacity.len())
-            .filter(|&j| {
-                let x = tg.grid.center(tg.grid.cell_coords(j)) * tg.h;
-                s.markings.is_fluid(s.grid.cell_index_of(&x))
-            })
+        (self.plan().active_cells().iter().map(|&j| j as usize))
+            .filter(|&j| s.markings.is_fluid(s.grid.cell_index_of(&tg.center(j))))
             .map(|j| (tg.capacity[j] - self.fill[j]).max(0.0))
             .sum()
     }
@@ -87,8 +95,7 @@ impl<const D: usize> PowerPicSim<D> {
 
 impl<const D: usize> FluidMethod<D> for PowerPicSim<D> {
     fn start(&mut self, s: &mut State<D>) {
-        let tau = self.settings.tau(s.config.per_axis);
-        self.volume = self.settings.eta * (2.0 * tau).powi(D as i32);
+        self.volume = (2.0 * self.settings.tau(s.config.per_axis)).powi(D as i32);
         let refine = self.settings.refine;
         let grid = Grid::new(std::array::from_fn(|k| s.grid.dims[k] * refine));
         let n = grid.num_cells();
@@ -96,35 +103,26 @@ impl<const D: usize> FluidMethod<D> for PowerPicSim<D> {
             grid,
             h: 1.0 / refine as f64,
             capacity: vec![0.0; n],
+            air: Air::Capacity,
         };
     }
 
     /// Steps 1 and 2: the plan, then each transport cell's mass and momentum to the faces.
     fn particles_to_grid(&mut self, s: &State<D>) -> anyhow::Result<(MacField<D>, Known<D>)> {
-        self.update_capacity(s);
+        self.update_cells(s);
         let (pos, vel) = (&s.particles.pos, &s.particles.vel);
         let warm = self.plan.take().map(|p| p.g);
         let plan = Transport::solve(&self.tg, pos, self.volume, &self.settings.sinkhorn(), warm)
             .map_err(|e| self.explain(e))?;
         let tg = &self.tg;
-        let active: Vec<usize> = plan.active_cells().collect();
-        let columns: Vec<(f64, Vector<D>)> = active
-            .par_iter()
-            .map(|&j| {
-                let (mut mass, mut momentum) = (0.0, Vector::<D>::zeros());
-                plan.for_each_in_column(tg, pos, j, |p, t| {
-                    mass += t;
-                    momentum += t * vel[p];
-                });
-                (mass, momentum)
-            })
-            .collect();
+        let mass = plan.columns(0.0, |_| 1.0);
+        let momentum = plan.columns(Vector::<D>::zeros(), |p| vel[p]);
         let mut fill = vec![0.0; tg.capacity.len()];
         let (mut centres, mut velocities, mut masses) = (vec![], vec![], vec![]);
-        for (&j, &(m, mv)) in active.iter().zip(&columns) {
-            fill[j] = m;
+        for ((&j, &m), mv) in plan.active_cells().iter().zip(&mass).zip(&momentum) {
+            fill[j as usize] = m;
             if m > 0.0 {
-                centres.push(tg.center(j));
+                centres.push(tg.center(j as usize));
                 velocities.push(mv / m);
                 masses.push(m);
             }
@@ -150,15 +148,9 @@ impl<const D: usize> FluidMethod<D> for PowerPicSim<D> {
     ) -> bool {
         let plan = self.plan();
         let (tg, g) = (&self.tg, &s.grid);
-        let mut slot = vec![u32::MAX; tg.capacity.len()];
-        let active: Vec<usize> = plan.active_cells().collect();
-        for (k, &j) in active.iter().enumerate() {
-            slot[j] = k as u32;
-        }
-        let at_cells: Vec<(Vector<D>, Vector<D>)> = active
-            .par_iter()
+        let at_cells: Vec<(Vector<D>, Vector<D>)> = (plan.active_cells().par_iter())
             .map(|&j| {
-                let x = tg.center(j);
+                let x = tg.center(j as usize);
                 let un = u.interpolate(g, &x);
                 (un, un - u_old.interpolate(g, &x))
             })
@@ -171,8 +163,8 @@ impl<const D: usize> FluidMethod<D> for PowerPicSim<D> {
             .map(|p| {
                 let (mut mass, mut centre) = (0.0, Vector::<D>::zeros());
                 let (mut un, mut du) = (Vector::<D>::zeros(), Vector::<D>::zeros());
-                plan.for_each_in_row(tg, pos, p, |j, xj, t| {
-                    let (a, b) = at_cells[slot[j] as usize];
+                plan.for_each_in_row(p, |k, xj, t| {
+                    let (a, b) = at_cells[k];
                     mass += t;
                     centre += t * xj;
                     un += t * a;
@@ -196,8 +188,8 @@ impl<const D: usize> FluidMethod<D> for PowerPicSim<D> {
     }
 
     /// The plan's marginals, recounted from the cells' sums: every particle's row holds its
-    /// volume (to rounding), and, when Sinkhorn converged, no cell is over-full by more than
-    /// `delta` and full cells are full to `delta`.
+    /// volume (to rounding), and, when Sinkhorn converged, every cell's column, with the air
+    /// its model gives, holds to `delta`.
     fn check_invariants(&self, _s: &State<D>) -> Result<(), InvariantViolation> {
         let Some(plan) = &self.plan else {
             return Ok(());
@@ -212,14 +204,15 @@ impl<const D: usize> FluidMethod<D> for PowerPicSim<D> {
             return Ok(());
         }
         let delta = self.settings.delta * (1.0 + 1e-9);
-        for j in plan.active_cells() {
-            let ratio = self.fill[j] / self.tg.capacity[j];
-            let full = plan.g[j] < 0.0;
-            if ratio - 1.0 > delta || (full && 1.0 - ratio > delta) {
+        let v = plan.column_scalings();
+        for (&j, &v) in plan.active_cells().iter().zip(v) {
+            let (j, fill) = (j as usize, self.fill[j as usize]);
+            let error = self.tg.column_error(j, fill, v);
+            if error > delta {
                 return Err(InvariantViolation(format!(
-                    "powerpic: transport cell {j} is filled to {ratio:.4} of its capacity \
-                     (full: {full}) after Sinkhorn converged to delta = {}",
-                    self.settings.delta
+                    "powerpic: transport cell {j} holds {fill:e} of its {:e} with column \
+                     error {error:.4} after Sinkhorn converged to delta = {}",
+                    self.tg.capacity[j], self.settings.delta
                 )));
             }
         }

@@ -5,6 +5,17 @@ use crate::methods::seam::{SettingContext, SettingError};
 use crate::solvers::sinkhorn::SinkhornSettings;
 use serde::{Deserialize, Serialize};
 
+/// How the free surface's air is costed in the transport (see [`crate::solvers::sinkhorn`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum AirForm {
+    /// Free air: a transport cell holds at most its volume.
+    Capacity,
+    /// Air pulled towards the air occupancy baseline estimated from the markings, with weight
+    /// `eta`.
+    Baseline,
+}
+
 /// Power PIC's parameters: `[simulation.powerpic]` in a scene file.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -13,12 +24,18 @@ pub struct PowerPicSettings {
     pub refine: usize,
     /// `eps`, the entropic regularisation, in cells squared (Levi: 0.1).
     pub epsilon: f64,
-    /// `eta`: a particle's volume as a multiple of its rest volume `(2 tau)^d` (Levi: 1).
+    /// `eta`: the weight of the air term `eta eps KL(a | b)` in the baseline form (Levi: 1; our
+    /// reading, see the module doc of `super`); the capacity form does not use it.
     pub eta: f64,
-    /// `tau`: half a particle's rest spacing, in cells (Levi: `1 / (2 mu^(1/d))`, the default
-    /// when unset).
+    /// `tau`: half a particle's rest spacing, in cells, so that `V_p = (2 tau)^d` is the volume
+    /// of the box each particle stands for (Levi: `1 / (2 mu^(1/d))`, the default when unset,
+    /// which makes `V_p = 1 / mu`; our reading).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub tau: Option<f64>,
+    /// How the free surface's air is costed: `baseline` (the default; pulled towards the air
+    /// baseline estimated from the markings) or `capacity` (free: a transport cell holds at
+    /// most its volume).
+    pub air: AirForm,
     /// `delta`: the relative marginal error at which Sinkhorn stops (Levi: 0.1).
     pub delta: f64,
     /// Sinkhorn iterations per step at most; a step that reaches it is reported.
@@ -32,6 +49,7 @@ impl Default for PowerPicSettings {
             epsilon: 0.1,
             eta: 1.0,
             tau: None,
+            air: AirForm::Baseline,
             delta: 0.1,
             max_iterations: 1000,
         }
@@ -69,14 +87,10 @@ impl PowerPicSettings {
             t.is_finite() && t > 0.0 && t <= 0.5,
             format!("must be a half-width in (0, 0.5] cells, got {t}"),
         )?;
-        let v = p.eta * (2.0 * t).powi(ctx.dim as i32);
         range(
             "eta",
-            p.eta.is_finite() && p.eta > 0.0 && v <= 1.0,
-            format!(
-                "must be positive with eta (2 tau)^d at most one cell (the particle volume), got eta = {} and a volume of {v} cells",
-                p.eta
-            ),
+            p.eta.is_finite() && p.eta > 0.0,
+            format!("must be a positive weight, got {}", p.eta),
         )?;
         range(
             "delta",
