@@ -110,15 +110,35 @@ impl LevelSet {
         self.unite_spheres(grid, pos);
     }
 
-    /// The union with every particle's sphere, at the centres within a cell's reach.
+    /// The union with every particle's sphere, at the centres within a cell's reach: the
+    /// values that lower the level set found in parallel, then applied (a minimum, so in any
+    /// order).
     fn unite_spheres<const D: usize>(&mut self, grid: &Grid<D>, pos: &[Vector<D>]) {
         let radius = particle_radius(D);
-        for x in pos {
-            let cell = grid.cell_of(x).expect("particle inside the domain");
-            for n in std::iter::once(cell).chain(grid.moore_neighbors(cell)) {
-                let c = grid.cell_index(n);
-                self.phi[c] = self.phi[c].min((grid.center(n) - x).norm() - radius);
-            }
+        let reach: Vec<[i64; D]> = (0..3usize.pow(D as u32))
+            .map(|code| std::array::from_fn(|k| (code / 3usize.pow(k as u32) % 3) as i64 - 1))
+            .collect();
+        let phi = &self.phi;
+        let lower: Vec<(usize, f64)> = pos
+            .par_iter()
+            .with_min_len(PARTICLES_PER_TASK)
+            .flat_map_iter(|x| {
+                let cell = grid.cell_of(x).expect("particle inside the domain");
+                reach.iter().filter_map(move |off| {
+                    let mut n = cell;
+                    for k in 0..D {
+                        n[k] = usize::try_from(cell[k] as i64 + off[k]).ok()?;
+                        if n[k] >= grid.dims[k] {
+                            return None;
+                        }
+                    }
+                    let (c, v) = (grid.cell_index(n), (grid.center(n) - x).norm() - radius);
+                    (v < phi[c]).then_some((c, v))
+                })
+            })
+            .collect();
+        for (c, v) in lower {
+            self.phi[c] = self.phi[c].min(v);
         }
     }
 
@@ -218,6 +238,9 @@ impl March {
         }
     }
 }
+
+/// Particles per parallel task of the union with the spheres (enough to outweigh a task's cost).
+const PARTICLES_PER_TASK: usize = 1024;
 
 /// [`LevelSet::remarch`]'s mark of a cell it does not work on.
 pub const FROZEN: u32 = u32::MAX;
