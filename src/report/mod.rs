@@ -92,6 +92,9 @@ fn default_entries(stability: bool) -> Result<Vec<Entry>> {
         Entry::named("compress-2d", &[], true, true),
         Entry::named("falling-obstacle-2d", &[], true, false),
         Entry::named("dam-3d", &[24, 32, 48], true, false),
+        // Narrow-band FLIP's scene: deep liquid, where a band of particles pays.
+        Entry::named("deep-pool-2d", &[], true, false),
+        Entry::named("deep-pool-3d", &[24, 32], true, false),
     ];
     if stability {
         e.push(Entry::named("large-obstacle-2d", &[], false, true));

@@ -47,6 +47,8 @@ pub const BUILT_IN: &[(&str, &str)] = built_in![
     "drop-3d",
     "hydrostatic-2d",
     "martin-moyce-2d",
+    "deep-pool-2d",
+    "deep-pool-3d",
 ];
 
 /// The rate at which a falling obstacle approaches its terminal speed in the water, 1/s,

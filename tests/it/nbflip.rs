@@ -8,6 +8,7 @@ use crate::common::{load, run, run_at_rest, with};
 use cellflip::grid::{Grid, MacField, Vector};
 use cellflip::methods::ccp::BandMode;
 use cellflip::methods::nbflip::levelset::{particle_radius, LevelSet};
+use cellflip::methods::nbflip::region::Region;
 use cellflip::methods::nbflip::{combine, NbflipReport, Resampling};
 use cellflip::methods::MethodKind;
 use cellflip::particles::Particles;
@@ -88,6 +89,60 @@ fn held<const D: usize>(depth: usize, r: u32, method: MethodKind, steps: u64) ->
     runner.sim.state.particles.len()
 }
 
+/// Every step's particles and level set, and the cells the level set was worked on.
+fn steps_of<const D: usize>(scene: &Scene, steps: u64) -> Vec<(Particles<D>, NbflipReport)> {
+    let mut out = vec![];
+    run::<D>(scene, Some(steps), |sim, rep| {
+        out.push((sim.state.particles.clone(), nbflip(rep).clone()))
+    });
+    out
+}
+
+#[test]
+fn the_narrow_level_set_gives_the_dense_one_s_results_2d_and_3d() {
+    // The same particles every step, the same level set wherever the dense one is re-marched
+    // (between its caps -(R + 4) and 5) and the same side everywhere else, while the narrow
+    // one is worked on a part of the grid only. The dam-2d run reaches its emitter (2.5 s).
+    fn check<const D: usize>(name: &str, cells: Option<usize>, steps: u64, most: Option<f64>) {
+        let o = Overrides {
+            cells,
+            ..with(MethodKind::Nbflip, None)
+        };
+        let narrow = load(name, &o);
+        let mut dense = narrow.clone();
+        dense.method.nbflip.narrow = false;
+        let (a, b) = (steps_of::<D>(&narrow, steps), steps_of::<D>(&dense, steps));
+        let mut worked = vec![];
+        for (step, ((pn, n), (pd, d))) in a.iter().zip(&b).enumerate() {
+            let at = format!("{name} step {step}");
+            assert_eq!(pn, pd, "{at}: particles differ");
+            let caps = (-(d.band_r as f64) - 4.0, 5.0);
+            let mut marched = 0;
+            for (c, (&vn, &vd)) in n.phi.phi.iter().zip(&d.phi.phi).enumerate() {
+                if caps.0 < vd && vd < caps.1 {
+                    assert_eq!(vn, vd, "{at}: cell {c}");
+                    marched += 1;
+                }
+                assert_eq!(vn < 0.0, vd < 0.0, "{at}: cell {c} on the other side");
+            }
+            assert!(marched > 0, "{at}");
+            assert_eq!(d.cells_worked, d.phi.phi.len(), "{at}: dense");
+            worked.push(n.cells_worked as f64 / d.cells_worked as f64);
+        }
+        assert_eq!(a.len(), steps as usize);
+        // The deep pools' liquid is mostly far from the surface: not worked on.
+        if let Some(most) = most {
+            let last = worked[worked.len() - 1];
+            assert!(last <= most, "{name}: worked on {last:.2} of the grid");
+        }
+    }
+    check::<2>("dam-2d", None, 300, None);
+    check::<3>("dam-3d", Some(24), 12, None);
+    check::<2>("deep-pool-2d", Some(128), 60, Some(0.5));
+    // At 48 cells the margin (10 cells each way, whole tiles) still spans most of the depth.
+    check::<3>("deep-pool-3d", Some(48), 15, Some(0.7));
+}
+
 #[test]
 fn a_deep_tank_holds_the_band_s_share_of_flip_s_particles_2d_and_3d() {
     // Particles lie at most R below the level set's zero, which the particles' spheres put
@@ -133,6 +188,7 @@ fn resampling_deletes_and_seeds_by_the_level_set_2d() {
         grid: &g,
         phi: &phi,
         solid: &solid,
+        cells: &Region::all(&g).cells,
         r: 3.0,
         mu: 4,
     };

@@ -38,16 +38,11 @@ impl LevelSet {
     /// centre, the distance to the nearest particle within a cell's reach minus the radius;
     /// `+radius` (outside) where none is that close.
     pub fn from_particles<const D: usize>(grid: &Grid<D>, pos: &[Vector<D>]) -> Self {
-        let radius = particle_radius(D);
-        let mut phi = vec![radius; grid.num_cells()];
-        for x in pos {
-            let cell = grid.cell_of(x).expect("particle inside the domain");
-            for n in std::iter::once(cell).chain(grid.moore_neighbors(cell)) {
-                let c = grid.cell_index(n);
-                phi[c] = phi[c].min((grid.center(n) - x).norm() - radius);
-            }
-        }
-        Self { phi }
+        let mut phi = Self {
+            phi: vec![particle_radius(D); grid.num_cells()],
+        };
+        phi.unite_spheres(grid, pos);
+        phi
     }
 
     /// The function `f` sampled at the cell centres.
@@ -74,58 +69,111 @@ impl LevelSet {
         self.interpolate(grid, &x)
     }
 
-    /// Semi-Lagrangian advection over `dt` (first order, as MantaFlow's scene advects `phi`):
-    /// each centre takes the value found where the velocity traces it back from.
-    pub fn advected<const D: usize>(&self, grid: &Grid<D>, u: &MacField<D>, dt: f64) -> Self {
-        let phi = (0..grid.num_cells())
-            .into_par_iter()
-            .map(|c| {
+    /// Semi-Lagrangian advection over `dt` (first order, as MantaFlow's scene advects `phi`),
+    /// of the cells `cells` only: each of their centres in `out` takes the value of `self`
+    /// found where the velocity traces it back from.
+    pub fn advect_into<const D: usize>(
+        &self,
+        grid: &Grid<D>,
+        u: &MacField<D>,
+        dt: f64,
+        cells: &[usize],
+        out: &mut LevelSet,
+    ) {
+        let values: Vec<f64> = cells
+            .par_iter()
+            .map(|&c| {
                 let x = grid.center(grid.cell_coords(c));
                 self.interpolate(grid, &(x - dt * u.interpolate(grid, &x)))
             })
             .collect();
-        Self { phi }
+        for (&c, v) in cells.iter().zip(values) {
+            out.phi[c] = v;
+        }
     }
 
-    /// Ferstl et al.'s combination of the two level sets: the grid's shrunk by one cell (so
-    /// that liquid the particles left does not linger), united with the particles'.
-    pub fn shrunk_union(&self, particles: &LevelSet) -> Self {
-        let phi = self
-            .phi
-            .iter()
-            .zip(&particles.phi)
-            .map(|(g, p)| (g + 1.0).min(*p))
+    /// Ferstl et al.'s combination of the two level sets on the cells `cells`: the advected
+    /// one shrunk by one cell (so that liquid the particles left does not linger), united with
+    /// the particles' ([`LevelSet::from_particles`]; every particle's cell and its neighbours
+    /// must be among `cells`).
+    pub fn unite_shrunk<const D: usize>(
+        &mut self,
+        grid: &Grid<D>,
+        advected: &LevelSet,
+        pos: &[Vector<D>],
+        cells: &[usize],
+    ) {
+        let radius = particle_radius(D);
+        for &c in cells {
+            self.phi[c] = (advected.phi[c] + 1.0).min(radius);
+        }
+        self.unite_spheres(grid, pos);
+    }
+
+    /// The union with every particle's sphere, at the centres within a cell's reach: the
+    /// values that lower the level set found in parallel, then applied (a minimum, so in any
+    /// order).
+    fn unite_spheres<const D: usize>(&mut self, grid: &Grid<D>, pos: &[Vector<D>]) {
+        let radius = particle_radius(D);
+        let reach: Vec<[i64; D]> = (0..3usize.pow(D as u32))
+            .map(|code| std::array::from_fn(|k| (code / 3usize.pow(k as u32) % 3) as i64 - 1))
             .collect();
-        Self { phi }
+        let phi = &self.phi;
+        let lower: Vec<(usize, f64)> = pos
+            .par_iter()
+            .with_min_len(PARTICLES_PER_TASK)
+            .flat_map_iter(|x| {
+                let cell = grid.cell_of(x).expect("particle inside the domain");
+                reach.iter().filter_map(move |off| {
+                    let mut n = cell;
+                    for k in 0..D {
+                        n[k] = usize::try_from(cell[k] as i64 + off[k]).ok()?;
+                        if n[k] >= grid.dims[k] {
+                            return None;
+                        }
+                    }
+                    let (c, v) = (grid.cell_index(n), (grid.center(n) - x).norm() - radius);
+                    (v < phi[c]).then_some((c, v))
+                })
+            })
+            .collect();
+        for (c, v) in lower {
+            self.phi[c] = self.phi[c].min(v);
+        }
     }
 
     /// Re-marches the level set on one side of its zero crossing (MantaFlow's
-    /// `extrapolateLsSimple`): the cells next to the other side keep their values; each
-    /// further layer takes the mean of its neighbours in the layer before, one cell further
-    /// from the surface; cells beyond `layers` layers get `layers + 2` cells. Solid cells
-    /// are marched through but never start a march: a wall is not a surface.
+    /// `extrapolateLsSimple`), over the cells `cells` only: the cells next to the other side
+    /// keep their values; each further layer takes the mean of its neighbours in the layer
+    /// before, one cell further from the surface; cells beyond `layers` layers get `layers + 2`
+    /// cells. Solid cells are marched through but never start a march: a wall is not a
+    /// surface. The march does not leave `cells`; `layer` is scratch space, kept between
+    /// calls so that a call works on `cells` alone (all [`FROZEN`] outside a call).
     pub fn remarch<const D: usize>(
         &mut self,
         grid: &Grid<D>,
-        side: Side,
-        layers: u32,
+        march: March,
         solid: &[bool],
+        cells: &[usize],
+        layer: &mut Vec<u32>,
     ) {
-        let sign = match side {
+        let sign = match march.side {
             Side::Inside => -1.0,
             Side::Outside => 1.0,
         };
-        // 0: not reached, 1: the other side, 2: the first layer, d + 1: layer d.
-        let mut layer: Vec<u32> = (0..grid.num_cells())
-            .into_par_iter()
-            .map(|c| u32::from(!solid[c] && self.phi[c] * sign < 0.0))
-            .collect();
-        let mut ring: Vec<usize> = (0..grid.num_cells())
-            .into_par_iter()
-            .filter(|&c| layer[c] == 0 && neighbours(grid, c).any(|n| layer[n] == 1))
+        let other = |c: usize| !solid[c] && self.phi[c] * sign < 0.0;
+        // FROZEN: not worked on, 0: not reached, 1: the other side, d + 1: layer d.
+        layer.resize(grid.num_cells(), FROZEN);
+        for &c in cells {
+            layer[c] = u32::from(other(c));
+        }
+        let mut ring: Vec<usize> = cells
+            .par_iter()
+            .copied()
+            .filter(|&c| layer[c] == 0 && neighbours(grid, c).any(other))
             .collect();
         ring.iter().for_each(|&c| layer[c] = 2);
-        for d in 2..=layers {
+        for d in 2..=march.layers {
             let mut next: Vec<usize> = ring
                 .iter()
                 .flat_map(|&c| neighbours(grid, c))
@@ -148,14 +196,54 @@ impl LevelSet {
             }
             ring = next;
         }
-        let cap = sign * (layers + 2) as f64;
-        self.phi.par_iter_mut().zip(&layer).for_each(|(v, &l)| {
-            if l == 0 {
-                *v = cap;
+        let cap = march.cap();
+        for &c in cells {
+            if layer[c] == 0 {
+                self.phi[c] = cap;
             }
-        });
+            layer[c] = FROZEN;
+        }
+    }
+
+    /// The cells of `cells` at the zero crossing: liquid cells (not solid, `phi < 0`) next to
+    /// a cell that is neither.
+    pub fn crossing<'a, const D: usize>(
+        &'a self,
+        grid: &'a Grid<D>,
+        solid: &'a [bool],
+        cells: &'a [usize],
+    ) -> impl Iterator<Item = usize> + 'a {
+        let liquid = |c: usize| !solid[c] && self.phi[c] < 0.0;
+        cells
+            .iter()
+            .copied()
+            .filter(move |&c| liquid(c) && neighbours(grid, c).any(|n| !liquid(n)))
     }
 }
+
+/// A re-march: the side and how many layers deep.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct March {
+    pub side: Side,
+    pub layers: u32,
+}
+
+impl March {
+    /// The value of cells beyond the march: `layers + 2` cells from the surface.
+    pub fn cap(&self) -> f64 {
+        let cap = (self.layers + 2) as f64;
+        match self.side {
+            Side::Inside => -cap,
+            Side::Outside => cap,
+        }
+    }
+}
+
+/// Particles per parallel task of the union with the spheres (enough to outweigh a task's cost).
+const PARTICLES_PER_TASK: usize = 1024;
+
+/// [`LevelSet::remarch`]'s mark of a cell it does not work on.
+pub const FROZEN: u32 = u32::MAX;
 
 /// The von Neumann neighbours of cell `c` inside the domain.
 fn neighbours<const D: usize>(grid: &Grid<D>, c: usize) -> impl Iterator<Item = usize> + '_ {
@@ -206,7 +294,10 @@ mod tests {
         let g = Grid::new([4, 5, 12]);
         let mut u = MacField::zeros(&g);
         u.comp[2].iter_mut().for_each(|v| *v = -2.0);
-        let ls = plane(&g, 6.2).advected(&g, &u, 0.5);
+        let mut ls = LevelSet::default();
+        ls.phi = vec![f64::NAN; g.num_cells()];
+        let all: Vec<usize> = (0..g.num_cells()).collect();
+        plane(&g, 6.2).advect_into(&g, &u, 0.5, &all, &mut ls);
         let want = plane(&g, 5.2);
         for c in 0..g.num_cells() {
             // The trace-back leaves the domain above the top centre: clamped there.
@@ -231,7 +322,12 @@ mod tests {
                 ls.phi[c] = -0.1;
             }
         }
-        ls.remarch(&g, Side::Inside, 3, &vec![false; g.num_cells()]);
+        let all: Vec<usize> = (0..g.num_cells()).collect();
+        let inside = March {
+            side: Side::Inside,
+            layers: 3,
+        };
+        ls.remarch(&g, inside, &vec![false; g.num_cells()], &all, &mut vec![]);
         for c in 0..g.num_cells() {
             let y = g.cell_coords(c)[1];
             let want = match y {
@@ -256,7 +352,11 @@ mod tests {
                 ls.phi[c] = 4.0;
             }
         }
-        ls.remarch(&g, Side::Inside, 10, &solid);
+        let all: Vec<usize> = (0..g.num_cells()).collect();
+        let march = |side, layers| March { side, layers };
+        let mut layer = vec![];
+        ls.remarch(&g, march(Side::Inside, 10), &solid, &all, &mut layer);
+        assert!(layer.iter().all(|&l| l == FROZEN), "scratch left as found");
         for c in 0..g.num_cells() {
             let z = g.cell_coords(c)[2];
             if (1..6).contains(&z) {
@@ -265,7 +365,7 @@ mod tests {
         }
         // Outwards, from the liquid: the air above steps up by one cell per layer.
         ls.phi.iter_mut().for_each(|v| *v += 0.25);
-        ls.remarch(&g, Side::Outside, 2, &solid);
+        ls.remarch(&g, march(Side::Outside, 2), &solid, &all, &mut layer);
         assert_eq!(ls.phi[g.cell_index([1, 1, 6])], 0.75);
         assert_eq!(ls.phi[g.cell_index([1, 1, 7])], 1.75);
         assert_eq!(ls.phi[g.cell_index([1, 1, 9])], 4.0);

@@ -29,6 +29,7 @@
 pub mod levelset;
 mod physics;
 mod record;
+pub mod region;
 
 pub use physics::{combine, level, NbflipReport, Resampling};
 
@@ -47,12 +48,17 @@ pub struct NbflipSettings {
     /// `R`: the band's depth in cells (`simulation.nbflip.band_r`, or `simulation.band_r` in a
     /// file whose method has a band; `--band-r`).
     pub band_r: u32,
+    /// Work on the level set only near the surface (`simulation.nbflip.narrow`, default
+    /// true); false works on the whole grid every step, with the same results (for measuring
+    /// and for tests).
+    pub narrow: bool,
 }
 
 impl Default for NbflipSettings {
     fn default() -> Self {
         Self {
             band_r: DEFAULT_BAND_R,
+            narrow: true,
         }
     }
 }
@@ -78,7 +84,7 @@ impl MethodType for Nbflip {
     }
 
     fn build<const D: usize>(s: &NbflipSettings) -> Box<dyn FluidMethod<D>> {
-        Box::new(NbflipSim::<D>::new(s.band_r))
+        Box::new(NbflipSim::<D>::new(s.band_r, s.narrow))
     }
 
     fn summary<const D: usize>(s: &NbflipSettings) -> Box<dyn MethodSummary<D>> {

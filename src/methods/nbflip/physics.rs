@@ -1,6 +1,7 @@
 //! Method nbflip's step: the hooks it implements (see the module doc of `super`).
 
-use super::levelset::{particle_radius, LevelSet, Side};
+use super::levelset::{particle_radius, LevelSet, March, Side};
+use super::region::Region;
 use crate::draw::{depth_level_classes, Log};
 use crate::grid::{Grid, MacField, Vector};
 use crate::methods::seam::{FluidMethod, MethodRecording, MethodReport};
@@ -11,6 +12,7 @@ use crate::sim::markings::{DepthLevel, Markings};
 use crate::sim::transfer::{self, Known};
 use crate::sim::State;
 use rand::Rng;
+use std::sync::Arc;
 
 /// Layers the level set is re-marched into the liquid beyond the band: `R + 2`
 /// (`extrapolateLsSimple(distance = narrowBandWidth + 2, inside = True)` in flip05_nbflip.py).
@@ -25,11 +27,20 @@ const MAX_PER_MU: u32 = 2;
 pub struct NbflipSim<const D: usize> {
     /// The band: particles down to `phi = -R`.
     band: Band,
-    /// The level set of the current markings.
-    phi: LevelSet,
-    /// The level set advected to the end of the step, before the particles are united with it
-    /// (none before the first step).
+    /// Whether the level set is worked on near the surface only (or on the whole grid).
+    narrow: bool,
+    /// The level set of the current markings (shared with the step's report).
+    phi: Arc<LevelSet>,
+    /// The level set advected to the end of the step, before the particles are united with it,
+    /// valid on `advected_over` (none before the first step).
     advected: Option<LevelSet>,
+    advected_over: Region,
+    /// The cells the next advection works on: around the surface and the particles.
+    next: Region,
+    /// The cells the last rebuild worked on.
+    rebuilt: Region,
+    /// [`LevelSet::remarch`]'s scratch.
+    layer: Vec<u32>,
     /// Particles deleted by resampling, net of those seeded.
     not_held: isize,
     /// The first particle seeded by the last resampling (those before it passed its test).
@@ -38,11 +49,16 @@ pub struct NbflipSim<const D: usize> {
 }
 
 impl<const D: usize> NbflipSim<D> {
-    pub fn new(band_r: u32) -> Self {
+    pub fn new(band_r: u32, narrow: bool) -> Self {
         NbflipSim {
             band: Band { r: band_r },
-            phi: LevelSet::default(),
+            narrow,
+            phi: Arc::default(),
             advected: None,
+            advected_over: Region::default(),
+            next: Region::default(),
+            rebuilt: Region::default(),
+            layer: vec![],
             not_held: 0,
             first_seed: 0,
             step: NbflipReport::default(),
@@ -54,18 +70,73 @@ impl<const D: usize> NbflipSim<D> {
         self.band.r as f64
     }
 
-    /// Step 4: the level set from the advected one (if any) and the particles.
-    fn rebuild_level_set(&mut self, s: &State<D>) {
-        let particles = LevelSet::from_particles(&s.grid, &s.particles.pos);
-        let mut phi = match &self.advected {
-            Some(a) => a.shrunk_union(&particles),
-            None => particles,
-        };
-        let solid = &s.solids.solid;
+    /// The re-marches of step 4: inwards `R + 2` layers, outwards 3.
+    fn marches(&self) -> [March; 2] {
         let inside = self.band.r + INSIDE_LAYERS_BEYOND_BAND;
-        phi.remarch(&s.grid, Side::Inside, inside, solid);
-        phi.remarch(&s.grid, Side::Outside, OUTSIDE_LAYERS, solid);
-        self.phi = phi;
+        [
+            March { side: Side::Inside, layers: inside },
+            March { side: Side::Outside, layers: OUTSIDE_LAYERS },
+        ]
+    }
+
+    /// How far (cells, along every axis) from the surface and the particles of a rebuild the
+    /// next rebuild may change the level set: the surface and the particles move at most `cfl`
+    /// cells a step, the interpolation, the shrink and the particles' spheres reach a cell
+    /// further each, and the re-march `R + 2` (or 3) layers beyond the cells next to the
+    /// surface.
+    fn margin(&self, cfl: f64) -> usize {
+        let deepest = self.marches().map(|m| m.layers).into_iter().max().unwrap_or(0);
+        cfl.ceil() as usize + 3 + deepest as usize + 1
+    }
+
+    /// The cells around the particles, and around the obstacles, which change the solid cells
+    /// the re-march reads.
+    fn around_particles(&self, s: &State<D>) -> Region {
+        let g = &s.grid;
+        let obstacles = s.solids.obstacles.iter();
+        let cells = s.particles.pos.iter().map(|x| g.cell_index_of(x));
+        let cells = cells.chain(obstacles.flat_map(|o| o.cells_at(g, &o.offset)));
+        Region::around(g, cells, self.margin(s.config.cfl))
+    }
+
+    /// Step 4: the level set from the advected one (if any) and the particles, on the cells
+    /// advected and those around the particles (new ones from an emitter); the cells to
+    /// advect next.
+    fn rebuild_level_set(&mut self, s: &State<D>) {
+        let (g, solid, pos) = (&s.grid, &s.solids.solid, &s.particles.pos);
+        let (margin, marches) = (self.margin(s.config.cfl), self.marches());
+        let around_particles = self.narrow.then(|| self.around_particles(s));
+        let phi = Arc::make_mut(&mut self.phi);
+        self.rebuilt = match &mut self.advected {
+            Some(advected) => {
+                let cells = match &around_particles {
+                    Some(around) => self.advected_over.union(g, around),
+                    None => Region::all(g),
+                };
+                // Cells not advected this step lie far from the surface: as they are.
+                for &c in &cells.cells {
+                    if !self.advected_over.contains(g, c) {
+                        advected.phi[c] = phi.phi[c];
+                    }
+                }
+                phi.unite_shrunk(g, advected, pos, &cells.cells);
+                cells
+            }
+            None => {
+                *phi = LevelSet::from_particles(g, pos);
+                Region::all(g)
+            }
+        };
+        for march in marches {
+            phi.remarch(g, march, solid, &self.rebuilt.cells, &mut self.layer);
+        }
+        self.next = match around_particles {
+            Some(around) => {
+                let crossing = phi.crossing(g, solid, &self.rebuilt.cells);
+                Region::around(g, crossing, margin).union(g, &around)
+            }
+            None => Region::all(g),
+        };
     }
 
     /// Resampling against the current level set.
@@ -79,6 +150,7 @@ impl<const D: usize> NbflipSim<D> {
             grid,
             phi: &self.phi,
             solid,
+            cells: &self.rebuilt.cells,
             r: self.r(),
             mu,
         }
@@ -134,8 +206,12 @@ impl<const D: usize> FluidMethod<D> for NbflipSim<D> {
         self.step = NbflipReport::default();
     }
 
-    /// Cells deeper than the band count as full: emitters must not fill the deep.
+    /// Cells deeper than the band count as full: emitters must not fill the deep. (Without
+    /// emitters, nothing: no pass over the grid.)
     fn emitter_counts(&self, s: &State<D>) -> Option<Vec<u32>> {
+        if s.config.emitters.is_empty() {
+            return None;
+        }
         let level = |c| level::<D>(&self.phi, &s.solids.solid, self.r(), c);
         Some(counts_with_full_deep(&s.markings, s.config.mu(), level))
     }
@@ -160,9 +236,13 @@ impl<const D: usize> FluidMethod<D> for NbflipSim<D> {
         Ok((u, known))
     }
 
-    /// Step 3: the level set moves with the projected velocity, and so does the grid velocity.
+    /// Step 3: the level set moves with the projected velocity (near the surface), and so does
+    /// the grid velocity.
     fn next_grid_velocity(&mut self, s: &State<D>, u: MacField<D>, dt: f64) -> MacField<D> {
-        self.advected = Some(self.phi.advected(&s.grid, &u, dt));
+        self.advected_over = std::mem::take(&mut self.next);
+        let advected = self.advected.get_or_insert_with(|| (*self.phi).clone());
+        let cells = &self.advected_over.cells;
+        self.phi.advect_into(&s.grid, &u, dt, cells, advected);
         Band::advect_grid_velocity(&s.grid, &u, dt, &s.markings)
     }
 
@@ -210,7 +290,8 @@ impl<const D: usize> FluidMethod<D> for NbflipSim<D> {
             )));
         }
         let mu = s.config.mu();
-        match (0..g.num_cells()).find(|&c| seedable(c) && s.markings.count[c] < mu) {
+        let mut cells = self.rebuilt.cells.iter().copied();
+        match cells.find(|&c| seedable(c) && s.markings.count[c] < mu) {
             Some(c) => Err(InvariantViolation(format!(
                 "band cell {:?} holds {} particles after resampling (mu = {mu})",
                 g.cell_coords(c),
@@ -224,7 +305,8 @@ impl<const D: usize> FluidMethod<D> for NbflipSim<D> {
         let mut rep = std::mem::take(&mut self.step);
         rep.particles = s.particles.len();
         rep.band_r = self.band.r;
-        rep.phi = self.phi.clone();
+        rep.phi = Arc::clone(&self.phi);
+        rep.cells_worked = self.rebuilt.cells.len();
         Box::new(rep)
     }
 }
@@ -249,6 +331,8 @@ pub struct Resampling<'a, const D: usize> {
     pub phi: &'a LevelSet,
     /// Cells no particle is seeded in.
     pub solid: &'a [bool],
+    /// The cells the level set was rebuilt on (the others lie far from the band).
+    pub cells: &'a [usize],
     /// `R`, the band's depth.
     pub r: f64,
     pub mu: u32,
@@ -288,7 +372,8 @@ impl<const D: usize> Resampling<'_, D> {
             keep.push(false);
         }
         p.retain_flagged(&keep);
-        for c in (0..g.num_cells()).filter(|&c| count[c] < mu && self.seedable(c)) {
+        let cells = self.cells.iter().copied();
+        for c in cells.filter(|&c| count[c] < mu && self.seedable(c)) {
             let corner = Vector::<D>::from_fn(|k, _| g.cell_coords(c)[k] as f64);
             for _ in count[c]..mu {
                 let x = corner + Vector::<D>::from_fn(|_, _| rng.random::<f64>());
@@ -313,9 +398,11 @@ pub struct NbflipReport {
     pub crowded: usize,
     /// Particles held after the step.
     pub particles: usize,
+    /// Cells the level set was last rebuilt on (all cells with the dense level set).
+    pub cells_worked: usize,
     /// `R` and the level set after the step.
     pub band_r: u32,
-    pub phi: LevelSet,
+    pub phi: Arc<LevelSet>,
 }
 
 impl NbflipReport {

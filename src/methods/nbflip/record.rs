@@ -91,9 +91,11 @@ impl<const D: usize> MethodSummary<D> for Totals {
         });
         let sum = |f: fn(&NbflipReport) -> usize| self.steps.iter().map(f).sum::<usize>();
         let seeded: Vec<usize> = self.steps.iter().map(|r| r.seeded).collect();
+        let worked: Vec<usize> = self.steps.iter().map(|r| r.cells_worked).collect();
         vec![format!(
-            "narrow band (R = {}): {lo} .. {hi} particles after a step; resampling seeded {} (median {} a step) and deleted {} outside the liquid, {} below the band, {} in crowded cells",
+            "narrow band (R = {}): {lo} .. {hi} particles after a step; level set worked on {} cells (median a step); resampling seeded {} (median {} a step) and deleted {} outside the liquid, {} below the band, {} in crowded cells",
             self.band_r,
+            median(&worked).unwrap_or(0),
             sum(|r| r.seeded),
             median(&seeded).unwrap_or(0),
             sum(|r| r.outside),
