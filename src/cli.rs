@@ -63,6 +63,9 @@ pub struct CompareArgs {
     /// Random seed, the same for every run [default: the scene's].
     #[arg(long)]
     pub seed: Option<u64>,
+    /// 3D: do not draw the liquid's surfaces (meshes, over the particles).
+    #[arg(long)]
+    pub no_surface: bool,
     /// Where the recording goes [default: recordings/<scene>-compare.rrd].
     #[command(flatten)]
     pub sink: SinkArgs,
@@ -248,6 +251,9 @@ pub struct RunArgs {
     /// position as a fraction of the tank along it (e.g. `x=0.3`) [default: z=0.5].
     #[arg(long, value_name = "AXIS[=FRACTION]")]
     pub slice: Option<String>,
+    /// 3D: do not draw the liquid's surface (a mesh, over the particles) in the recording.
+    #[arg(long)]
+    pub no_surface: bool,
     /// No progress bar and no summary.
     #[arg(long, short)]
     pub quiet: bool,

@@ -105,6 +105,7 @@ fn compare_dim<const D: usize>(
             title: e.title.clone(),
             scene: &e.scene,
             color: e.scene.method.kind.rgb(),
+            surface: !args.no_surface,
         })
         .collect();
     let labels: Vec<&str> = entries.iter().map(|e| e.title.as_str()).collect();

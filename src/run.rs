@@ -80,6 +80,7 @@ fn run_dim<const D: usize>(
         _ => None,
     };
     let drawing = Drawing {
+        surface: !args.no_surface,
         moves: args.moves,
         slice: parse_slice(args.slice.as_deref(), D)?,
     };

@@ -85,6 +85,8 @@ pub fn speed_color(speed: f64, max: f64) -> [u8; 3] {
 pub const MOVE_COLOR: [u8; 3] = [255, 60, 200];
 /// Obstacles, their trails and the cells they want.
 pub const OBSTACLE_COLOR: [u8; 3] = [230, 90, 40];
+/// The liquid's surface in 3D (`world/surface`): water blue, lighter than the particles at rest.
+pub const SURFACE_COLOR: [u8; 3] = [90, 160, 235];
 pub const NEW_SOLID_COLOR: [u8; 3] = [255, 200, 0];
 
 /// The name of the colour nearest to `c`, for the legend (markdown cannot colour text, and

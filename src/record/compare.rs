@@ -29,6 +29,8 @@ pub struct ComparedRun<'a> {
     pub scene: &'a Scene,
     /// The method's colour in the report's plots.
     pub color: [u8; 3],
+    /// 3D: draw the liquid's surface.
+    pub surface: bool,
 }
 
 /// A comparison being recorded.
@@ -74,7 +76,11 @@ impl Comparison {
                     .with_names([r.title.as_str()]);
                 out.log_static(s, &line).map_err(cannot)?;
             }
-            let run = RunLog::new(out, r.scene, Drawing::default(), true);
+            let drawing = Drawing {
+                surface: r.surface,
+                ..Drawing::default()
+            };
+            let run = RunLog::new(out, r.scene, drawing, true);
             logs.push((r.title.clone(), run));
         }
         Ok(Self { output, runs: logs })
@@ -154,6 +160,7 @@ fn compared<'a>(r: &ComparedRun<'a>) -> Compared<'a> {
             cross_check: false,
             obstacles: scene.file.obstacle.iter().map(|o| o.name.clone()).collect(),
             slice_axis: 2,
+            surface: r.surface,
         },
     }
 }

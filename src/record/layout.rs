@@ -33,6 +33,8 @@ pub struct RunFacts<'a> {
     pub obstacles: Vec<String>,
     /// 3D: the axis the slice cuts across.
     pub slice_axis: usize,
+    /// 3D: the liquid's surface is drawn (`world/surface`), so the particles start hidden.
+    pub surface: bool,
 }
 
 impl RunFacts<'_> {
@@ -380,6 +382,9 @@ fn world_view(f: &RunFacts<'_>, name: &str, prefix: &str) -> View {
         world.hidden = ["world/grid/markings", "world/corrector/moved"]
             .map(|e| format!("{prefix}{e}"))
             .into();
+        if f.surface {
+            world.hidden.push(format!("{prefix}world/particles"));
+        }
         world.hidden.extend(cell_layers);
         world.eye = Some(eye(&f.dims));
     } else {

@@ -49,6 +49,8 @@ pub struct Drawing {
     pub moves: Moves,
     /// 3D: the slice's axis (0, 1, 2) and position as a fraction of the tank along it.
     pub slice: (usize, f64),
+    /// 3D: the liquid's surface as a mesh in every frame, the particles hidden under it.
+    pub surface: bool,
 }
 
 /// Writes one run: its recording ([`Output`]) with the run drawn in it ([`RunLog`]).
@@ -71,6 +73,7 @@ impl Recorder {
             cross_check,
             obstacles: scene.file.obstacle.iter().map(|o| o.name.clone()).collect(),
             slice_axis: drawing.slice.0,
+            surface: drawing.surface,
         };
         layout::send(rec, &layout::layout(&facts), "step").map_err(cannot)?;
         rec.send_property("run", &run_properties(scene))

@@ -159,6 +159,9 @@ impl RunLog {
             radius_3d: 0.2,
         };
         c.cell_classes("world/grid/markings", &class, &hidden, layer);
+        if D == 3 && self.drawing.surface {
+            c.mesh("world/surface", &liquid_surface(sim), legend::SURFACE_COLOR);
+        }
     }
 
     /// Each obstacle's shape where it is now, and its trail (its centre over the steps).
@@ -209,6 +212,25 @@ impl RunLog {
             eprintln!("warning: recording: {e}");
         }
     }
+}
+
+/// The liquid's surface: around the particles and, for the band methods, the deep cells, which
+/// hold none ([`crate::surface::reconstruct`]).
+fn liquid_surface<const D: usize>(sim: &Simulation<D>) -> crate::surface::SurfaceMesh {
+    let s = &sim.state;
+    let g = &s.grid;
+    let positions: Vec<[f64; 3]> = (s.particles.pos.iter())
+        .map(|p| std::array::from_fn(|k| p[k]))
+        .collect();
+    let deep: Vec<[usize; 3]> = (0..g.num_cells())
+        .filter(|&cell| sim.method.is_deep(s, cell))
+        .map(|cell| {
+            let c = g.cell_coords(cell);
+            std::array::from_fn(|k| c[k])
+        })
+        .collect();
+    let dims = std::array::from_fn(|k| g.dims[k]);
+    crate::surface::reconstruct(&positions, &deep, dims, s.config.mu() as usize)
 }
 
 /// The scalars the state gives, also at the start (step 0): the volume, the particles, the

@@ -142,10 +142,14 @@ fn measure<const D: usize>(scene: &Scene, stop: &dyn Fn() -> bool, m: &mut Measu
     let t0 = std::time::Instant::now();
     let budget = m.spec.budget.unwrap_or(f64::INFINITY);
     let over = || t0.elapsed().as_secs_f64() > budget;
-    let result = runner.run(limit, || stop() || over(), |sim, rep| {
-        observe(sim, rep, mu, h, &mut g, m);
-        Ok(())
-    });
+    let result = runner.run(
+        limit,
+        || stop() || over(),
+        |sim, rep| {
+            observe(sim, rep, mu, h, &mut g, m);
+            Ok(())
+        },
+    );
     m.status = match (&result, runner.summary.interrupted) {
         (Err(e), _) => one_line(&format!("failed: {e:#}")),
         (Ok(()), true) if !stop() => format!(

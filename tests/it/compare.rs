@@ -92,6 +92,7 @@ fn a_run_that_fails_stops_alone_and_its_world_says_why() {
             title: s.method.kind.name().into(),
             scene: s,
             color: s.method.kind.rgb(),
+            surface: false,
         })
         .collect();
     let rec = Comparison::create(&Sink::File(path.clone()), "failure", &runs).unwrap();

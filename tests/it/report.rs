@@ -273,11 +273,25 @@ fn a_run_over_its_budget_stops_and_says_so() {
     let out = common::cellflip_in(
         &dir,
         &[
-            "report", "--scenes", "dam-2d", "--methods", "flip,ccp", "--duration", "1",
-            "--budget", "0.05", "-q", "--out", "out",
+            "report",
+            "--scenes",
+            "dam-2d",
+            "--methods",
+            "flip,ccp",
+            "--duration",
+            "1",
+            "--budget",
+            "0.05",
+            "-q",
+            "--out",
+            "out",
         ],
     );
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     for row in rows(&dir.join("out")) {
         let status = &row["status"];
         assert!(
@@ -298,7 +312,13 @@ fn docs_mode_refuses_a_folder_without_the_readme_markers_before_running() {
     let out = common::cellflip_in(&dir, &["report", "--docs", "-q"]);
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("README.md") && err.contains("results markers"), "{err}");
-    assert!(t0.elapsed().as_secs() < 10, "refused before running the matrix");
+    assert!(
+        err.contains("README.md") && err.contains("results markers"),
+        "{err}"
+    );
+    assert!(
+        t0.elapsed().as_secs() < 10,
+        "refused before running the matrix"
+    );
     assert!(!dir.join("docs").exists(), "nothing written");
 }

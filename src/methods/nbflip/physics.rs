@@ -74,8 +74,14 @@ impl<const D: usize> NbflipSim<D> {
     fn marches(&self) -> [March; 2] {
         let inside = self.band.r + INSIDE_LAYERS_BEYOND_BAND;
         [
-            March { side: Side::Inside, layers: inside },
-            March { side: Side::Outside, layers: OUTSIDE_LAYERS },
+            March {
+                side: Side::Inside,
+                layers: inside,
+            },
+            March {
+                side: Side::Outside,
+                layers: OUTSIDE_LAYERS,
+            },
         ]
     }
 
@@ -85,7 +91,12 @@ impl<const D: usize> NbflipSim<D> {
     /// further each, and the re-march `R + 2` (or 3) layers beyond the cells next to the
     /// surface.
     fn margin(&self, cfl: f64) -> usize {
-        let deepest = self.marches().map(|m| m.layers).into_iter().max().unwrap_or(0);
+        let deepest = self
+            .marches()
+            .map(|m| m.layers)
+            .into_iter()
+            .max()
+            .unwrap_or(0);
         cfl.ceil() as usize + 3 + deepest as usize + 1
     }
 

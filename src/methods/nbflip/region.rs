@@ -46,7 +46,12 @@ impl Region {
 
     /// The cells in either region.
     pub fn union<const D: usize>(&self, grid: &Grid<D>, other: &Region) -> Self {
-        let active: Vec<bool> = self.tiles.iter().zip(&other.tiles).map(|(a, b)| *a || *b).collect();
+        let active: Vec<bool> = self
+            .tiles
+            .iter()
+            .zip(&other.tiles)
+            .map(|(a, b)| *a || *b)
+            .collect();
         Self {
             cells: cells_of_tiles(grid, &tiles(grid), &active),
             tiles: active,
@@ -69,9 +74,12 @@ impl Region {
         let mut active = vec![false; tiles.num_cells()];
         for t in (0..tiles.num_cells()).filter(|&t| seeded[t]) {
             let tc = tiles.cell_coords(t);
-            for_each_in_box(&tiles, tc.map(|k| k.saturating_sub(reach)), tc.map(|k| k + reach), |n| {
-                active[n] = true
-            });
+            for_each_in_box(
+                &tiles,
+                tc.map(|k| k.saturating_sub(reach)),
+                tc.map(|k| k + reach),
+                |n| active[n] = true,
+            );
         }
         Self {
             cells: cells_of_tiles(grid, &tiles, &active),
@@ -127,7 +135,10 @@ mod tests {
         fn check<const D: usize>(dims: [usize; D], seed: [usize; D], margin: usize) {
             let g = Grid::new(dims);
             let r = Region::around(&g, std::iter::once(g.cell_index(seed)), margin);
-            assert!(r.cells.windows(2).all(|w| w[0] < w[1]), "ascending, no repeats");
+            assert!(
+                r.cells.windows(2).all(|w| w[0] < w[1]),
+                "ascending, no repeats"
+            );
             for c in 0..g.num_cells() {
                 let cc = g.cell_coords(c);
                 let far = (0..D).map(|k| cc[k].abs_diff(seed[k])).max().unwrap();
@@ -143,7 +154,9 @@ mod tests {
         let b = Region::around(&g, std::iter::once(g.cell_index([30, 25])), 1);
         let both = a.union(&g, &b);
         assert_eq!(both.cells.len(), a.cells.len() + b.cells.len());
-        assert!(both.contains(&g, g.cell_index([30, 25])) && !a.contains(&g, g.cell_index([30, 25])));
+        assert!(
+            both.contains(&g, g.cell_index([30, 25])) && !a.contains(&g, g.cell_index([30, 25]))
+        );
         check([19, 22, 17], [9, 15, 16], 6);
         let g = Grid::new([9, 7, 5]);
         assert_eq!(Region::all(&g).cells.len(), g.num_cells());
