@@ -205,6 +205,9 @@ pub fn load(spec: &RunSpec) -> Result<Scene> {
 /// `cellflip report`.
 pub fn report(args: &ReportArgs) -> Result<()> {
     let specs = matrix(args)?;
+    // When and at which commit the binary ran, read before the matrix: the checkout may move on
+    // during a run of a quarter of an hour.
+    let header = docs::provenance(&command());
     let docs = match args.docs {
         true => Some(docs::DocsTarget::at(Path::new("."))?),
         false => None,
@@ -217,9 +220,9 @@ pub fn report(args: &ReportArgs) -> Result<()> {
     let interrupted = stop();
     match &docs {
         // An interrupted matrix would leave the manual with half its runs: keep the pages.
-        Some(_) if interrupted => write_all(&args.out, &specs, &results)?,
-        Some(target) => write_docs(target, &specs, &results)?,
-        None => write_all(&args.out, &specs, &results)?,
+        Some(_) if interrupted => write_all(&args.out, &specs, &results, &header)?,
+        Some(target) => write_docs(target, &specs, &results, &header)?,
+        None => write_all(&args.out, &specs, &results, &header)?,
     }
     if !args.quiet {
         let failed = results
@@ -282,14 +285,13 @@ pub fn run_all(specs: &[RunSpec], quiet: bool, stop: &dyn Fn() -> bool) -> Vec<M
 }
 
 /// Writes every output, naming the file that could not be written.
-fn write_all(dir: &Path, specs: &[RunSpec], results: &[Measured]) -> Result<()> {
+fn write_all(dir: &Path, specs: &[RunSpec], results: &[Measured], header: &str) -> Result<()> {
     let csv = dir.join("report.csv");
     std::fs::write(&csv, output::csv(results))
         .with_context(|| format!("cannot write '{}'", csv.display()))?;
     let figures = plots::all(dir, results, true)?;
     let md = dir.join("report.md");
-    let header = docs::provenance(&command());
-    let text = output::markdown(specs, results, &figures, "cellflip report", &header);
+    let text = output::markdown(specs, results, &figures, "cellflip report", header);
     std::fs::write(&md, text).with_context(|| format!("cannot write '{}'", md.display()))?;
     let rrd = dir.join("report.rrd");
     crate::record::write_comparison(&rrd, &measure::comparison_series(results))
@@ -304,7 +306,12 @@ fn command() -> String {
 
 /// `--docs`: the manual's results page, its plots and CSV, and the README's headline table,
 /// all under one provenance line.
-fn write_docs(target: &docs::DocsTarget, specs: &[RunSpec], results: &[Measured]) -> Result<()> {
+fn write_docs(
+    target: &docs::DocsTarget,
+    specs: &[RunSpec],
+    results: &[Measured],
+    header: &str,
+) -> Result<()> {
     let csv = target.plots.join("report.csv");
     std::fs::write(&csv, output::csv(results))
         .with_context(|| format!("cannot write '{}'", csv.display()))?;
@@ -312,12 +319,11 @@ fn write_docs(target: &docs::DocsTarget, specs: &[RunSpec], results: &[Measured]
         .into_iter()
         .map(|f| format!("{}/{f}", docs::PLOTS))
         .collect();
-    let header = docs::provenance(&command());
-    let mut text = output::markdown(specs, results, &figures, "Results", &header);
+    let mut text = output::markdown(specs, results, &figures, "Results", header);
     for f in &figures {
         text += &format!("![{f}]({f})\n\n");
     }
     std::fs::write(&target.page, text)
         .with_context(|| format!("cannot write '{}'", target.page.display()))?;
-    target.write_headline(&docs::headline(results, &header))
+    target.write_headline(&docs::headline(results, header))
 }

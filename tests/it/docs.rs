@@ -238,7 +238,7 @@ fn the_readme_headline_comes_from_the_results_page() {
         provenance(&page),
         "README's headline and docs/results.md come from different runs of `cellflip report --docs`"
     );
-    assert!(provenance(&page).contains("by `cellflip report --docs`"));
+    assert!(provenance(&page).contains("by `cellflip report --docs"));
     for k in MethodKind::ALL {
         assert!(
             block.contains(&format!("| `{}` |", k.name())),
