@@ -51,18 +51,9 @@ pub struct CompareArgs {
     /// drawn at the first of its steps that reaches each frame's time.
     #[arg(long, value_name = "SECS", default_value_t = 0.04)]
     pub frame_dt: f64,
-    /// Simulated seconds [default: the scene's duration].
-    #[arg(long)]
-    pub duration: Option<f64>,
-    /// Cells along the longest axis [default: the scene's].
-    #[arg(long)]
-    pub res: Option<usize>,
-    /// Particles per cell, k^dim [default: the scene's].
-    #[arg(long)]
-    pub ppc: Option<usize>,
-    /// Random seed, the same for every run [default: the scene's].
-    #[arg(long)]
-    pub seed: Option<u64>,
+    /// Duration, resolution, particles per cell and seed, the same for every run.
+    #[command(flatten)]
+    pub scale: SceneArgs,
     /// 3D: do not draw the liquid's surfaces (meshes, over the particles).
     #[arg(long)]
     pub no_surface: bool,
@@ -80,6 +71,23 @@ fn positive_secs(s: &str) -> Result<f64, String> {
         Ok(x) if x.is_finite() && x > 0.0 => Ok(x),
         _ => Err(format!("'{s}' is not a positive number of seconds")),
     }
+}
+
+/// The scene values `run` and `compare` override.
+#[derive(Args, Debug, Clone, Default)]
+pub struct SceneArgs {
+    /// Simulated seconds to run (overrides the scene's `simulation.duration`).
+    #[arg(long, allow_hyphen_values = true)]
+    pub duration: Option<f64>,
+    /// Cells along the longest axis (overrides `domain.cells`).
+    #[arg(long)]
+    pub res: Option<usize>,
+    /// Particles per cell, mu = k^dim (overrides `simulation.ppc`).
+    #[arg(long)]
+    pub ppc: Option<usize>,
+    /// Random seed (overrides `simulation.seed`).
+    #[arg(long)]
+    pub seed: Option<u64>,
 }
 
 /// `method[:obstacle]`, as `--methods` takes it.
@@ -203,18 +211,9 @@ pub struct RunArgs {
     /// Number of steps to run (instead of the scene's duration).
     #[arg(long, conflicts_with = "duration")]
     pub steps: Option<u64>,
-    /// Simulated seconds to run (overrides the scene's `simulation.duration`).
-    #[arg(long, allow_hyphen_values = true)]
-    pub duration: Option<f64>,
-    /// Cells along the longest axis (overrides `domain.cells`).
-    #[arg(long)]
-    pub res: Option<usize>,
-    /// Particles per cell, mu = k^dim (overrides `simulation.ppc`).
-    #[arg(long)]
-    pub ppc: Option<usize>,
-    /// Random seed (overrides `simulation.seed`).
-    #[arg(long)]
-    pub seed: Option<u64>,
+    /// Duration, resolution, particles per cell and seed.
+    #[command(flatten)]
+    pub scale: SceneArgs,
     /// Band depth R: ccp's band interface lies R cells below the surface (the band is R + 1
     /// cells thick); nbflip keeps particles down to R cells below its level set's zero
     /// (overrides `simulation.band_r`).

@@ -59,10 +59,10 @@ fn entries(args: &CompareArgs) -> Result<Vec<Entry>> {
         let o = Overrides {
             method: Some(method),
             obstacle,
-            duration: args.duration,
-            cells: args.res,
-            ppc: args.ppc,
-            seed: args.seed,
+            duration: args.scale.duration,
+            cells: args.scale.res,
+            ppc: args.scale.ppc,
+            seed: args.scale.seed,
             ..Default::default()
         };
         let scene = Scene::load(&args.scene, &o)?;

@@ -18,10 +18,10 @@ impl RunArgs {
     fn overrides(&self) -> Overrides {
         Overrides {
             method: self.method,
-            duration: self.duration,
-            cells: self.res,
-            ppc: self.ppc,
-            seed: self.seed,
+            duration: self.scale.duration,
+            cells: self.scale.res,
+            ppc: self.scale.ppc,
+            seed: self.scale.seed,
             solver: self.ccp.solver,
             directions: self.ccp.directions,
             band: self.ccp.band,

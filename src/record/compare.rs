@@ -14,7 +14,6 @@ use super::{Drawing, Output, RunLog, Sink, Stream};
 use crate::draw::legend;
 use crate::draw::Log;
 use crate::grid::Vector;
-use crate::methods::ccp::BandMode;
 use crate::metrics::kinetic_energy;
 use crate::scene::Scene;
 use crate::simulation::{Simulation, StepReport};
@@ -76,11 +75,7 @@ impl Comparison {
                     .with_names([r.title.as_str()]);
                 out.log_static(s, &line).map_err(cannot)?;
             }
-            let drawing = Drawing {
-                surface: r.surface,
-                ..Drawing::default()
-            };
-            let run = RunLog::new(out, r.scene, drawing, true);
+            let run = RunLog::new(out, r.scene, r.drawing(), true);
             logs.push((r.title.clone(), run));
         }
         Ok(Self { output, runs: logs })
@@ -147,21 +142,22 @@ impl Comparison {
     }
 }
 
+impl ComparedRun<'_> {
+    /// How the run is drawn: worlds only (no slice), with or without the surface.
+    fn drawing(&self) -> Drawing {
+        Drawing {
+            surface: self.surface,
+            ..Drawing::default()
+        }
+    }
+}
+
 /// What the layout needs of a run.
 fn compared<'a>(r: &ComparedRun<'a>) -> Compared<'a> {
-    let scene = r.scene;
     Compared {
         label: r.label.clone(),
         title: r.title.clone(),
-        facts: RunFacts {
-            dims: scene.dims.clone(),
-            method: scene.method.kind.info(),
-            band: scene.method.band() != BandMode::None,
-            cross_check: false,
-            obstacles: scene.file.obstacle.iter().map(|o| o.name.clone()).collect(),
-            slice_axis: 2,
-            surface: r.surface,
-        },
+        facts: RunFacts::of(r.scene, false, &r.drawing()),
     }
 }
 

@@ -14,9 +14,11 @@
 //! the viewer reads: `container/<id>`, `view/<id>`, `view/<id>/ViewContents`,
 //! `view/<id>/<property archetype>`, `view/<id>/ViewContents/overrides/<entity>/visualizers`.
 
-use super::Plane;
+use super::{Drawing, Plane};
 use crate::draw::{LayerView, Needs, Panel};
+use crate::methods::ccp::BandMode;
 use crate::methods::MethodInfo;
+use crate::scene::Scene;
 use rerun::external::re_log_types::external::re_tuid::Tuid;
 use rerun::external::re_log_types::{BlueprintActivationCommand, LogMsg, RecordingId};
 use rerun::external::re_sdk_types::blueprint::{archetypes as bp, components as bpc};
@@ -37,7 +39,20 @@ pub struct RunFacts<'a> {
     pub surface: bool,
 }
 
-impl RunFacts<'_> {
+impl<'a> RunFacts<'a> {
+    /// What a run of `scene` drawn as `drawing` has (`cross_check`: `--cross-check`).
+    pub fn of(scene: &'a Scene, cross_check: bool, drawing: &Drawing) -> Self {
+        Self {
+            dims: scene.dims.clone(),
+            method: scene.method.kind.info(),
+            band: scene.method.band() != BandMode::None,
+            cross_check,
+            obstacles: scene.file.obstacle.iter().map(|o| o.name.clone()).collect(),
+            slice_axis: drawing.slice.0,
+            surface: drawing.surface,
+        }
+    }
+
     /// Whether one of the method's layer views this run has shows `entity`.
     pub fn shows(&self, entity: &str) -> bool {
         let mut views = self.method.layer_views.iter().filter(|l| self.has(l.needs));

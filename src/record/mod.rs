@@ -23,7 +23,6 @@ pub use run_log::RunLog;
 pub use stream::Stream;
 
 use crate::draw::legend;
-use crate::methods::ccp::BandMode;
 use crate::scene::Scene;
 use crate::simulation::{Simulation, StepReport};
 use anyhow::{anyhow, Result};
@@ -66,15 +65,7 @@ impl Recorder {
         let output = Output::open(sink, &recording_name(scene))?;
         let rec = &output.rec;
         let cannot = |e| anyhow!("cannot write the recording to {}: {e}", sink.describe());
-        let facts = RunFacts {
-            dims: scene.dims.clone(),
-            method: scene.method.kind.info(),
-            band: scene.method.band() != BandMode::None,
-            cross_check,
-            obstacles: scene.file.obstacle.iter().map(|o| o.name.clone()).collect(),
-            slice_axis: drawing.slice.0,
-            surface: drawing.surface,
-        };
+        let facts = RunFacts::of(scene, cross_check, &drawing);
         layout::send(rec, &layout::layout(&facts), "step").map_err(cannot)?;
         rec.send_property("run", &run_properties(scene))
             .map_err(cannot)?;

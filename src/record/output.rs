@@ -153,12 +153,4 @@ impl Output {
             }
         }
     }
-
-    /// The file written, if the recording goes to one.
-    pub fn file_path(&self) -> Option<&std::path::Path> {
-        match &self.sink {
-            Sink::File(p) => Some(p),
-            _ => None,
-        }
-    }
 }

@@ -39,11 +39,6 @@ impl RunLog {
         }
     }
 
-    /// The stream this run draws into.
-    pub fn stream(&self) -> &Stream {
-        &self.out
-    }
-
     pub(super) fn canvas<const D: usize>(&self, sim: &Simulation<D>) -> Canvas<'_, D> {
         if !self.compared {
             self.out

@@ -24,7 +24,7 @@ impl Stream {
     }
 
     /// The full path of `path`.
-    pub fn path(&self, path: &str) -> String {
+    fn path(&self, path: &str) -> String {
         format!("{}{path}", self.prefix)
     }
 
