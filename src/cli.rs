@@ -57,6 +57,9 @@ pub struct CompareArgs {
     /// 3D: do not draw the liquid's surfaces (meshes, over the particles).
     #[arg(long)]
     pub no_surface: bool,
+    /// Frames for a renderer.
+    #[command(flatten)]
+    pub export: ExportArgs,
     /// Where the recording goes [default: recordings/<scene>-compare.rrd].
     #[command(flatten)]
     pub sink: SinkArgs,
@@ -88,6 +91,16 @@ pub struct SceneArgs {
     /// Random seed (overrides `simulation.seed`).
     #[arg(long)]
     pub seed: Option<u64>,
+}
+
+/// Frames for a renderer, for `run` and `compare`.
+#[derive(Args, Debug, Clone, Default)]
+pub struct ExportArgs {
+    /// Also write every drawn frame into DIR as PLY files a renderer reads: the particles (3D:
+    /// and the liquid's surface, a mesh with normals), in metres, y up, named
+    /// <scene>_<method>_f<frame>_t<time>s_{particles,surface}.ply.
+    #[arg(long, value_name = "DIR")]
+    pub export_frames: Option<PathBuf>,
 }
 
 /// `method[:obstacle]`, as `--methods` takes it.
@@ -236,6 +249,9 @@ pub struct RunArgs {
     /// Where the recording goes.
     #[command(flatten)]
     pub sink: SinkArgs,
+    /// Frames for a renderer.
+    #[command(flatten)]
+    pub export: ExportArgs,
     /// Record particles, markings and correction moves every N steps (metrics: every step)
     /// [default: 2D every step; 3D every 1/25 s of simulated time, which keeps a 50^3 run
     /// near 1 MB per recorded step and a whole built-in run under about 200 MB].

@@ -9,6 +9,8 @@
 //! on; a signal ends them all after the current step and finishes the recording.
 
 use crate::cli::CompareArgs;
+use crate::export;
+use crate::frames::FrameWorker;
 use crate::interrupt::{self, Watchdog};
 use crate::methods::MethodKind;
 use crate::record::{ComparedRun, Comparison};
@@ -114,12 +116,22 @@ fn compare_dim<const D: usize>(
         .map(|s| Comparison::create(s, &name, &runs))
         .transpose()?;
     let mut runners = vec![];
+    let mut workers = vec![];
     for (i, e) in entries.iter().enumerate() {
         let sim = Simulation::<D>::new(e.scene.config::<D>(), &e.scene.method);
         if let Some(r) = &recording {
             r.log_setup(i, &sim);
             r.log_step(i, &sim, None, true)?;
         }
+        let sinks = [
+            recording.as_ref().and_then(|r| r.surface_sink(i)),
+            export::requested(&args.export, &e.scene, &e.label)?,
+        ];
+        let mut worker = FrameWorker::start(sinks.into_iter().flatten().collect())?;
+        if let Some(w) = &mut worker {
+            w.submit(&sim)?;
+        }
+        workers.push(worker);
         runners.push((Runner::new(sim), Status::Running));
     }
     let duration = entries[0].scene.duration_secs();
@@ -129,7 +141,19 @@ fn compare_dim<const D: usize>(
         until: duration,
         progress: !args.quiet,
     };
-    let stepped = step_frames(&mut runners, &labels, recording.as_ref(), frames);
+    let stepped = step_frames(
+        &mut runners,
+        &labels,
+        recording.as_ref(),
+        &mut workers,
+        frames,
+    );
+    // The last frames are drawn and written before the recording is finished.
+    let drawn = workers
+        .into_iter()
+        .flatten()
+        .try_for_each(FrameWorker::finish);
+    let stepped = stepped.and(drawn);
     watchdog.done();
     match (&stepped, recording) {
         (Ok(()), Some(r)) => r.finish()?,
@@ -150,12 +174,14 @@ pub struct Frames {
 }
 
 /// Steps every running run frame by frame to `frames.until` (or a signal), drawing each
-/// frame. A run's own failure stops it alone; a recording that cannot be written stops them
-/// all.
+/// frame, and handing it to the run's frame worker if it has one (`workers[i]`, see
+/// [`crate::frames`]). A run's own failure stops it alone; a recording or an export that
+/// cannot be written stops them all.
 pub fn step_frames<const D: usize>(
     runners: &mut [(Runner<D>, Status)],
     titles: &[&str],
     recording: Option<&Comparison>,
+    workers: &mut [Option<FrameWorker>],
     frames: Frames,
 ) -> Result<()> {
     let duration = frames.until;
@@ -170,10 +196,15 @@ pub fn step_frames<const D: usize>(
                 continue;
             }
             let write_error = RefCell::new(None);
+            let mut worker = workers.get_mut(i).and_then(Option::as_mut);
             let stepped = runner.run(Limit::SimSeconds(t_frame), interrupted, |sim, rep| {
-                let Some(r) = recording else { return Ok(()) };
                 let frame = sim.state.time_secs >= t_frame;
-                r.log_step(i, sim, Some(rep), frame).inspect_err(|e| {
+                let logged = recording.map_or(Ok(()), |r| r.log_step(i, sim, Some(rep), frame));
+                let handed = match (frame, worker.as_mut()) {
+                    (true, Some(w)) => w.submit(sim),
+                    _ => Ok(()),
+                };
+                logged.and(handed).inspect_err(|e| {
                     *write_error.borrow_mut() = Some(format!("{e:#}"));
                 })
             });

@@ -16,6 +16,8 @@ pub mod bench;
 pub mod cli;
 pub mod compare;
 pub mod draw;
+pub mod export;
+pub mod frames;
 pub mod grid;
 pub mod interrupt;
 pub mod methods;

@@ -3,6 +3,8 @@
 
 use crate::cli::RunArgs;
 use crate::cli::SinkArgs;
+use crate::export;
+use crate::frames::FrameWorker;
 use crate::interrupt::{self, Watchdog};
 use crate::methods::MethodOption;
 use crate::record::{Drawing, Recorder, Sink};
@@ -126,6 +128,14 @@ fn simulate<const D: usize>(
             r.warn(&sim, msg);
         }
     }
+    let sinks = [
+        recorder.and_then(Recorder::surface_sink),
+        export::requested(&args.export, scene, scene.method.kind.name())?,
+    ];
+    let mut frames = FrameWorker::start(sinks.into_iter().flatten().collect())?;
+    if let Some(f) = &mut frames {
+        f.submit(&sim)?;
+    }
     let mut runner = Runner::new(sim);
     let bar = progress_bar(limit);
     let t0 = Instant::now();
@@ -134,12 +144,15 @@ fn simulate<const D: usize>(
     let cadence = Cadence::of(args.record_every, D);
     let mut last_time_secs = 0.0;
     let result = runner.run(limit, interrupted, |sim, rep| {
+        let s = &sim.state;
+        let full = cadence.records(s.steps, last_time_secs, s.time_secs);
         if let Some(r) = recorder {
-            let s = &sim.state;
-            let full = cadence.records(s.steps, last_time_secs, s.time_secs);
             r.log_step(sim, Some(rep), full)?;
         }
-        last_time_secs = sim.state.time_secs;
+        if let (true, Some(f)) = (full, frames.as_mut()) {
+            f.submit(sim)?;
+        }
+        last_time_secs = s.time_secs;
         show_progress(
             &bar,
             sim,
@@ -148,9 +161,11 @@ fn simulate<const D: usize>(
         );
         Ok(())
     });
+    // The last frames are drawn and written before the recording is finished.
+    let drawn = frames.map_or(Ok(()), FrameWorker::finish);
     watchdog.done();
     bar.finish_and_clear();
-    Ok((runner, result))
+    Ok((runner, result.and(drawn)))
 }
 
 /// Ends the recording (with the run's error or interruption in its log), prints the summary

@@ -35,6 +35,7 @@
 //! [`SMOOTHING_LENGTH_PER_RADIUS`], [`CUBE_SIZE_PER_RADIUS`], [`ISO_SURFACE`]. With 8 particles
 //! per cell (dam-3d) the kernel reaches one cell and the marching-cubes grid is half a cell.
 
+use crate::simulation::Simulation;
 use splashsurf_lib::nalgebra::Vector3;
 use splashsurf_lib::{reconstruct_surface, Parameters};
 
@@ -86,6 +87,54 @@ impl SurfaceMesh {
                 (a[0] * bxc[0] + a[1] * bxc[1] + a[2] * bxc[2]) / 6.0
             })
             .sum()
+    }
+}
+
+/// What the surface is made of, copied out of a simulation so that the reconstruction can run
+/// on another thread while the simulation goes on ([`crate::frames`]).
+#[derive(Clone, Debug)]
+pub struct Liquid {
+    /// The particles, in grid units.
+    pub positions: Vec<[f64; 3]>,
+    /// The liquid cells that hold no particles (the band methods' deep).
+    pub deep_cells: Vec<[usize; 3]>,
+    pub domain_cells: [usize; 3],
+    /// Particles per cell.
+    pub mu: usize,
+}
+
+impl Liquid {
+    /// The liquid of a 3D simulation: its particles and, for the band methods, its deep cells.
+    pub fn of<const D: usize>(sim: &Simulation<D>) -> Self {
+        assert_eq!(D, 3, "surfaces are drawn for 3D runs only");
+        let s = &sim.state;
+        let g = &s.grid;
+        let positions = (s.particles.pos.iter())
+            .map(|p| std::array::from_fn(|k| p[k]))
+            .collect();
+        let deep_cells = (0..g.num_cells())
+            .filter(|&cell| sim.method.is_deep(s, cell))
+            .map(|cell| {
+                let c = g.cell_coords(cell);
+                std::array::from_fn(|k| c[k])
+            })
+            .collect();
+        Self {
+            positions,
+            deep_cells,
+            domain_cells: std::array::from_fn(|k| g.dims[k]),
+            mu: s.config.mu() as usize,
+        }
+    }
+
+    /// Its surface ([`reconstruct`]).
+    pub fn surface(&self) -> SurfaceMesh {
+        reconstruct(
+            &self.positions,
+            &self.deep_cells,
+            self.domain_cells,
+            self.mu,
+        )
     }
 }
 

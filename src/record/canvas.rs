@@ -207,18 +207,6 @@ impl<const D: usize> Canvas<'_, D> {
         self.keep(r);
     }
 
-    /// A triangle mesh with its vertex normals, in one colour (3D only; world coordinates are
-    /// grid coordinates there).
-    pub(super) fn mesh(&mut self, path: &str, mesh: &crate::surface::SurfaceMesh, color: [u8; 3]) {
-        let [r, g, b] = color;
-        let m = rerun::Mesh3D::new(mesh.vertices.iter().copied())
-            .with_triangle_indices(mesh.triangles.iter().copied())
-            .with_vertex_normals(mesh.normals.iter().copied())
-            .with_albedo_factor(rerun::Rgba32::from_unmultiplied_rgba(r, g, b, 255));
-        let r = self.rec.log(path, &m);
-        self.keep(r);
-    }
-
     /// One line strip through world points.
     pub(super) fn strip_world(&mut self, path: &str, pts: &[[f32; 3]], color: [u8; 3]) {
         let r = if D == 2 {

@@ -113,6 +113,14 @@ impl Comparison {
         self.output.step_logged(rep.is_some())
     }
 
+    /// Run `i`'s surface sink (see [`RunLog::surface_sink`]).
+    pub fn surface_sink(
+        &self,
+        i: usize,
+    ) -> Option<(crate::frames::FrameSink, crate::frames::Needs)> {
+        self.runs[i].1.surface_sink()
+    }
+
     /// Run `i` stopped on an error: its label and its log say why and when.
     pub fn failed<const D: usize>(&self, i: usize, sim: &Simulation<D>, why: &str) {
         let (title, run) = &self.runs[i];

@@ -102,6 +102,11 @@ impl Recorder {
         self.output.step_logged(rep.is_some())
     }
 
+    /// See [`RunLog::surface_sink`].
+    pub fn surface_sink(&self) -> Option<(crate::frames::FrameSink, crate::frames::Needs)> {
+        self.run.surface_sink()
+    }
+
     pub fn warn<const D: usize>(&self, sim: &Simulation<D>, msg: &str) {
         self.run.warn(sim, msg);
     }

@@ -6,6 +6,7 @@ use super::canvas::PointLook;
 use super::{Canvas, Drawing, Moves, Plane, Stream};
 use crate::draw::legend::{self, speed_color, NEW_SOLID_COLOR, OBSTACLE_COLOR};
 use crate::draw::{Layer, Log};
+use crate::frames::{Frame, FrameSink, Needs};
 use crate::grid::Vector;
 use crate::metrics::Stage;
 use crate::particles::Region;
@@ -154,9 +155,33 @@ impl RunLog {
             radius_3d: 0.2,
         };
         c.cell_classes("world/grid/markings", &class, &hidden, layer);
-        if D == 3 && self.drawing.surface {
-            c.mesh("world/surface", &liquid_surface(sim), legend::SURFACE_COLOR);
+    }
+
+    /// 3D with the surface drawn: the sink that draws each frame's surface, `world/surface`,
+    /// at the frame's step and time, from the frame worker's thread ([`crate::frames`]).
+    pub fn surface_sink(&self) -> Option<(FrameSink, Needs)> {
+        if self.dims.len() != 3 || !self.drawing.surface {
+            return None;
         }
+        let (out, compared) = (self.out.clone(), self.compared);
+        let sink = move |f: &Frame| {
+            let Some(mesh) = &f.surface else {
+                return Ok(());
+            };
+            if !compared {
+                out.rec.set_time_sequence("step", f.step as i64);
+            }
+            out.rec.set_duration_secs("sim_time", f.time_secs);
+            if let Err(e) = out.log("world/surface", &surface_mesh(mesh)) {
+                eprintln!("warning: recording: {e}");
+            }
+            Ok(())
+        };
+        let needs = Needs {
+            surface: true,
+            particles: false,
+        };
+        Some((Box::new(sink), needs))
     }
 
     /// Each obstacle's shape where it is now, and its trail (its centre over the steps).
@@ -209,23 +234,13 @@ impl RunLog {
     }
 }
 
-/// The liquid's surface: around the particles and, for the band methods, the deep cells, which
-/// hold none ([`crate::surface::reconstruct`]).
-fn liquid_surface<const D: usize>(sim: &Simulation<D>) -> crate::surface::SurfaceMesh {
-    let s = &sim.state;
-    let g = &s.grid;
-    let positions: Vec<[f64; 3]> = (s.particles.pos.iter())
-        .map(|p| std::array::from_fn(|k| p[k]))
-        .collect();
-    let deep: Vec<[usize; 3]> = (0..g.num_cells())
-        .filter(|&cell| sim.method.is_deep(s, cell))
-        .map(|cell| {
-            let c = g.cell_coords(cell);
-            std::array::from_fn(|k| c[k])
-        })
-        .collect();
-    let dims = std::array::from_fn(|k| g.dims[k]);
-    crate::surface::reconstruct(&positions, &deep, dims, s.config.mu() as usize)
+/// A surface mesh in the liquid's colour (grid coordinates are world coordinates in 3D).
+fn surface_mesh(mesh: &crate::surface::SurfaceMesh) -> rerun::Mesh3D {
+    let [r, g, b] = legend::SURFACE_COLOR;
+    rerun::Mesh3D::new(mesh.vertices.iter().copied())
+        .with_triangle_indices(mesh.triangles.iter().copied())
+        .with_vertex_normals(mesh.normals.iter().copied())
+        .with_albedo_factor(rerun::Rgba32::from_unmultiplied_rgba(r, g, b, 255))
 }
 
 /// The scalars the state gives, also at the start (step 0): the volume, the particles, the

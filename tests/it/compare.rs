@@ -113,7 +113,7 @@ fn a_run_that_fails_stops_alone_and_its_world_says_why() {
         until: 0.2,
         progress: false,
     };
-    step_frames(&mut runners, &["flip", "ccp"], Some(&rec), frames).unwrap();
+    step_frames(&mut runners, &["flip", "ccp"], Some(&rec), &mut [], frames).unwrap();
     rec.finish().unwrap();
     assert_eq!(runners[0].1, Status::Running, "flip went on");
     assert!(

@@ -9,6 +9,7 @@ mod cli_process;
 mod compare;
 mod correction;
 mod docs;
+mod export;
 mod fuzz;
 mod golden;
 mod idp;

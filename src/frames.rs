@@ -1,0 +1,163 @@
+//! A drawn frame's heavy outputs, made on a thread of their own while the simulation goes on:
+//! the liquid's surface in 3D ([`crate::surface`], drawn in the recording) and the files
+//! `--export-frames` writes ([`crate::export`]).
+//!
+//! **Why a thread.** Reconstructing a surface takes about a third of a second at dam-3d 64^3,
+//! a fifth of a run's wall time when done between the steps. The simulation keeps the two
+//! cores busy only part of the time (about 1.4 of 2 on that run: the correction and MIC(0)'s
+//! triangular solves are sequential), so the reconstruction runs beside it, on a thread pool of
+//! its own with one thread ([`THREADS`]), and takes the idle time instead of the simulation's.
+//!
+//! **Order and back-pressure.** Frames are handed over in order through a channel that holds
+//! one: the simulation waits only when the worker is a whole frame behind, so at most two
+//! frames' copies are alive at once. Each frame carries its step and simulated time, and the
+//! recording logs it at those times, so drawing it late changes nothing in the viewer.
+//!
+//! **Errors.** A sink's error (an export file that cannot be written) stops the worker; the
+//! next [`FrameWorker::submit`] or [`FrameWorker::finish`] returns it, naming the file.
+
+use crate::simulation::Simulation;
+use crate::surface::{Liquid, SurfaceMesh};
+use anyhow::{anyhow, Result};
+use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
+use std::thread::JoinHandle;
+
+/// The reconstruction's threads: one, so that it fills the core the simulation leaves idle
+/// rather than competing with the simulation's own parallel loops for both.
+pub const THREADS: usize = 1;
+
+/// One drawn frame, in grid units (cells, cells per second; 2D points have `z = 0`).
+pub struct Frame {
+    /// The frames handed over before this one (0 for the first).
+    pub index: u64,
+    pub step: u64,
+    pub time_secs: f64,
+    /// The particles' positions and velocities, when a sink asked for them.
+    pub positions: Vec<[f64; 3]>,
+    pub velocities: Vec<[f64; 3]>,
+    /// The liquid's surface (3D), when a sink asked for it.
+    pub surface: Option<SurfaceMesh>,
+}
+
+/// What receives the frames, on the worker's thread.
+pub type FrameSink = Box<dyn FnMut(&Frame) -> Result<()> + Send>;
+
+/// What the sinks need made for each frame.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Needs {
+    pub particles: bool,
+    pub surface: bool,
+}
+
+/// What the worker gets of a frame: copies of the simulation's state.
+struct Job {
+    frame: Frame,
+    liquid: Option<Liquid>,
+}
+
+/// The worker thread and its channel.
+pub struct FrameWorker {
+    tx: Option<SyncSender<Job>>,
+    thread: Option<JoinHandle<Result<()>>>,
+    needs: Needs,
+    submitted: u64,
+}
+
+impl FrameWorker {
+    /// A worker feeding `sinks`, or `None` when there is none.
+    pub fn start(sinks: Vec<(FrameSink, Needs)>) -> Result<Option<Self>> {
+        if sinks.is_empty() {
+            return Ok(None);
+        }
+        let needs = sinks.iter().fold(Needs::default(), |a, (_, n)| Needs {
+            particles: a.particles || n.particles,
+            surface: a.surface || n.surface,
+        });
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(THREADS)
+            .thread_name(|i| format!("cellflip-frames-{i}"))
+            .build()
+            .map_err(|e| anyhow!("cannot start the frame worker's threads: {e}"))?;
+        let (tx, rx) = sync_channel::<Job>(1);
+        let sinks = sinks.into_iter().map(|(s, _)| s).collect();
+        let thread = std::thread::Builder::new()
+            .name("cellflip-frames".into())
+            .spawn(move || work(rx, sinks, &pool))
+            .map_err(|e| anyhow!("cannot start the frame worker: {e}"))?;
+        Ok(Some(Self {
+            tx: Some(tx),
+            thread: Some(thread),
+            needs,
+            submitted: 0,
+        }))
+    }
+
+    /// Hands the simulation's current state over as the next frame. Fails with a sink's
+    /// error from an earlier frame.
+    pub fn submit<const D: usize>(&mut self, sim: &Simulation<D>) -> Result<()> {
+        let s = &sim.state;
+        let lift =
+            |v: &crate::grid::Vector<D>| std::array::from_fn(|k| if k < D { v[k] } else { 0.0 });
+        let (positions, velocities) = match self.needs.particles {
+            true => (
+                s.particles.pos.iter().map(lift).collect(),
+                s.particles.vel.iter().map(lift).collect(),
+            ),
+            false => (vec![], vec![]),
+        };
+        let job = Job {
+            frame: Frame {
+                index: self.submitted,
+                step: s.steps,
+                time_secs: s.time_secs,
+                positions,
+                velocities,
+                surface: None,
+            },
+            liquid: (self.needs.surface && D == 3).then(|| Liquid::of(sim)),
+        };
+        self.submitted += 1;
+        match self.tx.as_ref().is_some_and(|tx| tx.send(job).is_ok()) {
+            true => Ok(()),
+            // The worker stopped on an error: say which.
+            false => self.join(),
+        }
+    }
+
+    /// Waits for the frames handed over to be done; a sink's error if there was one.
+    pub fn finish(mut self) -> Result<()> {
+        self.join()
+    }
+
+    fn join(&mut self) -> Result<()> {
+        self.tx = None;
+        match self.thread.take().map(JoinHandle::join) {
+            Some(Ok(r)) => r,
+            Some(Err(_)) => Err(anyhow!("the frame worker panicked")),
+            None => Err(anyhow!("the frame worker had already stopped")),
+        }
+    }
+}
+
+impl Drop for FrameWorker {
+    /// A run that ends on an error still waits for its frames (their files stay whole).
+    fn drop(&mut self) {
+        if self.thread.is_some() {
+            let _ = self.join();
+        }
+    }
+}
+
+/// The worker's loop: each frame's surface, then every sink, until the channel closes or a
+/// sink fails.
+fn work(rx: Receiver<Job>, mut sinks: Vec<FrameSink>, pool: &rayon::ThreadPool) -> Result<()> {
+    for mut job in rx {
+        if let Some(liquid) = &job.liquid {
+            job.frame.surface = Some(pool.install(|| liquid.surface()));
+        }
+        for sink in &mut sinks {
+            sink(&job.frame)?;
+        }
+    }
+    Ok(())
+}
