@@ -27,9 +27,9 @@ pub trait Log<const D: usize> {
         hidden_3d: &[u8],
         layer: Layer,
     );
-    /// A `[width, height]` image of values in `range`, row 0 at the bottom (grid order), drawn
-    /// with a colour map in its own 2D view (a [`LayerView`] of the method).
-    fn image(&mut self, path: &str, size: [usize; 2], values: &[f32], range: [f32; 2]);
+    /// An image of values in `range` (see [`Image`]), drawn with a colour map in its own 2D
+    /// view (a [`LayerView`] of the method).
+    fn image(&mut self, path: &str, image: &Image, range: [f32; 2]);
     /// Arrows from the first point to the second of each pair (an empty batch clears).
     fn arrows(&mut self, path: &str, from_to: &[(Vector<D>, Vector<D>)], style: Style);
     /// Line strips through points, each with its colour and label (an empty batch clears).
@@ -45,6 +45,26 @@ pub trait Log<const D: usize> {
     /// (from `x_hat` to `x`, or with `--moves hops` from the centre of `x_hat`'s cell to the
     /// centre of `x`'s), and the moved particles highlighted under `world/corrector/moved`.
     fn moves(&mut self, from_to: &[(Vector<D>, Vector<D>)]);
+}
+
+/// A plane of per-cell values for [`Log::image`]: `[width, height]`, row 0 at the bottom.
+#[derive(Clone, Debug, Default)]
+pub struct Image {
+    pub size: [usize; 2],
+    pub values: Vec<f32>,
+}
+
+impl Image {
+    /// `value` of every cell of a grid of `dims` cells: the whole grid in 2D, the layer through
+    /// the middle of the third axis in 3D.
+    pub fn of_cells<const D: usize>(dims: [usize; D], value: impl Fn(usize) -> f32) -> Self {
+        let (w, h) = (dims[0], dims[1]);
+        let offset = if D == 3 { dims[2] / 2 * w * h } else { 0 };
+        Self {
+            size: [w, h],
+            values: (offset..offset + w * h).map(value).collect(),
+        }
+    }
 }
 
 /// How a drawing looks: its colour, radius (cells) and, in 2D, its draw order.

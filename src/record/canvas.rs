@@ -9,7 +9,7 @@
 
 use super::Stream;
 use crate::draw::legend::MOVE_COLOR;
-use crate::draw::{Layer, Log, Style};
+use crate::draw::{Image, Layer, Log, Style};
 use crate::grid::{Grid, Vector};
 
 /// A plane of cells drawn as an image: cell axis `u` to the right, `v` up, `cols` x `rows`
@@ -300,7 +300,8 @@ impl<const D: usize> Log<D> for Canvas<'_, D> {
         }
     }
 
-    fn image(&mut self, path: &str, [w, h]: [usize; 2], values: &[f32], range: [f32; 2]) {
+    fn image(&mut self, path: &str, image: &Image, range: [f32; 2]) {
+        let ([w, h], values) = (image.size, &image.values);
         // Image row 0 is the top.
         let mut bytes = Vec::with_capacity(4 * w * h);
         for row in (0..h).rev() {

@@ -96,7 +96,7 @@ fn recordings_log_exactly_the_documented_entities() {
         &dir,
         "dam-3d",
         "3",
-        &["--method", "nbflip", "--res", "12"],
+        &[&every_step[..], &["--method", "nbflip"]].concat(),
     ));
     logged.extend(record(
         &dir,

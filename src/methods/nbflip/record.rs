@@ -2,7 +2,7 @@
 //! scalars and the band levels by the level set, and the run's totals.
 
 use super::physics::{level, NbflipReport};
-use crate::draw::{Layer, LayerView, Log, Needs, Panel};
+use crate::draw::{Image, Layer, LayerView, Log, Needs, Panel};
 use crate::methods::seam::{MethodReport, MethodSummary};
 use crate::metrics::median;
 use crate::sim::markings::DepthLevel;
@@ -22,13 +22,28 @@ pub(super) const PANELS: &[Panel] = &[
     },
 ];
 
-pub(super) const LAYER_VIEWS: &[LayerView] = &[LayerView {
-    title: "band levels",
-    origin: "world",
-    layers: &["world/grid/depth"],
-    marks: &[],
-    needs: Needs::Always,
-}];
+pub(super) const LAYER_VIEWS: &[LayerView] = &[
+    LayerView {
+        title: "band levels",
+        origin: "world",
+        layers: &["world/grid/depth"],
+        marks: &[],
+        needs: Needs::Always,
+    },
+    LayerView {
+        title: "level set phi (cells)",
+        origin: "nbflip",
+        layers: &["nbflip/level_set"],
+        marks: &[],
+        needs: Needs::Always,
+    },
+];
+
+/// The level set's values drawn: from `R + 1` cells inside (below the band's interface at
+/// `-R`) to 3 cells outside (the outward re-march reaches 3); beyond, the colour map's ends.
+fn level_set_range(band_r: u32) -> [f32; 2] {
+    [-(band_r as f32 + 1.0), 3.0]
+}
 
 impl<const D: usize> MethodReport<D> for NbflipReport {
     fn record(&self, s: &State<D>, log: &mut dyn Log<D>, full: bool) {
@@ -44,6 +59,8 @@ impl<const D: usize> MethodReport<D> for NbflipReport {
             let (phi, solid, r) = (&self.phi, &s.solids.solid, self.band_r as f64);
             let class = |c| level::<D>(phi, solid, r, c) as u8;
             log.cell_classes("world/grid/depth", &class, &hidden, layer);
+            let image = Image::of_cells(s.grid.dims, |c| phi.phi[c] as f32);
+            log.image("nbflip/level_set", &image, level_set_range(self.band_r));
         }
     }
 

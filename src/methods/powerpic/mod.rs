@@ -67,7 +67,7 @@ mod physics;
 mod record;
 mod settings;
 
-pub use physics::{FractionImage, PowerPicReport};
+pub use physics::PowerPicReport;
 pub use settings::{AirForm, PowerPicSettings};
 
 use super::seam::{

@@ -2,6 +2,7 @@
 
 use super::air::air_baseline;
 use super::settings::{AirForm, PowerPicSettings};
+use crate::draw::Image;
 use crate::grid::{Grid, MacField, Vector};
 use crate::methods::seam::{FluidMethod, MethodRecording, MethodReport};
 use crate::metrics::InvariantViolation;
@@ -234,29 +235,13 @@ impl<const D: usize> FluidMethod<D> for PowerPicSim<D> {
     }
 }
 
-/// The transport grid's fluid fraction `sum_p T_pj / V_j` as an image: the whole grid in 2D,
-/// the slice through the middle of the third axis in 3D (solid cells: 0).
-fn fraction_image<const D: usize>(tg: &TransportGrid<D>, fill: &[f64]) -> FractionImage {
-    let dims = tg.grid.dims;
-    let (w, h) = (dims[0], dims[1]);
-    let offset = if D == 3 { dims[2] / 2 * w * h } else { 0 };
-    let values = (offset..offset + w * h)
-        .map(|j| match tg.capacity[j] {
-            c if c > 0.0 => (fill[j] / c) as f32,
-            _ => 0.0,
-        })
-        .collect();
-    FractionImage {
-        size: [w, h],
-        values,
-    }
-}
-
-/// A fluid-fraction image.
-#[derive(Clone, Debug, Default)]
-pub struct FractionImage {
-    pub size: [usize; 2],
-    pub values: Vec<f32>,
+/// The transport grid's fluid fraction `sum_p T_pj / V_j` as an image ([`Image::of_cells`];
+/// solid cells: 0).
+fn fraction_image<const D: usize>(tg: &TransportGrid<D>, fill: &[f64]) -> Image {
+    Image::of_cells(tg.grid.dims, |j| match tg.capacity[j] {
+        c if c > 0.0 => (fill[j] / c) as f32,
+        _ => 0.0,
+    })
 }
 
 /// What Power PIC did in one step.
@@ -273,7 +258,7 @@ pub struct PowerPicReport {
     /// Empty volume of the transport cells in the liquid's cells, cells.
     pub air_volume: f64,
     /// The transport grid's fluid fraction (2D; the mid slice in 3D).
-    pub fraction: FractionImage,
+    pub fraction: Image,
 }
 
 impl<const D: usize> MethodRecording<D> for PowerPicSim<D> {}

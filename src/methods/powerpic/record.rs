@@ -46,8 +46,7 @@ impl<const D: usize> MethodReport<D> for PowerPicReport {
             ));
         }
         if full {
-            let f = &self.fraction;
-            log.image("powerpic/fluid_fraction", f.size, &f.values, [0.0, 1.0]);
+            log.image("powerpic/fluid_fraction", &self.fraction, [0.0, 1.0]);
         }
     }
 
