@@ -110,35 +110,63 @@ impl LevelSet {
         self.unite_spheres(grid, pos);
     }
 
-    /// The union with every particle's sphere, at the centres within a cell's reach: the
-    /// values that lower the level set found in parallel, then applied (a minimum, so in any
-    /// order).
+    /// The union with every particle's sphere, at the centres within a cell's reach, in place.
+    /// A particle lowers only the layers (cells along the last axis, contiguous in memory) next
+    /// to its own, so the particles are sorted into slabs of [`SLAB`] layers, and the slabs of
+    /// one parity, whose reaches do not overlap, run in parallel on their own part of the level
+    /// set, then those of the other. A minimum, so the result does not depend on the order;
+    /// nothing is allocated per particle (collecting the lowered values took 4.8 GiB while
+    /// the 11 M particles of deep-pool-3d at 128^3 were first thinned).
     fn unite_spheres<const D: usize>(&mut self, grid: &Grid<D>, pos: &[Vector<D>]) {
         let radius = particle_radius(D);
         let reach: Vec<[i64; D]> = (0..3usize.pow(D as u32))
             .map(|code| std::array::from_fn(|k| (code / 3usize.pow(k as u32) % 3) as i64 - 1))
             .collect();
-        let phi = &self.phi;
-        let lower: Vec<(usize, f64)> = pos
-            .par_iter()
-            .with_min_len(PARTICLES_PER_TASK)
-            .flat_map_iter(|x| {
-                let cell = grid.cell_of(x).expect("particle inside the domain");
-                reach.iter().filter_map(move |off| {
-                    let mut n = cell;
-                    for k in 0..D {
-                        n[k] = usize::try_from(cell[k] as i64 + off[k]).ok()?;
-                        if n[k] >= grid.dims[k] {
-                            return None;
+        let layers = grid.dims[D - 1];
+        let per_layer = grid.num_cells() / layers;
+        let mut slabs: Vec<Vec<u32>> = vec![vec![]; layers.div_ceil(SLAB)];
+        for (i, x) in pos.iter().enumerate() {
+            let cell = grid.cell_of(x).expect("particle inside the domain");
+            slabs[cell[D - 1] / SLAB].push(i as u32);
+        }
+        // Slab k lowers layers [k SLAB - 1, (k + 1) SLAB + 1): with SLAB >= 2, those of k and
+        // k + 2 are apart.
+        let span = |k: usize| {
+            (
+                (k * SLAB).saturating_sub(1),
+                ((k + 1) * SLAB + 1).min(layers),
+            )
+        };
+        for parity in 0..2 {
+            let mut jobs = vec![];
+            let (mut rest, mut start) = (&mut self.phi[..], 0);
+            for k in (parity..slabs.len()).step_by(2) {
+                let (lo, hi) = span(k);
+                let tail = std::mem::take(&mut rest)
+                    .split_at_mut((lo - start) * per_layer)
+                    .1;
+                let (own, tail) = tail.split_at_mut((hi - lo) * per_layer);
+                (rest, start) = (tail, hi);
+                jobs.push((&slabs[k], lo * per_layer, own));
+            }
+            jobs.into_par_iter().for_each(|(particles, offset, phi)| {
+                for &i in particles {
+                    let x = &pos[i as usize];
+                    let cell = grid.cell_of(x).expect("particle inside the domain");
+                    for off in &reach {
+                        let mut n = cell;
+                        let inside = (0..D).all(|k| {
+                            let m = cell[k] as i64 + off[k];
+                            n[k] = m as usize;
+                            0 <= m && n[k] < grid.dims[k]
+                        });
+                        if inside {
+                            let c = grid.cell_index(n) - offset;
+                            phi[c] = phi[c].min((grid.center(n) - x).norm() - radius);
                         }
                     }
-                    let (c, v) = (grid.cell_index(n), (grid.center(n) - x).norm() - radius);
-                    (v < phi[c]).then_some((c, v))
-                })
-            })
-            .collect();
-        for (c, v) in lower {
-            self.phi[c] = self.phi[c].min(v);
+                }
+            });
         }
     }
 
@@ -239,8 +267,9 @@ impl March {
     }
 }
 
-/// Particles per parallel task of the union with the spheres (enough to outweigh a task's cost).
-const PARTICLES_PER_TASK: usize = 1024;
+/// Layers of cells per slab of [`LevelSet::unite_spheres`] (at least 2, so that the slabs of
+/// one parity lower disjoint layers).
+const SLAB: usize = 4;
 
 /// [`LevelSet::remarch`]'s mark of a cell it does not work on.
 pub const FROZEN: u32 = u32::MAX;
