@@ -73,7 +73,11 @@ fn every_panel_plots_what_the_run_logs_and_every_metric_has_one_panel() {
         ("dam-2d", "20", &["--band", "paths", "--res", "24"]),
         ("falling-obstacle-2d", "3", &[]),
         ("dam-2d", "3", &["--method", "idp"]),
-        ("dam-3d", "3", &["--method", "nbflip", "--res", "12"]),
+        (
+            "dam-3d",
+            "3",
+            &["--method", "nbflip", "--res", "12", "--record-every", "1"],
+        ),
         ("drop-3d", "10", &["--res", "12"]),
     ];
     for (scene, steps, extra) in runs {
