@@ -94,6 +94,13 @@ pub enum CellClass {
 /// solve and each application `2 n^2`, well below one fine-level sweep.
 pub const COARSEST_ROWS: usize = 256;
 
+/// The fewest rows a parallel loop over a level's rows gives one task: a row's stencil
+/// (seven or eight gathers) is several vector entries' work, so half of [`PAR_GRAIN`]
+/// ([`PAR_GRAIN`] itself left each half-sweep of a 100^3 dam's 54,000 rows on one thread:
+/// about 7 ms per V-cycle there against 5; a quarter slowed 64^3, whose 15,000 rows do
+/// better on one thread); restriction, 64 gathers per coarse row, a quarter of that.
+const ROW_GRAIN: usize = PAR_GRAIN / 2;
+
 /// Red-black Gauss-Seidel sweeps before and after each coarse correction.
 pub const SWEEPS: usize = 2;
 
@@ -259,7 +266,7 @@ impl<const D: usize> Operator<D> {
         for (r, &c) in at.iter().enumerate() {
             row[shape.index(widen(c))] = r as u32;
         }
-        let stencil = (at.par_iter().with_min_len(PAR_GRAIN))
+        let stencil = (at.par_iter().with_min_len(ROW_GRAIN))
             .map(|&c| Self::stencil_of(&shape, cells, &row, widen(c)))
             .collect();
         Operator {
@@ -329,7 +336,7 @@ impl<const D: usize> Operator<D> {
             true => (xr, &*xb, 0, self.red),
             false => (xb, &*xr, self.red, 0),
         };
-        (mine.par_iter_mut().with_min_len(PAR_GRAIN))
+        (mine.par_iter_mut().with_min_len(ROW_GRAIN))
             .enumerate()
             .for_each(|(k, xi)| {
                 let i = first + k;
@@ -345,7 +352,7 @@ impl<const D: usize> Operator<D> {
 
     /// `r = b - A x`.
     fn residual(&self, b: &[f64], x: &[f64], r: &mut [f64]) {
-        (r.par_iter_mut().with_min_len(PAR_GRAIN))
+        (r.par_iter_mut().with_min_len(ROW_GRAIN))
             .enumerate()
             .for_each(|(i, ri)| {
                 let diag = self.scale * self.stencil[i].count as f64;
@@ -452,9 +459,9 @@ impl<const D: usize> Level<D> {
     /// Sets [`Level::movable`] and [`Level::to_parent`] from the next level's cells.
     fn link(&mut self, coarse: &Cells) {
         let shape = self.op.shape.coarser();
-        let at = self.op.at.par_iter().with_min_len(PAR_GRAIN);
+        let at = self.op.at.par_iter().with_min_len(ROW_GRAIN);
         self.movable = at.map(|&f| movable(widen(f), &shape, coarse)).collect();
-        let at = self.op.at.par_iter().with_min_len(PAR_GRAIN);
+        let at = self.op.at.par_iter().with_min_len(ROW_GRAIN);
         self.to_parent = (at.zip(&self.movable))
             .map(|(&f, &axes)| {
                 let (parent, step) = corners(widen(f), &shape);
@@ -492,7 +499,7 @@ impl<const D: usize> Level<D> {
     fn restrict(&self, coarse: &mut Level<D>) {
         let (fine, cop) = (&self.op.shape, &coarse.op);
         let block = block(fine);
-        (coarse.b.par_iter_mut().with_min_len(PAR_GRAIN))
+        (coarse.b.par_iter_mut().with_min_len(ROW_GRAIN / 4))
             .zip(&cop.at)
             .for_each(|(b, &k)| {
                 let k = widen(k);
@@ -527,7 +534,7 @@ impl<const D: usize> Level<D> {
         let (cop, xc) = (&coarse.op, &coarse.x);
         let (op, to_parent, movable) = (&self.op, &self.to_parent, &self.movable);
         let weight: Vec<f64> = (0..1 << D).map(corner_weight::<D>).collect();
-        (self.x.par_iter_mut().with_min_len(PAR_GRAIN))
+        (self.x.par_iter_mut().with_min_len(ROW_GRAIN))
             .enumerate()
             .for_each(|(i, x)| {
                 let (parent, step) = corners(widen(op.at[i]), &cop.shape);
