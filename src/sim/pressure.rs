@@ -230,24 +230,48 @@ impl<const D: usize> Poisson<D> {
 /// A connected fluid region that touches no empty cell (a full, closed container or a pocket
 /// enclosed by solids) has a singular Poisson system, solvable only for a right-hand side with
 /// zero mean over the region; the solid fluxes leave a rounding-level mean, removed here.
+///
+/// The regions are found by union-find over the rows, each joined to its `+axis` neighbours
+/// in row order: one pass that reads the stencil in order (a depth-first search over every
+/// row jumps around memory: 0.4-0.6 s at 4 M rows against about 0.1 s). Only a closed
+/// region is then walked, depth-first from its first row, and its mean summed in that order.
 fn remove_mean_of_closed_components<const D: usize>(
     a: &StencilMatrix<D>,
     dirichlet: &[bool],
     rhs: &mut [f64],
 ) {
-    let mut seen = vec![false; a.len()];
+    let n = a.len();
+    let mut root: Vec<u32> = (0..n as u32).collect();
+    let find = |root: &mut [u32], mut i: u32| {
+        while root[i as usize] != i {
+            let up = root[root[i as usize] as usize];
+            root[i as usize] = up;
+            i = up;
+        }
+        i
+    };
+    for r in 0..n {
+        for &p in a.plus[r].iter().filter(|&&p| p != NONE) {
+            let (x, y) = (find(&mut root, r as u32), find(&mut root, p));
+            root[x.max(y) as usize] = x.min(y);
+        }
+    }
+    let mut open = vec![false; n];
+    for r in 0..n {
+        let k = find(&mut root, r as u32) as usize;
+        open[k] |= dirichlet[r];
+    }
+    let mut seen = vec![false; n];
     let mut stack = vec![];
-    for start in 0..a.len() {
-        if seen[start] {
+    for start in 0..n {
+        if seen[start] || open[find(&mut root, start as u32) as usize] {
             continue;
         }
         let mut members = vec![];
-        let mut open = false;
         seen[start] = true;
         stack.push(start);
         while let Some(r) = stack.pop() {
             members.push(r);
-            open |= dirichlet[r];
             for nb in a.plus[r].iter().chain(&a.minus[r]) {
                 if *nb != NONE && !seen[*nb as usize] {
                     seen[*nb as usize] = true;
@@ -255,10 +279,8 @@ fn remove_mean_of_closed_components<const D: usize>(
                 }
             }
         }
-        if !open {
-            let mean = members.iter().map(|&r| rhs[r]).sum::<f64>() / members.len() as f64;
-            members.iter().for_each(|&r| rhs[r] -= mean);
-        }
+        let mean = members.iter().map(|&r| rhs[r]).sum::<f64>() / members.len() as f64;
+        members.iter().for_each(|&r| rhs[r] -= mean);
     }
 }
 
