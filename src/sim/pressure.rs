@@ -206,14 +206,17 @@ impl<const D: usize> Poisson<D> {
     }
 
     /// Solves `A x = rhs` (`rhs` in row order) by PCG from zero, with the preconditioner
-    /// `settings` names. A connected part of the set with no Dirichlet neighbour has a
+    /// `settings` names (`auto` resolved by the number of rows,
+    /// [`Preconditioner::for_size`]). A connected part of the set with no Dirichlet neighbour has a
     /// singular system: the mean of `rhs` over it is removed first
     /// ([`remove_mean_of_closed_components`]). Returns `x` per cell (0 outside the set).
     pub fn solve(&self, mut rhs: Vec<f64>, settings: &PcgSettings) -> (Vec<f64>, PcgStats) {
         remove_mean_of_closed_components(&self.a, &self.dirichlet, &mut rhs);
         let mut x = vec![0.0; self.a.len()];
-        let stats = match settings.preconditioner {
-            Preconditioner::Mic0 => pcg::solve(&self.a, &rhs, &mut x, settings),
+        let stats = match settings.preconditioner.for_size(D, self.a.len()) {
+            Preconditioner::Auto | Preconditioner::Mic0 => {
+                pcg::solve(&self.a, &rhs, &mut x, settings)
+            }
             Preconditioner::Multigrid => pcg::solve_with(&self.a, &rhs, &mut x, settings, || {
                 Multigrid::new(self.dims, &self.class)
             }),
@@ -468,6 +471,43 @@ mod tests {
             .map(|c| divergence(&g, &u, c).abs())
             .fold(0.0, f64::max);
         assert!(worst <= 1e-6 * u.max_abs(), "{worst}");
+    }
+
+    /// `auto` in the projection: the very solve of multigrid on a 2D system of
+    /// `AUTO_ROWS[0]` rows, and of MIC(0) on one row fewer.
+    #[test]
+    fn auto_takes_the_preconditioner_of_the_number_of_fluid_cells() {
+        use Preconditioner::*;
+        let g = Grid::new([100, 101]);
+        let n = g.num_cells();
+        let (solid, sv) = (vec![false; n], vec![Vector::<2>::zeros(); n]);
+        let mut u0 = MacField::zeros(&g);
+        let mut rng = rand::rngs::StdRng::seed_from_u64(6);
+        for comp in u0.comp.iter_mut() {
+            comp.iter_mut()
+                .for_each(|v| *v = rng.random_range(-1.0..1.0));
+        }
+        apply_solid_boundary(&g, &solid, &sv, &mut u0);
+        let rows = Preconditioner::AUTO_ROWS[0];
+        for (fluid, chosen, other) in [(rows, Multigrid, Mic0), (rows - 1, Mic0, Multigrid)] {
+            let kind: Vec<CellKind> = (0..n)
+                .map(|c| match c < fluid {
+                    true => CellKind::Fluid,
+                    false => CellKind::Empty,
+                })
+                .collect();
+            let solve = |preconditioner| {
+                let settings = PcgSettings {
+                    preconditioner,
+                    ..Default::default()
+                };
+                project(&g, &kind, &solid, &sv, &mut u0.clone(), &settings)
+            };
+            let auto = solve(Auto);
+            assert!(auto.converged, "{auto:?}");
+            assert_eq!(auto, solve(chosen), "{fluid} rows");
+            assert_ne!(auto, solve(other), "{fluid} rows");
+        }
     }
 
     /// The grid velocity after a step of `scene` (flip) at `cells`, every step before it with

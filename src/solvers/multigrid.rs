@@ -444,9 +444,8 @@ fn spread_rows<const D: usize>(dense: &mut [f64], op: &Operator<D>, v: &[f64]) {
         .for_each(|(k, d)| {
             let (lo, hi) = (k * PAR_GRAIN, k * PAR_GRAIN + d.len());
             for (first, end) in [(0, op.red), (op.red, op.len())] {
-                let start = first + op.at[first..end].partition_point(|&c| {
-                    op.shape.index(widen(c)) < lo
-                });
+                let start =
+                    first + op.at[first..end].partition_point(|&c| op.shape.index(widen(c)) < lo);
                 for i in start..end {
                     let c = cell(i);
                     if c >= hi {
@@ -932,7 +931,10 @@ mod tests {
                 let (fine, coarse) = (&mut fine[l], &mut coarse[0]);
                 // Both ways of restricting are taken.
                 let plain = fine.plain.iter().filter(|&&p| p).count();
-                assert!(plain > 0 && plain < fine.plain.len(), "level {l}: {plain} plain");
+                assert!(
+                    plain > 0 && plain < fine.plain.len(),
+                    "level {l}: {plain} plain"
+                );
                 fine.r = random_vector(fine.r.len(), &mut rng);
                 coarse.x = random_vector(coarse.x.len(), &mut rng);
                 fine.restrict(coarse);
