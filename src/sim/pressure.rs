@@ -213,7 +213,8 @@ impl<const D: usize> Poisson<D> {
     pub fn solve(&self, mut rhs: Vec<f64>, settings: &PcgSettings) -> (Vec<f64>, PcgStats) {
         remove_mean_of_closed_components(&self.a, &self.dirichlet, &mut rhs);
         let mut x = vec![0.0; self.a.len()];
-        let stats = match settings.preconditioner.for_size(D, self.a.len()) {
+        let cells = self.row.len();
+        let stats = match settings.preconditioner.for_size(D, self.a.len(), cells) {
             Preconditioner::Auto | Preconditioner::Mic0 => {
                 pcg::solve(&self.a, &rhs, &mut x, settings)
             }
@@ -474,7 +475,7 @@ mod tests {
     }
 
     /// `auto` in the projection: the very solve of multigrid on a 2D system of
-    /// `AUTO_ROWS[0]` rows, and of MIC(0) on one row fewer.
+    /// `AUTO_ROWS[0]` rows (all but a row of the grid), and of MIC(0) on one row fewer.
     #[test]
     fn auto_takes_the_preconditioner_of_the_number_of_fluid_cells() {
         use Preconditioner::*;

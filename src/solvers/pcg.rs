@@ -85,8 +85,11 @@ impl<const D: usize> StencilMatrix<D> {
 #[serde(rename_all = "kebab-case")]
 pub enum Preconditioner {
     /// By the system's size: multigrid from [`Preconditioner::AUTO_ROWS`] rows (10,000 in 2D,
-    /// 100,000 in 3D), MIC(0) below, where the multigrid's set-up and heavier iterations do
-    /// not pay (the crossover measured in docs/benchmarks.md, "Pressure preconditioners").
+    /// 100,000 in 3D) when the rows fill at least an eighth of the grid
+    /// ([`Preconditioner::AUTO_FILL`]), MIC(0) otherwise, where the multigrid's set-up and
+    /// heavier iterations do not pay: its hierarchy is built over the whole grid, and a thin
+    /// column keeps more rows on its coarse levels (the crossover measured in
+    /// docs/benchmarks.md, "Pressure preconditioners").
     #[default]
     Auto,
     /// Modified incomplete Cholesky: cheap per iteration, but its triangular solves are
@@ -102,12 +105,17 @@ impl Preconditioner {
     /// The fewest rows for which [`Preconditioner::Auto`] takes multigrid, in 2D and in 3D.
     pub const AUTO_ROWS: [usize; 2] = [10_000, 100_000];
 
-    /// The preconditioner a solve of `rows` rows on a `dim`-dimensional grid runs with:
-    /// [`Preconditioner::Auto`] resolved by [`Preconditioner::AUTO_ROWS`], the others as
-    /// they are.
-    pub fn for_size(self, dim: usize, rows: usize) -> Preconditioner {
+    /// [`Preconditioner::Auto`] takes multigrid only if the rows are at least the grid's cells
+    /// over this.
+    pub const AUTO_FILL: usize = 8;
+
+    /// The preconditioner a solve of `rows` rows on a `dim`-dimensional grid of `cells` cells
+    /// runs with: [`Preconditioner::Auto`] resolved by [`Preconditioner::AUTO_ROWS`] and
+    /// [`Preconditioner::AUTO_FILL`], the others as they are.
+    pub fn for_size(self, dim: usize, rows: usize, cells: usize) -> Preconditioner {
+        let large = rows >= Self::AUTO_ROWS[dim.clamp(2, 3) - 2];
         match self {
-            Preconditioner::Auto if rows >= Self::AUTO_ROWS[dim.clamp(2, 3) - 2] => {
+            Preconditioner::Auto if large && rows * Self::AUTO_FILL >= cells => {
                 Preconditioner::Multigrid
             }
             Preconditioner::Auto => Preconditioner::Mic0,
@@ -455,11 +463,15 @@ mod tests {
             (2, Preconditioner::AUTO_ROWS[0]),
             (3, Preconditioner::AUTO_ROWS[1]),
         ] {
-            assert_eq!(Auto.for_size(dim, rows - 1), Mic0);
-            assert_eq!(Auto.for_size(dim, rows), Multigrid);
+            let cells = rows * Preconditioner::AUTO_FILL;
+            assert_eq!(Auto.for_size(dim, rows - 1, cells), Mic0);
+            assert_eq!(Auto.for_size(dim, rows, cells), Multigrid);
+            // Too few of a larger grid's cells.
+            assert_eq!(Auto.for_size(dim, rows, cells + 1), Mic0);
             for p in [Mic0, Multigrid] {
-                assert_eq!(p.for_size(dim, 1), p);
-                assert_eq!(p.for_size(dim, 10 * rows), p);
+                assert_eq!(p.for_size(dim, 1, cells), p);
+                assert_eq!(p.for_size(dim, 10 * rows, cells), p);
+                assert_eq!(p.for_size(dim, rows, 1000 * cells), p);
             }
         }
         assert!(Preconditioner::AUTO_ROWS[0] < Preconditioner::AUTO_ROWS[1]);
