@@ -9,6 +9,7 @@ use crate::metrics::{median, Stage};
 use crate::runner::{Limit, Runner};
 use crate::scene::{Overrides, Scene};
 use crate::simulation::Simulation;
+use crate::solvers::pcg::Preconditioner;
 use anyhow::{bail, Result};
 use std::time::Duration;
 
@@ -104,7 +105,12 @@ fn bench_dim<const D: usize>(scene: &Scene, args: &BenchArgs) -> Result<Measured
         sim.particles.len(),
         sim.markings.fluid_cells(),
         median(&s.pcg_iterations).unwrap_or(0),
-        sim.config.pressure_preconditioner.name()
+        preconditioner_shown(
+            sim.config.pressure_preconditioner,
+            sim.grid.dims.len(),
+            sim.markings.fluid_cells(),
+            sim.grid.num_cells()
+        )
     );
     crate::outln!("  {:<10} {:>12}", "stage", "median ms");
     for st in Stage::ALL {
@@ -223,6 +229,15 @@ fn least_squares_slope(points: &[(f64, f64)]) -> Option<f64> {
     let sxx: f64 = points.iter().map(|(x, _)| (x - mx).powi(2)).sum();
     let sxy: f64 = points.iter().map(|(x, y)| (x - mx) * (y - my)).sum();
     (sxx > 0.0).then(|| sxy / sxx)
+}
+
+/// The preconditioner a bench names: `auto` with what it chose for the last step's fluid
+/// cells (the pressure solve's rows) among the grid's `cells`, as `auto: multigrid`.
+fn preconditioner_shown(p: Preconditioner, dim: usize, rows: usize, cells: usize) -> String {
+    match p {
+        Preconditioner::Auto => format!("auto: {}", p.for_size(dim, rows, cells).name()),
+        p => p.name().to_string(),
+    }
 }
 
 #[cfg(test)]

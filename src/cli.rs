@@ -237,8 +237,9 @@ pub struct RunArgs {
     #[arg(long, value_enum)]
     pub obstacle: Option<ObstacleMode>,
     /// CG's preconditioner in the pressure solve (overrides
-    /// `simulation.pressure_preconditioner`): mic0 (modified incomplete Cholesky) or multigrid
-    /// (a geometric V-cycle).
+    /// `simulation.pressure_preconditioner`): auto (multigrid from 10,000 unknown rows in 2D
+    /// and 100,000 in 3D filling at least an eighth of the grid, mic0 otherwise), mic0
+    /// (modified incomplete Cholesky) or multigrid (a geometric V-cycle).
     #[arg(long, value_enum, value_name = "PRECONDITIONER")]
     pub pressure: Option<Preconditioner>,
     /// Method powerpic: how the free surface's air is costed (overrides
@@ -297,8 +298,9 @@ pub struct BenchArgs {
     #[arg(long, value_enum)]
     pub method: Option<MethodKind>,
     /// CG's preconditioner in the pressure solve (overrides
-    /// `simulation.pressure_preconditioner`): mic0 (modified incomplete Cholesky) or multigrid
-    /// (a geometric V-cycle).
+    /// `simulation.pressure_preconditioner`): auto (multigrid from 10,000 unknown rows in 2D
+    /// and 100,000 in 3D filling at least an eighth of the grid, mic0 otherwise), mic0
+    /// (modified incomplete Cholesky) or multigrid (a geometric V-cycle).
     #[arg(long, value_enum, value_name = "PRECONDITIONER")]
     pub pressure: Option<Preconditioner>,
     /// Method powerpic: how the free surface's air is costed (overrides

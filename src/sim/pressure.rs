@@ -206,14 +206,18 @@ impl<const D: usize> Poisson<D> {
     }
 
     /// Solves `A x = rhs` (`rhs` in row order) by PCG from zero, with the preconditioner
-    /// `settings` names. A connected part of the set with no Dirichlet neighbour has a
+    /// `settings` names (`auto` resolved by the number of rows,
+    /// [`Preconditioner::for_size`]). A connected part of the set with no Dirichlet neighbour has a
     /// singular system: the mean of `rhs` over it is removed first
     /// ([`remove_mean_of_closed_components`]). Returns `x` per cell (0 outside the set).
     pub fn solve(&self, mut rhs: Vec<f64>, settings: &PcgSettings) -> (Vec<f64>, PcgStats) {
         remove_mean_of_closed_components(&self.a, &self.dirichlet, &mut rhs);
         let mut x = vec![0.0; self.a.len()];
-        let stats = match settings.preconditioner {
-            Preconditioner::Mic0 => pcg::solve(&self.a, &rhs, &mut x, settings),
+        let cells = self.row.len();
+        let stats = match settings.preconditioner.for_size(D, self.a.len(), cells) {
+            Preconditioner::Auto | Preconditioner::Mic0 => {
+                pcg::solve(&self.a, &rhs, &mut x, settings)
+            }
             Preconditioner::Multigrid => pcg::solve_with(&self.a, &rhs, &mut x, settings, || {
                 Multigrid::new(self.dims, &self.class)
             }),
@@ -230,24 +234,48 @@ impl<const D: usize> Poisson<D> {
 /// A connected fluid region that touches no empty cell (a full, closed container or a pocket
 /// enclosed by solids) has a singular Poisson system, solvable only for a right-hand side with
 /// zero mean over the region; the solid fluxes leave a rounding-level mean, removed here.
+///
+/// The regions are found by union-find over the rows, each joined to its `+axis` neighbours
+/// in row order: one pass that reads the stencil in order (a depth-first search over every
+/// row jumps around memory: 0.4-0.6 s at 4 M rows against about 0.1 s). Only a closed
+/// region is then walked, depth-first from its first row, and its mean summed in that order.
 fn remove_mean_of_closed_components<const D: usize>(
     a: &StencilMatrix<D>,
     dirichlet: &[bool],
     rhs: &mut [f64],
 ) {
-    let mut seen = vec![false; a.len()];
+    let n = a.len();
+    let mut root: Vec<u32> = (0..n as u32).collect();
+    let find = |root: &mut [u32], mut i: u32| {
+        while root[i as usize] != i {
+            let up = root[root[i as usize] as usize];
+            root[i as usize] = up;
+            i = up;
+        }
+        i
+    };
+    for r in 0..n {
+        for &p in a.plus[r].iter().filter(|&&p| p != NONE) {
+            let (x, y) = (find(&mut root, r as u32), find(&mut root, p));
+            root[x.max(y) as usize] = x.min(y);
+        }
+    }
+    let mut open = vec![false; n];
+    for r in 0..n {
+        let k = find(&mut root, r as u32) as usize;
+        open[k] |= dirichlet[r];
+    }
+    let mut seen = vec![false; n];
     let mut stack = vec![];
-    for start in 0..a.len() {
-        if seen[start] {
+    for start in 0..n {
+        if seen[start] || open[find(&mut root, start as u32) as usize] {
             continue;
         }
         let mut members = vec![];
-        let mut open = false;
         seen[start] = true;
         stack.push(start);
         while let Some(r) = stack.pop() {
             members.push(r);
-            open |= dirichlet[r];
             for nb in a.plus[r].iter().chain(&a.minus[r]) {
                 if *nb != NONE && !seen[*nb as usize] {
                     seen[*nb as usize] = true;
@@ -255,10 +283,8 @@ fn remove_mean_of_closed_components<const D: usize>(
                 }
             }
         }
-        if !open {
-            let mean = members.iter().map(|&r| rhs[r]).sum::<f64>() / members.len() as f64;
-            members.iter().for_each(|&r| rhs[r] -= mean);
-        }
+        let mean = members.iter().map(|&r| rhs[r]).sum::<f64>() / members.len() as f64;
+        members.iter().for_each(|&r| rhs[r] -= mean);
     }
 }
 
@@ -446,6 +472,43 @@ mod tests {
             .map(|c| divergence(&g, &u, c).abs())
             .fold(0.0, f64::max);
         assert!(worst <= 1e-6 * u.max_abs(), "{worst}");
+    }
+
+    /// `auto` in the projection: the very solve of multigrid on a 2D system of
+    /// `AUTO_ROWS[0]` rows (all but a row of the grid), and of MIC(0) on one row fewer.
+    #[test]
+    fn auto_takes_the_preconditioner_of_the_number_of_fluid_cells() {
+        use Preconditioner::*;
+        let g = Grid::new([100, 101]);
+        let n = g.num_cells();
+        let (solid, sv) = (vec![false; n], vec![Vector::<2>::zeros(); n]);
+        let mut u0 = MacField::zeros(&g);
+        let mut rng = rand::rngs::StdRng::seed_from_u64(6);
+        for comp in u0.comp.iter_mut() {
+            comp.iter_mut()
+                .for_each(|v| *v = rng.random_range(-1.0..1.0));
+        }
+        apply_solid_boundary(&g, &solid, &sv, &mut u0);
+        let rows = Preconditioner::AUTO_ROWS[0];
+        for (fluid, chosen, other) in [(rows, Multigrid, Mic0), (rows - 1, Mic0, Multigrid)] {
+            let kind: Vec<CellKind> = (0..n)
+                .map(|c| match c < fluid {
+                    true => CellKind::Fluid,
+                    false => CellKind::Empty,
+                })
+                .collect();
+            let solve = |preconditioner| {
+                let settings = PcgSettings {
+                    preconditioner,
+                    ..Default::default()
+                };
+                project(&g, &kind, &solid, &sv, &mut u0.clone(), &settings)
+            };
+            let auto = solve(Auto);
+            assert!(auto.converged, "{auto:?}");
+            assert_eq!(auto, solve(chosen), "{fluid} rows");
+            assert_ne!(auto, solve(other), "{fluid} rows");
+        }
     }
 
     /// The grid velocity after a step of `scene` (flip) at `cells`, every step before it with

@@ -84,9 +84,16 @@ impl<const D: usize> StencilMatrix<D> {
 )]
 #[serde(rename_all = "kebab-case")]
 pub enum Preconditioner {
+    /// By the system's size: multigrid from [`Preconditioner::AUTO_ROWS`] rows (10,000 in 2D,
+    /// 100,000 in 3D) when the rows fill at least an eighth of the grid
+    /// ([`Preconditioner::AUTO_FILL`]), MIC(0) otherwise, where the multigrid's set-up and
+    /// heavier iterations do not pay: its hierarchy is built over the whole grid, and a thin
+    /// column keeps more rows on its coarse levels (the crossover measured in
+    /// docs/benchmarks.md, "Pressure preconditioners").
+    #[default]
+    Auto,
     /// Modified incomplete Cholesky: cheap per iteration, but its triangular solves are
     /// sequential and its iteration count grows with the grid.
-    #[default]
     Mic0,
     /// A geometric multigrid V-cycle (McAdams et al. 2010; `solvers::multigrid`): several
     /// MIC(0) iterations' work per iteration, but an iteration count nearly independent of
@@ -95,8 +102,30 @@ pub enum Preconditioner {
 }
 
 impl Preconditioner {
+    /// The fewest rows for which [`Preconditioner::Auto`] takes multigrid, in 2D and in 3D.
+    pub const AUTO_ROWS: [usize; 2] = [10_000, 100_000];
+
+    /// [`Preconditioner::Auto`] takes multigrid only if the rows are at least the grid's cells
+    /// over this.
+    pub const AUTO_FILL: usize = 8;
+
+    /// The preconditioner a solve of `rows` rows on a `dim`-dimensional grid of `cells` cells
+    /// runs with: [`Preconditioner::Auto`] resolved by [`Preconditioner::AUTO_ROWS`] and
+    /// [`Preconditioner::AUTO_FILL`], the others as they are.
+    pub fn for_size(self, dim: usize, rows: usize, cells: usize) -> Preconditioner {
+        let large = rows >= Self::AUTO_ROWS[dim.clamp(2, 3) - 2];
+        match self {
+            Preconditioner::Auto if large && rows * Self::AUTO_FILL >= cells => {
+                Preconditioner::Multigrid
+            }
+            Preconditioner::Auto => Preconditioner::Mic0,
+            p => p,
+        }
+    }
+
     pub fn name(self) -> &'static str {
         match self {
+            Preconditioner::Auto => "auto",
             Preconditioner::Mic0 => "mic0",
             Preconditioner::Multigrid => "multigrid",
         }
@@ -114,8 +143,8 @@ pub struct PcgSettings {
     /// MIC(0) safety cut-off sigma (Bridson: 0.25).
     pub sigma: f64,
     /// The preconditioner a caller that knows the grid builds
-    /// ([`crate::sim::pressure::Poisson::solve`]); [`solve`] has only the matrix and takes
-    /// MIC(0).
+    /// ([`crate::sim::pressure::Poisson::solve`], which resolves [`Preconditioner::Auto`]
+    /// by the system's size); [`solve`] has only the matrix and takes MIC(0).
     pub preconditioner: Preconditioner,
 }
 
@@ -126,7 +155,7 @@ impl Default for PcgSettings {
             max_iterations: 2000,
             tau: 0.97,
             sigma: 0.25,
-            preconditioner: Preconditioner::Mic0,
+            preconditioner: Preconditioner::Auto,
         }
     }
 }
@@ -425,6 +454,27 @@ mod tests {
     #[test]
     fn solves_manufactured_poisson_3d() {
         manufactured([16, 12, 14], 2);
+    }
+
+    #[test]
+    fn auto_takes_multigrid_from_the_size_rule_on_and_leaves_the_others() {
+        use Preconditioner::*;
+        for (dim, rows) in [
+            (2, Preconditioner::AUTO_ROWS[0]),
+            (3, Preconditioner::AUTO_ROWS[1]),
+        ] {
+            let cells = rows * Preconditioner::AUTO_FILL;
+            assert_eq!(Auto.for_size(dim, rows - 1, cells), Mic0);
+            assert_eq!(Auto.for_size(dim, rows, cells), Multigrid);
+            // Too few of a larger grid's cells.
+            assert_eq!(Auto.for_size(dim, rows, cells + 1), Mic0);
+            for p in [Mic0, Multigrid] {
+                assert_eq!(p.for_size(dim, 1, cells), p);
+                assert_eq!(p.for_size(dim, 10 * rows, cells), p);
+                assert_eq!(p.for_size(dim, rows, 1000 * cells), p);
+            }
+        }
+        assert!(Preconditioner::AUTO_ROWS[0] < Preconditioner::AUTO_ROWS[1]);
     }
 
     #[test]

@@ -216,15 +216,22 @@ pub fn digest_report<const D: usize>(d: &mut Digest, rep: &StepReport<D>) {
     }
 }
 
-/// The digest of `steps` steps of a scene: state and report after every step, chained.
-pub fn digest_run<const D: usize>(scene: &Scene, steps: u64) -> String {
+/// The digest of `steps` steps of a scene: state and report after every step, chained; and
+/// the PCG iterations of all its pressure solves (idp's second solves included), so that a
+/// solver regression reads as a number, not only as a changed digest.
+pub fn digest_run<const D: usize>(scene: &Scene, steps: u64) -> (String, usize) {
     let mut d = Digest::default();
+    let mut iterations = 0;
     digest_state(&mut d, &simulation::<D>(scene, false));
     run::<D>(scene, Some(steps), |sim, rep| {
+        iterations += rep.pcg.iterations;
+        if let Some(idp) = rep.method_report::<IdpReport<D>>() {
+            iterations += idp.pcg.iterations;
+        }
         digest_report(&mut d, rep);
         digest_state(&mut d, sim);
     });
-    d.hex()
+    (d.hex(), iterations)
 }
 
 /// Every entity path of a recording.
