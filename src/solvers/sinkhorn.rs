@@ -122,7 +122,7 @@ impl<const D: usize> TransportGrid<D> {
             Air::Capacity => (cap / c).min(1.0),
             Air::Baseline { eta, baseline } => match (baseline[j], *eta) {
                 (b, _) if c == 0.0 && b == 0.0 => v,
-                (b, eta) if eta == 1.0 => cap / (c + b),
+                (b, 1.0) => cap / (c + b),
                 (b, eta) => baseline_newton(cap, c, b, eta),
             },
         }

@@ -150,8 +150,8 @@ fn run_briefly(scene: &Scene) -> anyhow::Result<()> {
     }
     let limit = Limit::Steps(3);
     match scene.dim() {
-        2 => common::try_run_sim(common::simulation::<2>(&scene, false), limit, |_, _| {}),
-        _ => common::try_run_sim(common::simulation::<3>(&scene, false), limit, |_, _| {}),
+        2 => common::try_run_sim(common::simulation::<2>(scene, false), limit, |_, _| {}),
+        _ => common::try_run_sim(common::simulation::<3>(scene, false), limit, |_, _| {}),
     }
 }
 

@@ -323,8 +323,9 @@ mod tests {
         let g = Grid::new([4, 5, 12]);
         let mut u = MacField::zeros(&g);
         u.comp[2].iter_mut().for_each(|v| *v = -2.0);
-        let mut ls = LevelSet::default();
-        ls.phi = vec![f64::NAN; g.num_cells()];
+        let mut ls = LevelSet {
+            phi: vec![f64::NAN; g.num_cells()],
+        };
         let all: Vec<usize> = (0..g.num_cells()).collect();
         plane(&g, 6.2).advect_into(&g, &u, 0.5, &all, &mut ls);
         let want = plane(&g, 5.2);
