@@ -10,7 +10,7 @@
 //! counter-clockwise seen from outside the liquid, as `uchar`-counted lists of `uint`.
 
 use crate::cli::ExportArgs;
-use crate::frames::{Frame, FrameSink, Needs};
+use crate::frames::{Frame, FrameNeeds, FrameSink};
 use crate::scene::Scene;
 use crate::surface::SurfaceMesh;
 use anyhow::{Context, Result};
@@ -51,11 +51,11 @@ pub fn requested(
     args: &ExportArgs,
     scene: &Scene,
     run: &str,
-) -> Result<Option<(FrameSink, Needs)>> {
+) -> Result<Option<(FrameSink, FrameNeeds)>> {
     let Some(dir) = &args.export_frames else {
         return Ok(None);
     };
-    let needs = Needs {
+    let needs = FrameNeeds {
         particles: true,
         surface: scene.dim() == 3,
     };

@@ -9,8 +9,8 @@
 //! its own with one thread ([`THREADS`]), and takes the idle time instead of the simulation's.
 //!
 //! **Order and back-pressure.** Frames are handed over in order through a channel that holds
-//! one: the simulation waits only when the worker is a whole frame behind, so at most two
-//! frames' copies are alive at once. Each frame carries its step and simulated time, and the
+//! one: the simulation waits only when the worker is a whole frame behind, so at most three
+//! frames' copies are alive at once (one being drawn, one waiting, one being handed over). Each frame carries its step and simulated time, and the
 //! recording logs it at those times, so drawing it late changes nothing in the viewer.
 //!
 //! **Errors.** A sink's error (an export file that cannot be written) stops the worker; the
@@ -44,7 +44,7 @@ pub type FrameSink = Box<dyn FnMut(&Frame) -> Result<()> + Send>;
 
 /// What the sinks need made for each frame.
 #[derive(Clone, Copy, Debug, Default)]
-pub struct Needs {
+pub struct FrameNeeds {
     pub particles: bool,
     pub surface: bool,
 }
@@ -59,20 +59,22 @@ struct Job {
 pub struct FrameWorker {
     tx: Option<SyncSender<Job>>,
     thread: Option<JoinHandle<Result<()>>>,
-    needs: Needs,
+    needs: FrameNeeds,
     submitted: u64,
 }
 
 impl FrameWorker {
     /// A worker feeding `sinks`, or `None` when there is none.
-    pub fn start(sinks: Vec<(FrameSink, Needs)>) -> Result<Option<Self>> {
+    pub fn start(sinks: Vec<(FrameSink, FrameNeeds)>) -> Result<Option<Self>> {
         if sinks.is_empty() {
             return Ok(None);
         }
-        let needs = sinks.iter().fold(Needs::default(), |a, (_, n)| Needs {
-            particles: a.particles || n.particles,
-            surface: a.surface || n.surface,
-        });
+        let needs = sinks
+            .iter()
+            .fold(FrameNeeds::default(), |a, (_, n)| FrameNeeds {
+                particles: a.particles || n.particles,
+                surface: a.surface || n.surface,
+            });
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(THREADS)
             .thread_name(|i| format!("cellflip-frames-{i}"))

@@ -117,7 +117,7 @@ impl Comparison {
     pub fn surface_sink(
         &self,
         i: usize,
-    ) -> Option<(crate::frames::FrameSink, crate::frames::Needs)> {
+    ) -> Option<(crate::frames::FrameSink, crate::frames::FrameNeeds)> {
         self.runs[i].1.surface_sink()
     }
 

@@ -103,7 +103,7 @@ impl Recorder {
     }
 
     /// See [`RunLog::surface_sink`].
-    pub fn surface_sink(&self) -> Option<(crate::frames::FrameSink, crate::frames::Needs)> {
+    pub fn surface_sink(&self) -> Option<(crate::frames::FrameSink, crate::frames::FrameNeeds)> {
         self.run.surface_sink()
     }
 

@@ -6,7 +6,7 @@ use super::canvas::PointLook;
 use super::{Canvas, Drawing, Moves, Plane, Stream};
 use crate::draw::legend::{self, speed_color, NEW_SOLID_COLOR, OBSTACLE_COLOR};
 use crate::draw::{Layer, Log};
-use crate::frames::{Frame, FrameSink, Needs};
+use crate::frames::{Frame, FrameNeeds, FrameSink};
 use crate::grid::Vector;
 use crate::metrics::Stage;
 use crate::particles::Region;
@@ -41,14 +41,12 @@ impl RunLog {
     }
 
     pub(super) fn canvas<const D: usize>(&self, sim: &Simulation<D>) -> Canvas<'_, D> {
-        if !self.compared {
-            self.out
-                .rec
-                .set_time_sequence("step", sim.state.steps as i64);
-        }
-        self.out
-            .rec
-            .set_duration_secs("sim_time", sim.state.time_secs);
+        stamp(
+            &self.out,
+            self.compared,
+            sim.state.steps,
+            sim.state.time_secs,
+        );
         let (axis, at) = self.drawing.slice;
         let slice = (D == 3 && !self.compared).then(|| {
             let layer = ((at * self.dims[axis] as f64) as usize).min(self.dims[axis] - 1);
@@ -159,7 +157,7 @@ impl RunLog {
 
     /// 3D with the surface drawn: the sink that draws each frame's surface, `world/surface`,
     /// at the frame's step and time, from the frame worker's thread ([`crate::frames`]).
-    pub fn surface_sink(&self) -> Option<(FrameSink, Needs)> {
+    pub fn surface_sink(&self) -> Option<(FrameSink, FrameNeeds)> {
         if self.dims.len() != 3 || !self.drawing.surface {
             return None;
         }
@@ -168,16 +166,11 @@ impl RunLog {
             let Some(mesh) = &f.surface else {
                 return Ok(());
             };
-            if !compared {
-                out.rec.set_time_sequence("step", f.step as i64);
-            }
-            out.rec.set_duration_secs("sim_time", f.time_secs);
-            if let Err(e) = out.log("world/surface", &surface_mesh(mesh)) {
-                eprintln!("warning: recording: {e}");
-            }
+            stamp(&out, compared, f.step, f.time_secs);
+            warn_on_failure(out.log("world/surface", &surface_mesh(mesh)));
             Ok(())
         };
-        let needs = Needs {
+        let needs = FrameNeeds {
             surface: true,
             particles: false,
         };
@@ -226,12 +219,26 @@ impl RunLog {
         self.report(c.result);
     }
 
-    /// A failed log call is not worth stopping a simulation for; say so on stderr.
+    /// See [`warn_on_failure`].
     pub(super) fn report(&self, r: rerun::RecordingStreamResult<()>) {
-        if let Err(e) = r {
-            eprintln!("warning: recording: {e}");
-        }
+        warn_on_failure(r);
     }
+}
+
+/// A failed log call is not worth stopping a simulation for; say so on stderr.
+fn warn_on_failure(r: rerun::RecordingStreamResult<()>) {
+    if let Err(e) = r {
+        eprintln!("warning: recording: {e}");
+    }
+}
+
+/// Sets the calling thread's times on `out` for what it logs next: `sim_time`, and `step`
+/// unless the run is one of a comparison (whose runs' steps differ).
+fn stamp(out: &Stream, compared: bool, step: u64, time_secs: f64) {
+    if !compared {
+        out.rec.set_time_sequence("step", step as i64);
+    }
+    out.rec.set_duration_secs("sim_time", time_secs);
 }
 
 /// A surface mesh in the liquid's colour (grid coordinates are world coordinates in 3D).

@@ -445,6 +445,15 @@ pub fn cellflip_in(dir: &Path, args: &[&str]) -> Output {
         .expect("the binary runs")
 }
 
+/// Asserts that a `cellflip` process succeeded, showing its standard error if not.
+pub fn ok(out: &Output) {
+    assert!(
+        out.status.success(),
+        "stderr: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
 /// The scratch folder of a command-line test.
 pub fn scratch_dir(test: &str) -> Scratch {
     Scratch::new("test", test)

@@ -2,20 +2,12 @@
 //! series equal to its own `cellflip run`'s, a failing run that stops alone, and streams that
 //! carry the file's data or survive a viewer that is not there.
 
-use crate::common::{self, cellflip_in, scratch_dir};
+use crate::common::{self, cellflip_in, ok, scratch_dir};
 use cellflip::compare::{step_frames, Frames, Status};
 use cellflip::methods::MethodKind;
 use cellflip::record::{ComparedRun, Comparison, Sink};
 use cellflip::runner::Runner;
 use std::path::Path;
-
-fn ok(out: &std::process::Output) {
-    assert!(
-        out.status.success(),
-        "stderr: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
 
 #[test]
 fn a_comparison_holds_one_world_per_run_and_each_runs_series_is_its_own_runs() {

@@ -2,17 +2,11 @@
 //! renderer reads, one per run, frame and kind, in metres; the recording's surface at every
 //! frame the particles are drawn.
 
-use crate::common::{self, cellflip_in, scratch_dir};
+use crate::common::{self, cellflip_in, ok, scratch_dir};
+use crate::surface::assert_closed_and_oriented;
+use cellflip::surface::SurfaceMesh;
 use std::collections::HashMap;
 use std::path::Path;
-
-fn ok(out: &std::process::Output) {
-    assert!(
-        out.status.success(),
-        "stderr: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
 
 /// A binary little-endian PLY file as read back: per element, its name, its count and its
 /// rows (`float` properties as numbers; a face row is its vertex indices).
@@ -93,20 +87,6 @@ fn exported(dir: &Path) -> HashMap<String, Vec<String>> {
     by_kind
 }
 
-/// The signed volume a triangle mesh encloses (divergence theorem).
-fn enclosed(vertices: &[Vec<f64>], faces: &[Vec<f64>]) -> f64 {
-    let v = |i: f64| &vertices[i as usize];
-    faces
-        .iter()
-        .map(|f| {
-            let (a, b, c) = (v(f[0]), v(f[1]), v(f[2]));
-            a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
-                + a[2] * (b[0] * c[1] - b[1] * c[0])
-        })
-        .sum::<f64>()
-        / 6.0
-}
-
 #[test]
 fn a_3d_run_exports_particles_and_a_closed_surface_per_frame_in_metres() {
     let dir = scratch_dir("export_3d");
@@ -156,29 +136,31 @@ fn a_3d_run_exports_particles_and_a_closed_surface_per_frame_in_metres() {
     }
     let water = pts.len() as f64 / mu * h.powi(3);
     let surface = Ply::read(&frames.join(&files["surface"][0]));
-    let (vertices, faces) = (surface.rows("vertex"), surface.rows("face"));
-    assert!(faces.iter().all(|f| f.len() == 3));
-    // Closed: every edge is in two faces, once each way.
-    let mut edges: HashMap<(u64, u64), i32> = HashMap::new();
-    for f in faces {
-        for k in 0..3 {
-            let (a, b) = (f[k] as u64, f[(k + 1) % 3] as u64);
-            *edges.entry((a.min(b), a.max(b))).or_default() += if a < b { 1 } else { -1 };
-        }
-    }
-    assert!(
-        edges.values().all(|&n| n == 0),
-        "an edge without its opposite"
-    );
-    for v in vertices {
-        let n = (v[3] * v[3] + v[4] * v[4] + v[5] * v[5]).sqrt();
-        assert!((n - 1.0).abs() < 1e-5, "normal {v:?}");
+    let mesh = SurfaceMesh {
+        vertices: (surface.rows("vertex").iter())
+            .map(|v| [v[0], v[1], v[2]].map(|x| x as f32))
+            .collect(),
+        normals: (surface.rows("vertex").iter())
+            .map(|v| [v[3], v[4], v[5]].map(|x| x as f32))
+            .collect(),
+        triangles: (surface.rows("face").iter())
+            .map(|f| {
+                <[f64; 3]>::try_from(&f[..])
+                    .expect("triangles")
+                    .map(|i| i as u32)
+            })
+            .collect(),
+    };
+    assert_closed_and_oriented(&mesh);
+    for (v, n) in mesh.vertices.iter().zip(&mesh.normals) {
+        let len = n.iter().map(|x| x * x).sum::<f32>().sqrt();
+        assert!((len - 1.0).abs() < 1e-5, "normal {n:?} at {v:?}");
         assert!(
-            v[..3].iter().all(|x| (0.0..=1.0).contains(x)),
+            v.iter().all(|x| (0.0..=1.0).contains(x)),
             "{v:?} outside the tank"
         );
     }
-    let v = enclosed(vertices, faces);
+    let v = mesh.enclosed_volume();
     println!("enclosed {v:.5} m^3, water {water:.5} m^3");
     // 10%: a column 5 cells wide, whose free faces (a third of its surface) the iso-surface may
     // place a fraction of a particle spacing off; against the walls the mesh is the wall.

@@ -36,7 +36,7 @@ fn cells(lo: [usize; 3], hi: [usize; 3]) -> impl Iterator<Item = [usize; 3]> {
 
 /// Every edge is shared by exactly two triangles that traverse it in opposite directions: the
 /// mesh is closed and consistently oriented.
-fn assert_closed_and_oriented(m: &SurfaceMesh) {
+pub(crate) fn assert_closed_and_oriented(m: &SurfaceMesh) {
     let mut directed: HashMap<(u32, u32), usize> = HashMap::new();
     for t in &m.triangles {
         for k in 0..3 {
