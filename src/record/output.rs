@@ -4,7 +4,7 @@
 //!
 //! A live stream that breaks (the viewer closed mid-run) does not stop the simulation: rerun's
 //! gRPC sink drops what it cannot send, and the end of the run waits at most
-//! [`LIVE_FLUSH_TIMEOUT`] for the rest and then says the stream was lost.
+//! [`LIVE_FLUSH_TIMEOUT`] for the rest and then says the stream was lost (see [`end_live`]).
 
 use super::RrdFile;
 use anyhow::{anyhow, Result};
@@ -116,7 +116,7 @@ impl Output {
                 file.finish()
             }
             None => {
-                if let Err(e) = self.rec.flush_with_timeout(LIVE_FLUSH_TIMEOUT) {
+                if let Err(e) = end_live(&self.rec) {
                     eprintln!(
                         "warning: the stream to {} was lost ({e}); the run finished",
                         self.sink.describe()
@@ -130,10 +130,15 @@ impl Output {
     /// After a run that failed: a file is finished as far as it goes, or removed if it never
     /// took its name (no step was recorded).
     pub fn abandon(self) {
-        let _ = self.rec.flush_with_timeout(LIVE_FLUSH_TIMEOUT);
-        if let Some(file) = &self.file {
-            let _ = file.finish();
-            file.discard();
+        match &self.file {
+            Some(file) => {
+                let _ = self.rec.flush_blocking();
+                let _ = file.finish();
+                file.discard();
+            }
+            None => {
+                let _ = end_live(&self.rec);
+            }
         }
     }
 
@@ -148,9 +153,30 @@ impl Output {
                 file.finish()
             }
             None => {
-                let _ = rec.flush_with_timeout(LIVE_FLUSH_TIMEOUT);
+                let _ = end_live(&rec);
                 Ok(())
             }
         }
     }
+}
+
+/// Ends a live stream, waiting at most [`LIVE_FLUSH_TIMEOUT`] for each of its two stages.
+///
+/// Rerun's flush returns once everything is handed to its gRPC client, not once it has been
+/// sent: a process that exits then loses the tail of the stream (the live-sink test saw whole
+/// series missing). Only dropping the sink waits for the viewer to take the stream's end, and
+/// rerun does that in `disconnect`, which blocks without a limit; it runs on a thread of its
+/// own so that a viewer that stops reading cannot hang the end of the run.
+fn end_live(rec: &RecordingStream) -> Result<(), String> {
+    rec.flush_with_timeout(LIVE_FLUSH_TIMEOUT)
+        .map_err(|e| e.to_string())?;
+    let (done, ended) = std::sync::mpsc::channel();
+    let rec = rec.clone();
+    std::thread::spawn(move || {
+        rec.disconnect();
+        let _ = done.send(());
+    });
+    ended
+        .recv_timeout(LIVE_FLUSH_TIMEOUT)
+        .map_err(|_| "the viewer did not take the end of the stream".to_string())
 }

@@ -153,23 +153,3 @@ fn the_stdout_stream_carries_what_the_file_holds() {
         common::scalars_per_step(&file, entity)
     );
 }
-
-#[test]
-fn a_viewer_that_is_not_there_neither_hangs_nor_stops_the_run() {
-    let dir = scratch_dir("lost_viewer");
-    // A port nothing listens on: bound, then released.
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
-    let url = format!("rerun+http://127.0.0.1:{port}/proxy");
-    let t0 = std::time::Instant::now();
-    let out = cellflip_in(&dir, &["run", "dam-2d", "--steps", "30", "--connect", &url]);
-    ok(&out);
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(stdout.contains("dam-2d (2D, ccp): 30 steps"), "{stdout}");
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(stderr.contains("was lost"), "{stderr}");
-    assert!(t0.elapsed().as_secs() < 60, "{:?}", t0.elapsed());
-}

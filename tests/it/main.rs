@@ -12,6 +12,7 @@ mod docs;
 mod export;
 mod fuzz;
 mod golden;
+mod grpc;
 mod idp;
 mod nbflip;
 mod powerpic;
