@@ -50,7 +50,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
                 ..Default::default()
             };
             let scene = Scene::load(&args.scene, &overrides)?;
-            scene.ensure_fits_in_memory()?;
+            scene.ensure_fits_in_memory(false)?;
             let given = [
                 (MethodOption::Band, band.is_some()),
                 (MethodOption::CrossCheck, args.cross_check),
@@ -140,7 +140,10 @@ fn bench_dim<const D: usize>(scene: &Scene, args: &BenchArgs) -> Result<Measured
     }
     s.method_lines.iter().for_each(|l| crate::outln!("  {l}"));
     if let Some(m) = peak_memory_mib() {
-        crate::outln!("  peak memory (process so far): {m:.0} MiB");
+        let estimate = scene.memory_estimate(false).bytes() / (1u64 << 20) as f64;
+        crate::outln!(
+            "  peak memory (process so far): {m:.0} MiB; estimated up front {estimate:.0} MiB"
+        );
     }
     Ok(Measured {
         step,

@@ -39,6 +39,8 @@ pub fn compare(args: &CompareArgs) -> Result<()> {
         );
     }
     let entries = entries(args)?;
+    let scenes: Vec<&Scene> = entries.iter().map(|e| &e.scene).collect();
+    crate::scene::ensure_fit(&scenes, !args.sink.no_record)?;
     let sink = args
         .sink
         .choice(&format!("{}-compare", entries[0].scene.name()))?;
@@ -68,7 +70,6 @@ fn entries(args: &CompareArgs) -> Result<Vec<Entry>> {
             ..Default::default()
         };
         let scene = Scene::load(&args.scene, &o)?;
-        scene.ensure_fits_in_memory()?;
         let (label, title) = match obstacle {
             Some(m) => (
                 format!("{}-{}", method.name(), m.name()),

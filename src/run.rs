@@ -50,7 +50,7 @@ impl RunArgs {
 /// `cellflip run`.
 pub fn run(args: &RunArgs) -> Result<()> {
     let scene = Scene::load(&args.scene, &args.overrides())?;
-    scene.ensure_fits_in_memory()?;
+    scene.ensure_fits_in_memory(!args.sink.no_record)?;
     scene
         .method
         .check_given(&args.method_options())

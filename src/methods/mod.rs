@@ -41,7 +41,7 @@ pub mod powerpic;
 mod seam;
 
 pub use seam::{
-    FluidMethod, MethodInfo, MethodOption, MethodRecording, MethodReport, MethodSummary,
+    FluidMethod, Footprint, MethodInfo, MethodOption, MethodRecording, MethodReport, MethodSummary,
     MethodType, NoReport, NoSummary, SettingContext, SettingError,
 };
 
@@ -72,6 +72,13 @@ macro_rules! methods {
             /// `kind` with every method's default settings.
             pub fn new(kind: MethodKind) -> Self {
                 Self { kind, $($module: Default::default(),)* }
+            }
+
+            /// The peak memory of the method to run ([`MethodType::footprint`]).
+            pub fn footprint(&self, dim: usize) -> Footprint {
+                match self.kind {
+                    $(MethodKind::$ty => $module::$ty::footprint(&self.$module, dim),)*
+                }
             }
 
             /// The checks of the settings of the method to run ([`MethodType::check`]).

@@ -99,6 +99,27 @@ pub struct SettingContext {
     pub per_axis: usize,
 }
 
+/// A method's peak memory, measured: resident bytes per grid cell and per particle seeded, the
+/// fit behind the up-front estimate ([`crate::scene::memory`]; the measurements and the
+/// command that repeats them are in docs/benchmarks.md, "Memory").
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Footprint {
+    pub per_cell: f64,
+    pub per_particle: f64,
+}
+
+impl Footprint {
+    /// The footprint in `dim` dimensions, from the measured `[2D, 3D]` pairs of bytes per cell
+    /// and bytes per particle.
+    pub fn of(dim: usize, measured: [(f64, f64); 2]) -> Self {
+        let (per_cell, per_particle) = measured[dim.clamp(2, 3) - 2];
+        Self {
+            per_cell,
+            per_particle,
+        }
+    }
+}
+
 /// What a method is, for lists, help and checks.
 #[derive(Debug)]
 pub struct MethodInfo {
@@ -132,6 +153,8 @@ pub trait MethodType {
     }
     fn build<const D: usize>(settings: &Self::Settings) -> Box<dyn FluidMethod<D>>;
     fn summary<const D: usize>(settings: &Self::Settings) -> Box<dyn MethodSummary<D>>;
+    /// Its peak memory over a run in `dim` dimensions with these settings.
+    fn footprint(settings: &Self::Settings, dim: usize) -> Footprint;
 }
 
 /// One fluid method's step: the places where it departs from plain FLIP. Every hook has

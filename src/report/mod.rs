@@ -198,7 +198,7 @@ pub fn load(spec: &RunSpec) -> Result<Scene> {
         Source::Named(name) => Scene::load(name, &o),
         Source::Text(text) => Scene::parse(&format!("scene variant '{}'", spec.label), text, &o),
     }?;
-    scene.ensure_fits_in_memory()?;
+    scene.ensure_fits_in_memory(false)?;
     Ok(scene)
 }
 

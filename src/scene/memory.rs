@@ -1,16 +1,23 @@
-//! Runs that cannot fit are refused up front: a scene's peak memory, estimated from its cell
-//! and particle counts, against the memory this machine has available (Linux `MemAvailable`).
+//! Runs that cannot fit are refused up front: a run's peak memory, estimated from its cell and
+//! particle counts with its method's measured [`Footprint`], against the memory this machine
+//! has available (Linux `MemAvailable`).
+//!
+//! The estimate is `BASE + per_cell * cells + per_particle * particles (+ the recording's)`,
+//! where `particles` counts what is seeded plus what emitters may add. The footprints are fits
+//! to the peak resident memory of whole runs (docs/benchmarks.md, "Memory", gives the
+//! measurements, the ratio of estimate to peak per method and the command that repeats them).
 
 use super::Scene;
 use crate::grid::Grid;
 use anyhow::{bail, Result};
 
-/// Bytes per grid cell, an upper estimate: flip uses about 200 (dam-3d 32^3 -> 64^3 with
-/// `cellflip bench`: 16 -> 91 MiB for 229k more cells and 97k more particles), powerpic's
-/// finer transport grid about twice that.
-const BYTES_PER_CELL: f64 = 400.0;
-/// Bytes per particle, an upper estimate (the same measurements: about 300 for flip and ccp).
-const BYTES_PER_PARTICLE: f64 = 600.0;
+/// The process before any simulation: code, the thread pool, the scene.
+const BASE_BYTES: f64 = 12.0 * MIB;
+/// What a recording adds per particle, an allowance rather than a fit: rerun's buffers and the
+/// frame worker's copies, and in 3D the surface reconstruction (measured on dam-3d with flip:
+/// 0.7 to 1.6 KB per particle in 3D, [2D, 3D]).
+const RECORDING_PER_PARTICLE: [f64; 2] = [300.0, 1700.0];
+const MIB: f64 = (1u64 << 20) as f64;
 
 /// A run's size and estimated peak memory.
 #[derive(Clone, Copy, Debug)]
@@ -18,18 +25,30 @@ pub struct MemoryEstimate {
     pub cells: usize,
     /// Particles seeded, plus what the emitters may add (up to their fill, or a full tank).
     pub particles: f64,
-    pub bytes: f64,
+    /// The simulation's share: the cells' and the particles' bytes.
+    pub cell_bytes: f64,
+    pub particle_bytes: f64,
+    /// What the recording adds (0 without one).
+    pub recording_bytes: f64,
+}
+
+impl MemoryEstimate {
+    /// The whole run's peak, the process's base included.
+    pub fn bytes(&self) -> f64 {
+        BASE_BYTES + self.cell_bytes + self.particle_bytes + self.recording_bytes
+    }
 }
 
 impl Scene {
-    pub fn memory_estimate(&self) -> MemoryEstimate {
+    /// The estimated peak of a run of this scene, `recorded` or not.
+    pub fn memory_estimate(&self, recorded: bool) -> MemoryEstimate {
         match self.dim() {
-            2 => self.memory_estimate_dim::<2>(),
-            _ => self.memory_estimate_dim::<3>(),
+            2 => self.memory_estimate_dim::<2>(recorded),
+            _ => self.memory_estimate_dim::<3>(recorded),
         }
     }
 
-    fn memory_estimate_dim<const D: usize>(&self) -> MemoryEstimate {
+    fn memory_estimate_dim<const D: usize>(&self, recorded: bool) -> MemoryEstimate {
         let config = self.config::<D>();
         let grid = Grid::new(config.dims);
         let cells = grid.num_cells();
@@ -40,39 +59,64 @@ impl Scene {
             .map(|e| e.until_fill.unwrap_or(1.0))
             .fold(0.0, f64::max);
         let particles = mu * (seeded as f64 + emitted * cells as f64);
-        let bytes = BYTES_PER_CELL * cells as f64 + BYTES_PER_PARTICLE * particles;
+        let footprint = self.method.footprint(D);
         MemoryEstimate {
             cells,
             particles,
-            bytes,
+            cell_bytes: footprint.per_cell * cells as f64,
+            particle_bytes: footprint.per_particle * particles,
+            recording_bytes: match recorded {
+                true => RECORDING_PER_PARTICLE[D - 2] * particles,
+                false => 0.0,
+            },
         }
     }
 
     /// Fails, naming the key that makes the run large, when the estimate exceeds the memory
     /// available now; passes where that is unknown (no `/proc/meminfo`).
-    pub fn ensure_fits_in_memory(&self) -> Result<()> {
-        let e = self.memory_estimate();
-        let Some(available) = available_bytes() else {
-            return Ok(());
-        };
-        if e.bytes <= available {
-            return Ok(());
-        }
-        let key = match BYTES_PER_PARTICLE * e.particles > BYTES_PER_CELL * e.cells as f64 {
-            true => "simulation.ppc",
-            false => "domain.cells",
-        };
-        let gib = |b: f64| b / (1u64 << 30) as f64;
-        bail!(
-            "{}: key '{key}': the run needs about {:.1} GiB ({} cells, about {:.3e} particles), \
-             more than the {:.1} GiB this machine has available",
-            self.source,
-            gib(e.bytes),
-            e.cells,
-            e.particles,
-            gib(available)
-        )
+    pub fn ensure_fits_in_memory(&self, recorded: bool) -> Result<()> {
+        ensure_fit(&[self], recorded)
     }
+}
+
+/// Fails when runs of `scenes` side by side in one process (`cellflip compare`) would not fit,
+/// naming the first scene's file and the key that makes the runs large.
+pub fn ensure_fit(scenes: &[&Scene], recorded: bool) -> Result<()> {
+    let Some((first, _)) = scenes.split_first() else {
+        return Ok(());
+    };
+    let estimates: Vec<MemoryEstimate> =
+        scenes.iter().map(|s| s.memory_estimate(recorded)).collect();
+    let sum = |f: fn(&MemoryEstimate) -> f64| estimates.iter().map(f).sum::<f64>();
+    let bytes = BASE_BYTES + sum(|e| e.bytes() - BASE_BYTES);
+    let Some(available) = available_bytes() else {
+        return Ok(());
+    };
+    if bytes <= available {
+        return Ok(());
+    }
+    let key = match sum(|e| e.particle_bytes + e.recording_bytes) > sum(|e| e.cell_bytes) {
+        true => "simulation.ppc",
+        false => "domain.cells",
+    };
+    let gib = |b: f64| b / (MIB * 1024.0);
+    let runs = match scenes.len() {
+        1 => "the run needs".to_string(),
+        n => format!("{n} runs side by side need"),
+    };
+    bail!(
+        "{}: key '{key}': {runs} about {:.1} GiB ({} cells, about {:.3e} particles{}), \
+         more than the {:.1} GiB this machine has available",
+        first.source,
+        gib(bytes),
+        estimates[0].cells,
+        estimates[0].particles,
+        match scenes.len() {
+            1 => "",
+            _ => " each",
+        },
+        gib(available)
+    )
 }
 
 /// `MemAvailable` from `/proc/meminfo`, bytes.

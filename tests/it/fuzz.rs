@@ -144,7 +144,7 @@ fn render(scene: &BTreeMap<(String, String), String>) -> String {
 
 /// Runs a scene a few steps, unless it is too large for a test.
 fn run_briefly(scene: &Scene) -> anyhow::Result<()> {
-    let size = scene.memory_estimate();
+    let size = scene.memory_estimate(false);
     if size.cells > 40_000 || size.particles > 2e5 {
         return Ok(());
     }

@@ -19,7 +19,8 @@ pub use record::CcpReport;
 pub use settings::{BandMode, CcpArgs, CcpSettings, Directions, Solver};
 
 use super::seam::{
-    FluidMethod, MethodInfo, MethodOption, MethodSummary, MethodType, SettingContext, SettingError,
+    FluidMethod, Footprint, MethodInfo, MethodOption, MethodSummary, MethodType, SettingContext,
+    SettingError,
 };
 use crate::draw::{LayerView, Needs};
 use crate::sim::solids::ObstacleMode;
@@ -65,5 +66,15 @@ impl MethodType for Ccp {
 
     fn summary<const D: usize>(s: &CcpSettings) -> Box<dyn MethodSummary<D>> {
         Box::new(Totals::new(s))
+    }
+
+    /// Measured peak memory over a run ([`Footprint`]; docs/benchmarks.md, "Memory"): the band
+    /// stores more per cell (its levels and the deep's bookkeeping) and far less per particle
+    /// (the correction sees the band's particles only).
+    fn footprint(s: &CcpSettings, dim: usize) -> Footprint {
+        match s.band {
+            BandMode::None => Footprint::of(dim, [(362.0, 470.0), (226.0, 560.0)]),
+            _ => Footprint::of(dim, [(362.0, 470.0), (380.0, 90.0)]),
+        }
     }
 }

@@ -3,7 +3,9 @@
 //! [`FluidMethod`] and [`MethodRecording`] keeps its default, so the whole method is its
 //! registration.
 
-use super::seam::{FluidMethod, MethodInfo, MethodRecording, MethodSummary, MethodType, NoSummary};
+use super::seam::{
+    FluidMethod, Footprint, MethodInfo, MethodRecording, MethodSummary, MethodType, NoSummary,
+};
 use crate::sim::solids::ObstacleMode;
 
 /// Plain FLIP.
@@ -29,6 +31,11 @@ impl MethodType for Flip {
 
     fn summary<const D: usize>(_settings: &()) -> Box<dyn MethodSummary<D>> {
         Box::new(NoSummary)
+    }
+
+    /// Measured peak memory over a run ([`Footprint`]; docs/benchmarks.md, "Memory").
+    fn footprint(_settings: &(), dim: usize) -> Footprint {
+        Footprint::of(dim, [(105.0, 102.0), (140.0, 107.0)])
     }
 }
 

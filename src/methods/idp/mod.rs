@@ -66,7 +66,7 @@ pub use physics::{
     CLAMP, PUSH_MARGIN, RESAMPLE_BELOW,
 };
 
-use super::seam::{FluidMethod, MethodInfo, MethodOption, MethodSummary, MethodType};
+use super::seam::{FluidMethod, Footprint, MethodInfo, MethodOption, MethodSummary, MethodType};
 use crate::sim::solids::ObstacleMode;
 use physics::IdpSim;
 use record::{Totals, LAYER_VIEWS, PANELS};
@@ -103,5 +103,10 @@ impl MethodType for Idp {
 
     fn summary<const D: usize>(_s: &IdpSettings) -> Box<dyn MethodSummary<D>> {
         Box::new(Totals::default())
+    }
+
+    /// Measured peak memory over a run ([`Footprint`]; docs/benchmarks.md, "Memory").
+    fn footprint(_settings: &IdpSettings, dim: usize) -> Footprint {
+        Footprint::of(dim, [(144.0, 100.0), (170.0, 150.0)])
     }
 }

@@ -34,7 +34,8 @@ pub mod region;
 pub use physics::{combine, level, NbflipReport, Resampling};
 
 use super::seam::{
-    FluidMethod, MethodInfo, MethodOption, MethodSummary, MethodType, SettingContext, SettingError,
+    FluidMethod, Footprint, MethodInfo, MethodOption, MethodSummary, MethodType, SettingContext,
+    SettingError,
 };
 use crate::sim::band::{check_band_r, DEFAULT_BAND_R};
 use crate::sim::solids::ObstacleMode;
@@ -89,5 +90,10 @@ impl MethodType for Nbflip {
 
     fn summary<const D: usize>(s: &NbflipSettings) -> Box<dyn MethodSummary<D>> {
         Box::new(Totals::new(s.band_r))
+    }
+
+    /// Measured peak memory over a run ([`Footprint`]; docs/benchmarks.md, "Memory").
+    fn footprint(_settings: &NbflipSettings, dim: usize) -> Footprint {
+        Footprint::of(dim, [(128.0, 90.0), (315.0, 60.0)])
     }
 }

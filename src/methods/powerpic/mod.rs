@@ -71,7 +71,8 @@ pub use physics::PowerPicReport;
 pub use settings::{AirForm, PowerPicSettings};
 
 use super::seam::{
-    FluidMethod, MethodInfo, MethodOption, MethodSummary, MethodType, SettingContext, SettingError,
+    FluidMethod, Footprint, MethodInfo, MethodOption, MethodSummary, MethodType, SettingContext,
+    SettingError,
 };
 use crate::sim::solids::ObstacleMode;
 use physics::PowerPicSim;
@@ -109,5 +110,10 @@ impl MethodType for Powerpic {
 
     fn summary<const D: usize>(s: &PowerPicSettings) -> Box<dyn MethodSummary<D>> {
         Box::new(Totals::new(s.max_iterations))
+    }
+
+    /// Measured peak memory over a run ([`Footprint`]; docs/benchmarks.md, "Memory").
+    fn footprint(_settings: &PowerPicSettings, dim: usize) -> Footprint {
+        Footprint::of(dim, [(282.0, 975.0), (340.0, 4500.0)])
     }
 }
