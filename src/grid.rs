@@ -131,17 +131,30 @@ impl<const D: usize> Grid<D> {
         values: &mut [T],
         f: impl Fn(usize, Cell<D>, &mut T) + Sync,
     ) {
-        assert_eq!(values.len(), self.num_faces(axis));
+        let mut none = vec![(); values.len()];
+        self.par_for_each_face_pair(axis, values, &mut none, |i, c, v, _| f(i, c, v));
+    }
+
+    /// As [`Self::par_for_each_face`] with two entries per face, one of `a` and one of `b`.
+    pub fn par_for_each_face_pair<T: Send, U: Send>(
+        &self,
+        axis: usize,
+        a: &mut [T],
+        b: &mut [U],
+        f: impl Fn(usize, Cell<D>, &mut T, &mut U) + Sync,
+    ) {
+        assert_eq!(a.len(), self.num_faces(axis));
+        assert_eq!(b.len(), self.num_faces(axis));
         let layer = self.face_strides[axis][D - 1];
-        values
-            .par_chunks_mut(layer)
+        a.par_chunks_mut(layer)
+            .zip(b.par_chunks_mut(layer))
             .with_min_len(crate::PAR_GRAIN.div_ceil(layer))
             .enumerate()
-            .for_each(|(l, chunk)| {
+            .for_each(|(l, (a, b))| {
                 let start = l * layer;
                 let coords = self.face_coords_from(axis, start);
-                for ((j, v), c) in chunk.iter_mut().enumerate().zip(coords) {
-                    f(start + j, c, v);
+                for (((j, v), w), c) in a.iter_mut().enumerate().zip(b).zip(coords) {
+                    f(start + j, c, v, w);
                 }
             });
     }
