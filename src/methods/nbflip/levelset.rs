@@ -8,7 +8,7 @@
 //! grid part carries the liquid where the band holds no particles; the particles carry the
 //! surface.
 
-use crate::grid::{for_each_cell_weight, Cell, Grid, MacField, Vector};
+use crate::grid::{for_each_cell_weight, AtGridPoints, Cell, Grid, MacField, Vector};
 use rayon::prelude::*;
 
 /// A level set on cell centres, in cells; negative inside.
@@ -65,8 +65,7 @@ impl LevelSet {
     /// The level set at the face of axis `a` with coordinates `f`, interpolated from the
     /// centres.
     pub fn at_face<const D: usize>(&self, grid: &Grid<D>, a: usize, f: Cell<D>) -> f64 {
-        let x = Vector::<D>::from_fn(|k, _| f[k] as f64 + if k == a { 0.0 } else { 0.5 });
-        self.interpolate(grid, &x)
+        self.interpolate(grid, &grid.face_point(a, f))
     }
 
     /// Semi-Lagrangian advection over `dt` (first order, as MantaFlow's scene advects `phi`),
@@ -80,11 +79,13 @@ impl LevelSet {
         cells: &[usize],
         out: &mut LevelSet,
     ) {
+        let at_centres = AtGridPoints::centres(grid);
         let values: Vec<f64> = cells
             .par_iter()
             .map(|&c| {
-                let x = grid.center(grid.cell_coords(c));
-                self.interpolate(grid, &(x - dt * u.interpolate(grid, &x)))
+                let cc = grid.cell_coords(c);
+                let x = grid.center(cc);
+                self.interpolate(grid, &(x - dt * at_centres.interpolate(grid, u, cc)))
             })
             .collect();
         for (&c, v) in cells.iter().zip(values) {
