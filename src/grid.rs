@@ -131,17 +131,30 @@ impl<const D: usize> Grid<D> {
         values: &mut [T],
         f: impl Fn(usize, Cell<D>, &mut T) + Sync,
     ) {
-        assert_eq!(values.len(), self.num_faces(axis));
+        let mut none = vec![(); values.len()];
+        self.par_for_each_face_pair(axis, values, &mut none, |i, c, v, _| f(i, c, v));
+    }
+
+    /// As [`Self::par_for_each_face`] with two entries per face, one of `a` and one of `b`.
+    pub fn par_for_each_face_pair<T: Send, U: Send>(
+        &self,
+        axis: usize,
+        a: &mut [T],
+        b: &mut [U],
+        f: impl Fn(usize, Cell<D>, &mut T, &mut U) + Sync,
+    ) {
+        assert_eq!(a.len(), self.num_faces(axis));
+        assert_eq!(b.len(), self.num_faces(axis));
         let layer = self.face_strides[axis][D - 1];
-        values
-            .par_chunks_mut(layer)
+        a.par_chunks_mut(layer)
+            .zip(b.par_chunks_mut(layer))
             .with_min_len(crate::PAR_GRAIN.div_ceil(layer))
             .enumerate()
-            .for_each(|(l, chunk)| {
+            .for_each(|(l, (a, b))| {
                 let start = l * layer;
                 let coords = self.face_coords_from(axis, start);
-                for ((j, v), c) in chunk.iter_mut().enumerate().zip(coords) {
-                    f(start + j, c, v);
+                for (((j, v), w), c) in a.iter_mut().enumerate().zip(b).zip(coords) {
+                    f(start + j, c, v, w);
                 }
             });
     }
@@ -201,6 +214,11 @@ impl<const D: usize> Grid<D> {
             self.cell_index(c)
         });
         left.into_iter().chain(right)
+    }
+
+    /// The centre of the face of axis `a` with coordinates `f`, in grid units.
+    pub fn face_point(&self, a: usize, f: Cell<D>) -> Vector<D> {
+        Vector::<D>::from_fn(|k, _| f[k] as f64 + if k == a { 0.0 } else { 0.5 })
     }
 
     /// Cell centre in grid units.
@@ -292,6 +310,62 @@ impl<const D: usize> MacField<D> {
     #[inline]
     pub fn interpolate_component(&self, grid: &Grid<D>, a: usize, x: &Vector<D>) -> f64 {
         FaceStencil::new(grid, a, x).apply(&self.comp[a])
+    }
+}
+
+/// [`MacField::interpolate`] at the faces of one component or at the cell centres (where
+/// semi-Lagrangian advection starts its trace back), without locating each point: at a point
+/// at least one cell from every wall no layer is clamped, so its stencils are those of one such
+/// point shifted by the difference of their indices (the same faces, weights and order: the
+/// same values, bit for bit). Points nearer a wall, or any point of a grid under 3 cells wide,
+/// take the general path.
+pub struct AtGridPoints<const D: usize> {
+    /// The faces' axis, or `None` for the cell centres.
+    axis: Option<usize>,
+    /// Per component, its stencil at the point with coordinates `[1; D]`, if that is inner.
+    inner: Option<[FaceStencil<D>; D]>,
+}
+
+impl<const D: usize> AtGridPoints<D> {
+    /// At the faces of axis `axis`.
+    pub fn faces(grid: &Grid<D>, axis: usize) -> Self {
+        Self::new(grid, Some(axis))
+    }
+
+    /// At the cell centres.
+    pub fn centres(grid: &Grid<D>) -> Self {
+        Self::new(grid, None)
+    }
+
+    fn new(grid: &Grid<D>, axis: Option<usize>) -> Self {
+        let mut at = Self { axis, inner: None };
+        at.inner = grid.dims.iter().all(|&n| n >= 3).then(|| {
+            let point = FacePoint::new(grid, &at.point(grid, [1; D]));
+            std::array::from_fn(|b| FaceStencil::at(grid, &point, b))
+        });
+        at
+    }
+
+    /// The point with coordinates `f`.
+    fn point(&self, grid: &Grid<D>, f: Cell<D>) -> Vector<D> {
+        match self.axis {
+            Some(a) => grid.face_point(a, f),
+            None => grid.center(f),
+        }
+    }
+
+    /// The field `u` at the point with coordinates `f`.
+    #[inline]
+    pub fn interpolate(&self, grid: &Grid<D>, u: &MacField<D>, f: Cell<D>) -> Vector<D> {
+        match &self.inner {
+            Some(inner) if (0..D).all(|k| 1 <= f[k] && f[k] + 2 <= grid.dims[k]) => {
+                Vector::<D>::from_fn(|b, _| {
+                    let shift = (0..D).map(|k| (f[k] - 1) * grid.face_strides[b][k]).sum();
+                    inner[b].shifted(shift).apply(&u.comp[b])
+                })
+            }
+            _ => u.interpolate(grid, &self.point(grid, f)),
+        }
     }
 }
 
@@ -420,6 +494,15 @@ impl<const D: usize> FaceStencil<D> {
         Self { idx, w }
     }
 
+    /// The same weights on the faces `shift` indices further.
+    #[inline]
+    fn shifted(&self, shift: usize) -> Self {
+        Self {
+            idx: self.idx.map(|i| i + shift),
+            w: self.w,
+        }
+    }
+
     /// The faces and their weights.
     pub fn weights(&self) -> impl Iterator<Item = (usize, f64)> + '_ {
         (0..Self::CORNERS).map(|c| (self.idx[c], self.w[c]))
@@ -481,6 +564,44 @@ pub fn for_each_cell_weight<const D: usize>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_field_at_faces_and_centres_is_its_interpolation_there_bit_for_bit_2d_and_3d() {
+        fn same<const D: usize>(got: Vector<D>, want: Vector<D>) {
+            assert_eq!(
+                got.map(f64::to_bits),
+                want.map(f64::to_bits),
+                "{got} against {want}"
+            );
+        }
+        fn check<const D: usize>(dims: [usize; D]) {
+            let g = Grid::new(dims);
+            let mut u = MacField::zeros(&g);
+            for (a, comp) in u.comp.iter_mut().enumerate() {
+                for (i, v) in comp.iter_mut().enumerate() {
+                    *v = ((i * 7 + a * 3) as f64 * 0.37).sin() * 1e3;
+                }
+            }
+            for a in 0..D {
+                let at = AtGridPoints::faces(&g, a);
+                for i in 0..g.num_faces(a) {
+                    let f = g.face_coords(a, i);
+                    same(
+                        at.interpolate(&g, &u, f),
+                        u.interpolate(&g, &g.face_point(a, f)),
+                    );
+                }
+            }
+            let at = AtGridPoints::centres(&g);
+            for c in 0..g.num_cells() {
+                let cc = g.cell_coords(c);
+                same(at.interpolate(&g, &u, cc), u.interpolate(&g, &g.center(cc)));
+            }
+        }
+        check([5, 4]);
+        check([6, 3, 5]);
+        check([2, 6, 4]);
+    }
 
     #[test]
     fn indices_round_trip_2d_and_3d() {

@@ -6,7 +6,7 @@
 //! `dt * max|u_face| <= 1` no particle moves more than one cell along any axis: it stays in the
 //! Moore neighbourhood of its cell (sec. grid_move).
 
-use crate::grid::{Grid, MacField, Vector};
+use crate::grid::{AtGridPoints, Grid, MacField, Vector};
 use rayon::prelude::*;
 
 /// The margin epsilon of eq. best_cell_pos, in cells.
@@ -63,12 +63,13 @@ pub fn advect_velocity<const D: usize>(
 ) -> MacField<D> {
     let mut out = u.clone();
     for (a, comp) in out.comp.iter_mut().enumerate() {
+        let at_faces = AtGridPoints::faces(grid, a);
         grid.par_for_each_face(a, comp, |_, f, v| {
             if !grid.face_cells_at(a, f).any(|c| needed[c]) {
                 return;
             }
-            let x = Vector::<D>::from_fn(|k, _| f[k] as f64 + if k == a { 0.0 } else { 0.5 });
-            let mut back = x - dt * u.interpolate(grid, &x);
+            let x = grid.face_point(a, f);
+            let mut back = x - dt * at_faces.interpolate(grid, u, f);
             for k in 0..D {
                 back[k] = back[k].clamp(0.0, grid.dims[k] as f64);
             }

@@ -6,11 +6,10 @@
 //! What the deep holds is a method's business: method ccp counts its imaginary particles in
 //! `n_deep`; narrow-band FLIP keeps the deep as a level set.
 
-use crate::grid::{Grid, MacField, Vector};
+use crate::grid::{Cell, Grid, MacField, Vector};
 use crate::sim::advect;
 use crate::sim::markings::{DepthLevel, Markings};
 use crate::sim::transfer::Known;
-use rayon::prelude::*;
 
 /// `R` when a scene file does not say (the paper: 3, and 6 for the dam scenes).
 pub const DEFAULT_BAND_R: u32 = 3;
@@ -89,8 +88,8 @@ impl Band {
         grid_u: &MacField<D>,
         m: &Markings,
     ) {
-        combine_velocities(u, known, grid_u, |a, i, _| {
-            grid.face_cells(a, i)
+        combine_velocities(grid, u, known, grid_u, |a, f, _| {
+            grid.face_cells_at(a, f)
                 .any(|c| m.at_or_below_interface(c, self.r))
         });
     }
@@ -125,26 +124,23 @@ pub fn counts_with_full_deep(
 }
 
 /// The velocity combination of the band methods (paper alg. band line 1; Ferstl et al. 2016,
-/// sec. 4): faces for which `take_grid(axis, face, had_particle_weight)` holds take the grid
-/// velocity `grid_u` and count as known; the others keep the particles' velocity `u` where
-/// particles gave weight.
+/// sec. 4): faces for which `take_grid(axis, face_coords, had_particle_weight)` holds take the
+/// grid velocity `grid_u` and count as known; the others keep the particles' velocity `u` where
+/// particles gave weight. (Coordinates, not indices: a pass over every face must not divide.)
 pub fn combine_velocities<const D: usize>(
+    grid: &Grid<D>,
     u: &mut MacField<D>,
     known: &mut Known<D>,
     grid_u: &MacField<D>,
-    take_grid: impl Fn(usize, usize, bool) -> bool + Sync,
+    take_grid: impl Fn(usize, Cell<D>, bool) -> bool + Sync,
 ) {
-    for a in 0..D {
-        u.comp[a]
-            .par_iter_mut()
-            .zip(known[a].par_iter_mut())
-            .enumerate()
-            .for_each(|(i, (v, k))| {
-                if take_grid(a, i, *k) {
-                    *v = grid_u.comp[a][i];
-                    *k = true;
-                }
-            });
+    for (a, (u, known)) in u.comp.iter_mut().zip(known.iter_mut()).enumerate() {
+        grid.par_for_each_face_pair(a, u, known, |i, f, v, k| {
+            if take_grid(a, f, *k) {
+                *v = grid_u.comp[a][i];
+                *k = true;
+            }
+        });
     }
 }
 

@@ -152,13 +152,13 @@ impl Markings {
                 }
             })
             .collect();
+        let steps = moore_steps(grid);
         let surface: Vec<bool> = (0..n)
             .into_par_iter()
             .with_min_len(crate::PAR_GRAIN)
             .map(|c| {
                 kind[c] == CellKind::Fluid
-                    && grid.moore_neighbors(grid.cell_coords(c)).any(|m| {
-                        let m = grid.cell_index(m);
+                    && any_moore_neighbour(grid, &steps, c, |m| {
                         kind[m] == CellKind::Empty || moving.is_some_and(|mv| mv[m])
                     })
             })
@@ -215,28 +215,54 @@ fn depth<const D: usize>(grid: &Grid<D>, kind: &[CellKind], surface: &[bool]) ->
             }
         })
         .collect();
-    let mut queue: VecDeque<usize> = VecDeque::new();
+    // Cells queued with their coordinates: no division per cell.
+    let mut queue: VecDeque<(usize, Cell<D>)> = VecDeque::new();
     for c in 0..kind.len() {
         if surface[c] {
             depth[c] = 0;
-            queue.push_back(c);
+            queue.push_back((c, grid.cell_coords(c)));
         }
     }
-    while let Some(c) = queue.pop_front() {
-        let cc: Cell<D> = grid.cell_coords(c);
+    while let Some((c, cc)) = queue.pop_front() {
         for a in 0..D {
-            for dir in [-1, 1] {
-                if let Some(nb) = grid.neighbor(cc, a, dir) {
-                    let n = grid.cell_index(nb);
-                    if kind[n] == CellKind::Fluid && depth[n] == i32::MIN {
-                        depth[n] = depth[c] - 1;
-                        queue.push_back(n);
-                    }
+            let stride = grid.cell_stride(a);
+            let lower = (cc[a] > 0).then(|| (c - stride, cc[a] - 1));
+            let upper = (cc[a] + 1 < grid.dims[a]).then(|| (c + stride, cc[a] + 1));
+            for (n, na) in lower.into_iter().chain(upper) {
+                if kind[n] == CellKind::Fluid && depth[n] == i32::MIN {
+                    depth[n] = depth[c] - 1;
+                    let mut nc = cc;
+                    nc[a] = na;
+                    queue.push_back((n, nc));
                 }
             }
         }
     }
     depth
+}
+
+/// The index steps from a cell to the others of its Moore neighbourhood.
+fn moore_steps<const D: usize>(grid: &Grid<D>) -> Vec<isize> {
+    let three = Grid::new([3; D]);
+    let offsets = three.moore_neighbors([1; D]);
+    let step = |m: Cell<D>| (0..D).map(move |k| (m[k] as isize - 1) * grid.cell_stride(k) as isize);
+    offsets.map(|m| step(m).sum()).collect()
+}
+
+/// Whether a cell of the Moore neighbourhood of cell `c` satisfies `hit`: by the index steps
+/// of [`moore_steps`] for a cell off the domain's walls, by coordinates next to them.
+fn any_moore_neighbour<const D: usize>(
+    grid: &Grid<D>,
+    steps: &[isize],
+    c: usize,
+    hit: impl Fn(usize) -> bool,
+) -> bool {
+    let cc = grid.cell_coords(c);
+    if (0..D).all(|k| 0 < cc[k] && cc[k] + 1 < grid.dims[k]) {
+        steps.iter().any(|&s| hit(c.wrapping_add_signed(s)))
+    } else {
+        grid.moore_neighbors(cc).any(|m| hit(grid.cell_index(m)))
+    }
 }
 
 #[cfg(test)]

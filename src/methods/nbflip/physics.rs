@@ -125,10 +125,8 @@ impl<const D: usize> NbflipSim<D> {
                     None => Region::all(g),
                 };
                 // Cells not advected this step lie far from the surface: as they are.
-                for &c in &cells.cells {
-                    if !self.advected_over.contains(g, c) {
-                        advected.phi[c] = phi.phi[c];
-                    }
+                for c in cells.minus(g, &self.advected_over) {
+                    advected.phi[c] = phi.phi[c];
                 }
                 phi.unite_shrunk(g, advected, pos, &cells.cells);
                 cells
@@ -196,9 +194,9 @@ pub fn combine<const D: usize>(
     known: &mut Known<D>,
     grid_u: &MacField<D>,
 ) {
-    combine_velocities(u, known, grid_u, |a, i, weighted| {
-        g.face_cells(a, i).any(|c| m.is_fluid(c))
-            && (!weighted || phi.at_face(g, a, i) < -(r - 1.0))
+    combine_velocities(g, u, known, grid_u, |a, f, weighted| {
+        g.face_cells_at(a, f).any(|c| m.is_fluid(c))
+            && (!weighted || phi.at_face(g, a, f) < -(r - 1.0))
     });
 }
 

@@ -39,23 +39,24 @@ impl Region {
         }
     }
 
-    /// Whether cell `c` is in.
-    pub fn contains<const D: usize>(&self, grid: &Grid<D>, c: usize) -> bool {
-        self.tiles[tile_of(grid, &tiles(grid), c)]
-    }
-
     /// The cells in either region.
     pub fn union<const D: usize>(&self, grid: &Grid<D>, other: &Region) -> Self {
-        let active: Vec<bool> = self
-            .tiles
-            .iter()
-            .zip(&other.tiles)
-            .map(|(a, b)| *a || *b)
-            .collect();
+        let active = self.tiles_with(other, |a, b| a || b);
         Self {
             cells: cells_of_tiles(grid, &tiles(grid), &active),
             tiles: active,
         }
+    }
+
+    /// The cells in this region and not in `other`, ascending.
+    pub fn minus<const D: usize>(&self, grid: &Grid<D>, other: &Region) -> Vec<usize> {
+        cells_of_tiles(grid, &tiles(grid), &self.tiles_with(other, |a, b| a && !b))
+    }
+
+    /// Per tile, `op` of whether it is in this region and whether it is in `other`.
+    fn tiles_with(&self, other: &Region, op: impl Fn(bool, bool) -> bool) -> Vec<bool> {
+        let pairs = self.tiles.iter().zip(&other.tiles);
+        pairs.map(|(&a, &b)| op(a, b)).collect()
     }
 
     /// The cells of every tile within `margin` cells (in every axis) of a tile holding a seed
@@ -154,9 +155,8 @@ mod tests {
         let b = Region::around(&g, std::iter::once(g.cell_index([30, 25])), 1);
         let both = a.union(&g, &b);
         assert_eq!(both.cells.len(), a.cells.len() + b.cells.len());
-        assert!(
-            both.contains(&g, g.cell_index([30, 25])) && !a.contains(&g, g.cell_index([30, 25]))
-        );
+        assert_eq!(both.minus(&g, &a), b.cells);
+        assert!(a.minus(&g, &both).is_empty());
         check([19, 22, 17], [9, 15, 16], 6);
         let g = Grid::new([9, 7, 5]);
         assert_eq!(Region::all(&g).cells.len(), g.num_cells());
