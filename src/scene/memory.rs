@@ -13,10 +13,13 @@ use anyhow::{bail, Result};
 
 /// The process before any simulation: code, the thread pool, the scene.
 const BASE_BYTES: f64 = 12.0 * MIB;
-/// What a recording adds per particle, an allowance rather than a fit: rerun's buffers and the
-/// frame worker's copies, and in 3D the surface reconstruction (measured on dam-3d with flip:
-/// 0.7 to 1.6 KB per particle in 3D, [2D, 3D]).
-const RECORDING_PER_PARTICLE: [f64; 2] = [300.0, 1700.0];
+/// What a recording adds, an allowance rather than a fit: rerun's SDK and buffers, the frame
+/// worker's copies of the particles and, in 3D, the surface reconstruction. Measured with flip:
+/// 42-49 MiB on dam-2d at 128^2 and 256^2; on dam-3d 70 MiB at 48^3, 180 at 64^3, 277 at 96^3,
+/// that is 0.7 to 1.6 KB per particle beyond the fixed part.
+const RECORDING_BASE_BYTES: f64 = 48.0 * MIB;
+/// The recording's allowance per particle, [2D, 3D].
+const RECORDING_PER_PARTICLE: [f64; 2] = [300.0, 1300.0];
 const MIB: f64 = (1u64 << 20) as f64;
 
 /// A run's size and estimated peak memory.
@@ -66,7 +69,7 @@ impl Scene {
             cell_bytes: footprint.per_cell * cells as f64,
             particle_bytes: footprint.per_particle * particles,
             recording_bytes: match recorded {
-                true => RECORDING_PER_PARTICLE[D - 2] * particles,
+                true => RECORDING_BASE_BYTES + RECORDING_PER_PARTICLE[D - 2] * particles,
                 false => 0.0,
             },
         }
