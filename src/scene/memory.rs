@@ -31,15 +31,27 @@ pub struct MemoryEstimate {
     /// The simulation's share: the cells' and the particles' bytes.
     pub cell_bytes: f64,
     pub particle_bytes: f64,
-    /// What the recording adds (0 without one).
+    /// What the recording adds per particle (0 without one).
     pub recording_bytes: f64,
+    /// Whether the run is recorded (the recording's fixed part counts once per process).
+    pub recorded: bool,
 }
 
 impl MemoryEstimate {
-    /// The whole run's peak, the process's base included.
+    /// The whole run's peak, the process's base and the recording's fixed part included.
     pub fn bytes(&self) -> f64 {
-        BASE_BYTES + self.cell_bytes + self.particle_bytes + self.recording_bytes
+        process_bytes(self.recorded) + self.run_bytes()
     }
+
+    /// This run's own share: what one more run side by side adds.
+    fn run_bytes(&self) -> f64 {
+        self.cell_bytes + self.particle_bytes + self.recording_bytes
+    }
+}
+
+/// The process's share, whatever it runs: its base and, `recorded`, the recording's fixed part.
+fn process_bytes(recorded: bool) -> f64 {
+    BASE_BYTES + if recorded { RECORDING_BASE_BYTES } else { 0.0 }
 }
 
 impl Scene {
@@ -69,9 +81,10 @@ impl Scene {
             cell_bytes: footprint.per_cell * cells as f64,
             particle_bytes: footprint.per_particle * particles,
             recording_bytes: match recorded {
-                true => RECORDING_BASE_BYTES + RECORDING_PER_PARTICLE[D - 2] * particles,
+                true => RECORDING_PER_PARTICLE[D - 2] * particles,
                 false => 0.0,
             },
+            recorded,
         }
     }
 
@@ -91,7 +104,7 @@ pub fn ensure_fit(scenes: &[&Scene], recorded: bool) -> Result<()> {
     let estimates: Vec<MemoryEstimate> =
         scenes.iter().map(|s| s.memory_estimate(recorded)).collect();
     let sum = |f: fn(&MemoryEstimate) -> f64| estimates.iter().map(f).sum::<f64>();
-    let bytes = BASE_BYTES + sum(|e| e.bytes() - BASE_BYTES);
+    let bytes = process_bytes(recorded) + sum(MemoryEstimate::run_bytes);
     let Some(available) = available_bytes() else {
         return Ok(());
     };

@@ -125,31 +125,3 @@ fn a_run_that_fails_stops_alone_and_its_world_says_why() {
     let flip = labels(&path, "flip/world/label");
     assert!(flip.len() >= 5, "flip's frames: {flip:?}");
 }
-
-#[test]
-fn the_stdout_stream_carries_what_the_file_holds() {
-    let dir = scratch_dir("stdout_stream");
-    let file = dir.join("file.rrd");
-    let run = ["run", "dam-2d", "--method", "ccp", "--steps", "4"];
-    ok(&cellflip_in(
-        &dir,
-        &[&run[..], &["--save", file.to_str().unwrap()]].concat(),
-    ));
-    let out = cellflip_in(&dir, &[&run[..], &["--stdout"]].concat());
-    ok(&out);
-    assert!(
-        String::from_utf8_lossy(&out.stderr).contains("streamed to standard output"),
-        "the summary goes to stderr"
-    );
-    let piped = dir.join("piped.rrd");
-    std::fs::write(&piped, &out.stdout).unwrap();
-    assert_eq!(
-        common::logged_entities(&piped),
-        common::logged_entities(&file)
-    );
-    let entity = "metrics/correction/objective";
-    assert_eq!(
-        common::scalars_per_step(&piped, entity),
-        common::scalars_per_step(&file, entity)
-    );
-}

@@ -1,5 +1,6 @@
-//! The live sink against a real gRPC endpoint: `--connect` streams to rerun's message-proxy
-//! service (the one a viewer serves), and what arrives is what the file sink writes.
+//! The live sinks: `--stdout`, and `--connect` to a real gRPC endpoint (rerun's message-proxy
+//! service, the one a viewer serves); what arrives is what the file sink writes, and a viewer
+//! that hangs up or is not there neither stops nor hangs the run.
 
 use crate::common::{self, cellflip_in, ok, scratch_dir};
 use re_protos::sdk_comms::v1alpha1::message_proxy_service_server::{
@@ -108,38 +109,66 @@ fn save(messages: &[LogMsg], path: &Path) {
     std::fs::write(path, Encoder::encode(messages.iter().map(Ok)).unwrap()).unwrap();
 }
 
+/// The run every stream test makes, with its sink's flags appended.
+const RUN: [&str; 6] = ["run", "dam-2d", "--method", "ccp", "--steps", "4"];
+
+/// [`RUN`] saved to a file in `dir`, the reference a stream is compared with.
+fn saved_run(dir: &Path) -> std::path::PathBuf {
+    let file = dir.join("file.rrd");
+    ok(&cellflip_in(
+        dir,
+        &[&RUN[..], &["--save", file.to_str().unwrap()]].concat(),
+    ));
+    file
+}
+
+/// A streamed recording holds what the file of the same run holds: its entities, a series
+/// step by step, and the blueprint's views.
+fn assert_same_recording(streamed: &Path, file: &Path) {
+    let entities = common::logged_entities(streamed);
+    assert!(entities.contains("world/particles"), "{entities:?}");
+    assert_eq!(entities, common::logged_entities(file));
+    let entity = "metrics/correction/objective";
+    let series = common::scalars_per_step(streamed, entity);
+    assert_eq!(series.len(), 4, "steps 1..=4: {series:?}");
+    assert_eq!(series, common::scalars_per_step(file, entity));
+    assert_eq!(
+        common::blueprint(streamed).0.len(),
+        common::blueprint(file).0.len(),
+        "the layout is streamed too"
+    );
+}
+
+#[test]
+fn the_stdout_stream_carries_what_the_file_holds() {
+    let dir = scratch_dir("stdout_stream");
+    let file = saved_run(&dir);
+    let out = cellflip_in(&dir, &[&RUN[..], &["--stdout"]].concat());
+    ok(&out);
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("streamed to standard output"),
+        "the summary goes to stderr"
+    );
+    let piped = dir.join("piped.rrd");
+    std::fs::write(&piped, &out.stdout).unwrap();
+    assert_same_recording(&piped, &file);
+}
+
 #[test]
 fn the_live_sink_streams_to_a_grpc_endpoint_what_the_file_holds() {
     let dir = scratch_dir("grpc_stream");
-    let file = dir.join("file.rrd");
-    let run = ["run", "dam-2d", "--method", "ccp", "--steps", "4"];
-    ok(&cellflip_in(
-        &dir,
-        &[&run[..], &["--save", file.to_str().unwrap()]].concat(),
-    ));
+    let file = saved_run(&dir);
     let endpoint = Endpoint::default();
     let out = serving(&endpoint, |port| {
         let url = format!("rerun+http://127.0.0.1:{port}/proxy");
-        cellflip_in(&dir, &[&run[..], &["--connect", &url]].concat())
+        cellflip_in(&dir, &[&RUN[..], &["--connect", &url]].concat())
     });
     ok(&out);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!stderr.contains("was lost"), "{stderr}");
-
     let streamed = dir.join("streamed.rrd");
     save(&endpoint.received.lock().unwrap(), &streamed);
-    let entities = common::logged_entities(&streamed);
-    assert!(entities.contains("world/particles"), "{entities:?}");
-    assert_eq!(entities, common::logged_entities(&file));
-    let entity = "metrics/correction/objective";
-    let series = common::scalars_per_step(&streamed, entity);
-    assert_eq!(series.len(), 4, "steps 1..=4: {series:?}");
-    assert_eq!(series, common::scalars_per_step(&file, entity));
-    assert_eq!(
-        common::blueprint(&streamed).0.len(),
-        common::blueprint(&file).0.len(),
-        "the layout is streamed too"
-    );
+    assert_same_recording(&streamed, &file);
 }
 
 #[test]
