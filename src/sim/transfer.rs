@@ -151,41 +151,41 @@ fn slab_windows<'a, const D: usize>(
 }
 
 /// Extrapolates face values into unknown faces, `layers` rings deep: each ring takes the
-/// average of its known axis neighbours (in the same component) from the previous ring. Only
-/// the frontier of the known region is visited, so sparse fluid costs little.
+/// average of its known axis neighbours (in the same component) from the previous ring, and
+/// the rings are filled in ascending face order.
+///
+/// The first ring, the unknown faces next to a known one, is found by one parallel pass over
+/// the faces, which reads only the flags; the later rings are the unknown neighbours of the
+/// ring before. (Listing every known face as the first frontier instead cost 70-140 ms per
+/// call at 128^3, twice a step: the faces of a deep pool are mostly known.)
 pub fn extrapolate<const D: usize>(
     grid: &Grid<D>,
     field: &mut MacField<D>,
     known: &mut [Vec<bool>; D],
     layers: usize,
 ) {
-    let comps: Vec<_> = field.comp.iter_mut().zip(known.iter_mut()).collect();
-    let per_task = if grid.num_cells() < PAR_GRAIN { D } else { 1 };
-    let comps = comps.into_par_iter().with_min_len(per_task);
-    comps.enumerate().for_each(|(a, (u, k))| {
+    for (a, (u, k)) in field.comp.iter_mut().zip(known.iter_mut()).enumerate() {
         let near =
             |i, c, f: &mut dyn FnMut(usize, Cell<D>)| for_each_axis_neighbor(grid, a, i, c, f);
-        let mut frontier: Vec<(usize, Cell<D>)> = (grid.face_coords_from(a, 0).enumerate())
-            .take(u.len())
-            .filter(|&(i, _)| k[i])
-            .collect();
-        let mut queued = vec![false; u.len()];
-        for _ in 0..layers {
-            let mut ring = vec![];
-            for &(i, c) in &frontier {
-                near(i, c, &mut |n, nc| {
-                    if !k[n] && !queued[n] {
-                        queued[n] = true;
-                        ring.push((n, nc));
-                    }
-                });
+        let mut ring = first_ring(grid, a, k);
+        for layer in 0..layers {
+            if layer > 0 {
+                let mut next = vec![];
+                for &(i, c) in &ring {
+                    near(i, c, &mut |n, nc| {
+                        if !k[n] {
+                            next.push((n, nc));
+                        }
+                    });
+                }
+                next.sort_unstable_by_key(|&(i, _)| i);
+                next.dedup_by_key(|&mut (i, _)| i);
+                ring = next;
             }
             if ring.is_empty() {
                 break;
             }
-            ring.sort_unstable_by_key(|&(i, _)| i);
-            let values: Vec<f64> = ring
-                .iter()
+            let values: Vec<f64> = (ring.par_iter().with_min_len(PAR_GRAIN / 8))
                 .map(|&(i, c)| {
                     let (mut s, mut n) = (0.0, 0);
                     near(i, c, &mut |j, _| {
@@ -201,9 +201,30 @@ pub fn extrapolate<const D: usize>(
                 u[i] = v;
                 k[i] = true;
             }
-            frontier = ring;
         }
-    });
+    }
+}
+
+/// The unknown faces of component `a` with a known axis neighbour, in ascending order, each
+/// with its coordinates: a parallel pass over layers of the last axis.
+fn first_ring<const D: usize>(grid: &Grid<D>, a: usize, k: &[bool]) -> Vec<(usize, Cell<D>)> {
+    let layer = grid.face_stride(a, D - 1);
+    let layers = k.len() / layer;
+    (0..layers)
+        .into_par_iter()
+        .with_min_len(PAR_GRAIN.div_ceil(layer))
+        .flat_map_iter(|l| {
+            let start = l * layer;
+            let coords = grid.face_coords_from(a, start);
+            (start..start + layer).zip(coords).filter(|&(i, c)| {
+                let mut near_known = false;
+                if !k[i] {
+                    for_each_axis_neighbor(grid, a, i, c, &mut |j, _| near_known |= k[j]);
+                }
+                near_known
+            })
+        })
+        .collect()
 }
 
 /// Calls `f(index, coords)` for each axis neighbour of face `i` (coordinates `c`) of
