@@ -86,10 +86,11 @@ impl<const D: usize> StencilMatrix<D> {
 pub enum Preconditioner {
     /// By the system's size: multigrid from [`Preconditioner::AUTO_ROWS`] rows (10,000 in 2D,
     /// 100,000 in 3D) when the rows fill at least an eighth of the grid
-    /// ([`Preconditioner::AUTO_FILL`]), MIC(0) otherwise, where the multigrid's set-up and
-    /// heavier iterations do not pay: its hierarchy is built over the whole grid, and a thin
-    /// column keeps more rows on its coarse levels (the crossover measured in
-    /// docs/benchmarks.md, "Pressure preconditioners").
+    /// ([`Preconditioner::AUTO_FILL`]), or from [`Preconditioner::AUTO_ROWS_ANY_FILL`] rows
+    /// whatever the fill; MIC(0) otherwise, where the multigrid's set-up and heavier
+    /// iterations do not pay: its hierarchy is built over the whole grid, and a thin column
+    /// keeps more rows on its coarse levels (the crossover measured in docs/benchmarks.md,
+    /// "Pressure preconditioners").
     #[default]
     Auto,
     /// Modified incomplete Cholesky: cheap per iteration, but its triangular solves are
@@ -109,13 +110,21 @@ impl Preconditioner {
     /// over this.
     pub const AUTO_FILL: usize = 8;
 
+    /// The fewest rows for which [`Preconditioner::Auto`] takes multigrid however little of
+    /// the grid they fill: the 300^3 drop's 2.7 M rows (10% of the grid) solve in 0.76x
+    /// MIC(0)'s time with it, the 200^3 drop's 0.84 M in 0.72-1.0x, the 128^3 dam's 115 k
+    /// (5.5%) in 1.28x.
+    pub const AUTO_ROWS_ANY_FILL: usize = 1_000_000;
+
     /// The preconditioner a solve of `rows` rows on a `dim`-dimensional grid of `cells` cells
-    /// runs with: [`Preconditioner::Auto`] resolved by [`Preconditioner::AUTO_ROWS`] and
-    /// [`Preconditioner::AUTO_FILL`], the others as they are.
+    /// runs with: [`Preconditioner::Auto`] resolved by [`Preconditioner::AUTO_ROWS`],
+    /// [`Preconditioner::AUTO_FILL`] and [`Preconditioner::AUTO_ROWS_ANY_FILL`], the others
+    /// as they are.
     pub fn for_size(self, dim: usize, rows: usize, cells: usize) -> Preconditioner {
         let large = rows >= Self::AUTO_ROWS[dim.clamp(2, 3) - 2];
+        let filled = rows * Self::AUTO_FILL >= cells;
         match self {
-            Preconditioner::Auto if large && rows * Self::AUTO_FILL >= cells => {
+            Preconditioner::Auto if (large && filled) || rows >= Self::AUTO_ROWS_ANY_FILL => {
                 Preconditioner::Multigrid
             }
             Preconditioner::Auto => Preconditioner::Mic0,
@@ -466,8 +475,11 @@ mod tests {
             let cells = rows * Preconditioner::AUTO_FILL;
             assert_eq!(Auto.for_size(dim, rows - 1, cells), Mic0);
             assert_eq!(Auto.for_size(dim, rows, cells), Multigrid);
-            // Too few of a larger grid's cells.
+            // Too few of a larger grid's cells, unless there are very many rows.
             assert_eq!(Auto.for_size(dim, rows, cells + 1), Mic0);
+            let many = Preconditioner::AUTO_ROWS_ANY_FILL;
+            assert_eq!(Auto.for_size(dim, many - 1, 100 * many), Mic0);
+            assert_eq!(Auto.for_size(dim, many, 100 * many), Multigrid);
             for p in [Mic0, Multigrid] {
                 assert_eq!(p.for_size(dim, 1, cells), p);
                 assert_eq!(p.for_size(dim, 10 * rows, cells), p);
