@@ -54,6 +54,7 @@
 use crate::grid::{Grid, Vector};
 use rayon::prelude::*;
 use std::ops::{AddAssign, Mul, Range};
+use std::sync::atomic::{AtomicU32, Ordering};
 
 /// The kernel is cut where `|x_p - x_j|^2 / eps` exceeds this: `exp(-27.63) = 1e-12`, far
 /// below the tolerances `delta` the iteration is run to.
@@ -62,6 +63,10 @@ pub const KERNEL_CUTOFF: f64 = 27.631_021_115_928_547;
 /// Points per chunk of the column sums (fixed, so that the summation order does not depend on
 /// the thread count; large enough that the chunks' windows of cells overlap little).
 const CHUNK_POINTS: usize = 4096;
+
+/// Points per chunk of the row listing (any size gives the same rows; small enough that a
+/// 2D tank of a few thousand points is listed on every thread).
+const LIST_POINTS: usize = 256;
 
 /// Newton's method for the baseline column update stops when a step moves `g_j` by less than
 /// this (a relative change of `1e-13` in `v_j`, far below any `delta`) ...
@@ -280,7 +285,7 @@ impl<const D: usize> Transport<D> {
         s: &SinkhornSettings,
     ) -> Result<Self, SinkhornError> {
         let lists: Vec<(Vec<usize>, Vec<u32>, Vec<f64>)> = points
-            .par_chunks(CHUNK_POINTS)
+            .par_chunks(LIST_POINTS)
             .map(|chunk| {
                 let (mut row, mut cells, mut kernel) = (vec![], vec![], vec![]);
                 let mut axes = Axes::default();
@@ -304,22 +309,10 @@ impl<const D: usize> Transport<D> {
         if let Some(p) = (0..points.len()).find(|&p| row[p] == row[p + 1]) {
             return Err(SinkhornError::KernelVanishes { point: p });
         }
-        let mut index = vec![u32::MAX; tg.grid.num_cells()];
-        for &j in &slot {
-            index[j as usize] = 0;
-        }
-        let active: Vec<u32> = (0..index.len() as u32)
-            .filter(|&j| index[j as usize] == 0)
-            .collect();
-        for (k, &j) in active.iter().enumerate() {
-            index[j as usize] = k as u32;
-        }
-        slot.par_iter_mut().for_each(|j| *j = index[*j as usize]);
+        let active = reached_cells(tg.grid.num_cells(), &mut slot);
         let centre = active.iter().map(|&j| tg.center(j as usize)).collect();
         let order = sorted_by_cell(tg, points);
-        let chunks = order
-            .chunks(CHUNK_POINTS)
-            .enumerate()
+        let chunks = (order.par_chunks(CHUNK_POINTS).enumerate())
             .map(|(n, ps)| {
                 let slots = ps.iter().flat_map(|&p| {
                     let p = p as usize;
@@ -441,10 +434,27 @@ impl<const D: usize> Transport<D> {
     }
 }
 
+/// The cells of `num_cells` that `slot` (cell indices) names, in grid order; `slot` is
+/// rewritten to index into them.
+fn reached_cells(num_cells: usize, slot: &mut [u32]) -> Vec<u32> {
+    let index: Vec<AtomicU32> = (0..num_cells).map(|_| AtomicU32::new(u32::MAX)).collect();
+    slot.par_iter()
+        .for_each(|&j| index[j as usize].store(0, Ordering::Relaxed));
+    let mut index: Vec<u32> = index.into_iter().map(AtomicU32::into_inner).collect();
+    let active: Vec<u32> = (0..num_cells as u32)
+        .filter(|&j| index[j as usize] == 0)
+        .collect();
+    for (k, &j) in active.iter().enumerate() {
+        index[j as usize] = k as u32;
+    }
+    slot.par_iter_mut().for_each(|j| *j = index[*j as usize]);
+    active
+}
+
 /// The points' indices sorted by the cell holding them (stably).
 fn sorted_by_cell<const D: usize>(tg: &TransportGrid<D>, points: &[Vector<D>]) -> Vec<u32> {
     let mut order: Vec<u32> = (0..points.len() as u32).collect();
-    order.sort_by_cached_key(|&p| tg.grid.cell_index(cell_of(tg, &points[p as usize])));
+    order.par_sort_by_cached_key(|&p| tg.grid.cell_index(cell_of(tg, &points[p as usize])));
     order
 }
 
