@@ -48,20 +48,34 @@
 //! Gaussian convolutions"). The scalings are kept as `u`, `v` rather than their logs: with the
 //! cut, every kept `K_pj` is at least `1e-12`, far inside the range of `f64`, and a scaling
 //! that leaves it is reported ([`SinkhornError::Diverged`]). Columns are summed by scattering
-//! fixed chunks of spatially sorted points into their own windows of cells, added in chunk
-//! order: results are the same whatever the thread count.
+//! chunks of spatially sorted points (their size set by the point count) into their own
+//! windows of cells, added in chunk order: results are the same whatever the thread count.
+//! A solve may start from the previous one's plan ([`Transport::solve`]): from its scalings,
+//! the points' carried with them, and into its storage.
 
 use crate::grid::{Grid, Vector};
 use rayon::prelude::*;
 use std::ops::{AddAssign, Mul, Range};
+use std::sync::atomic::{AtomicU32, Ordering};
 
 /// The kernel is cut where `|x_p - x_j|^2 / eps` exceeds this: `exp(-27.63) = 1e-12`, far
 /// below the tolerances `delta` the iteration is run to.
 pub const KERNEL_CUTOFF: f64 = 27.631_021_115_928_547;
 
-/// Points per chunk of the column sums (fixed, so that the summation order does not depend on
-/// the thread count; large enough that the chunks' windows of cells overlap little).
-const CHUNK_POINTS: usize = 4096;
+/// Points per chunk of the column sums: a `1 / MIN_CHUNKS` share of the points, within
+/// these bounds. It depends on the point count only, so that the summation order does not
+/// depend on the thread count; it is large enough in 3D that the chunks' windows of cells
+/// overlap little, and small enough that a 2D tank of a few thousand points is cut into
+/// chunks for every thread.
+const CHUNK_POINTS: Range<usize> = 256..4096;
+const MIN_CHUNKS: usize = 16;
+
+/// Slots per task of the column updates.
+const SLOTS_PER_TASK: usize = 2048;
+
+/// Points per chunk of the row listing (any size gives the same rows; small enough that a
+/// 2D tank of a few thousand points is listed on every thread).
+const LIST_POINTS: usize = 256;
 
 /// Newton's method for the baseline column update stops when a step moves `g_j` by less than
 /// this (a relative change of `1e-13` in `v_j`, far below any `delta`) ...
@@ -184,6 +198,15 @@ pub enum SinkhornError {
     Diverged { iteration: u32 },
 }
 
+/// The rows of [`LIST_POINTS`] consecutive points: the `i`-th one's slots are
+/// `slot[row[i]..row[i + 1]]`, its `K_pj` `kernel[..]` the same range.
+#[derive(Clone, Debug, Default)]
+struct Rows {
+    row: Vec<usize>,
+    slot: Vec<u32>,
+    kernel: Vec<f64>,
+}
+
 /// A chunk of the column sums: points `order[points]`, whose cells are the slots `window`.
 #[derive(Clone, Debug)]
 struct Chunk {
@@ -198,8 +221,6 @@ struct Chunk {
 /// gives each slot's cell.
 #[derive(Clone, Debug)]
 pub struct Transport<const D: usize> {
-    /// `g_j = log v_j`, one per cell of the grid (0 for cells no point reaches).
-    pub g: Vec<f64>,
     /// Row updates done.
     pub iterations: u32,
     /// The largest relative column error after the last row update.
@@ -211,10 +232,8 @@ pub struct Transport<const D: usize> {
     /// `u_p`, one per point, and `v_j`, one per slot.
     u: Vec<f64>,
     v: Vec<f64>,
-    /// Point `p`'s row is `slot[row[p]..row[p + 1]]`, `kernel[..]` the same range.
-    row: Vec<usize>,
-    slot: Vec<u32>,
-    kernel: Vec<f64>,
+    /// Point `p`'s row is in `rows[p / LIST_POINTS]` ([`row_of`]).
+    rows: Vec<Rows>,
     /// Each slot's cell and centre.
     active: Vec<u32>,
     centre: Vec<Vector<D>>,
@@ -224,14 +243,15 @@ pub struct Transport<const D: usize> {
 }
 
 impl<const D: usize> Transport<D> {
-    /// Solves the transport of `points`, each of volume `volume`, to `tg`, starting from the
-    /// cells' log scalings `warm` (one per cell, e.g. a previous plan's `g`; zeros if none).
+    /// Solves the transport of `points`, each of volume `volume`, to `tg`, starting from a
+    /// previous plan `warm` on the same grid ([`Self::start_from`]; `u = v = 1` if none),
+    /// whose storage it reuses.
     pub fn solve(
         tg: &TransportGrid<D>,
         points: &[Vector<D>],
         volume: f64,
         s: &SinkhornSettings,
-        warm: Option<Vec<f64>>,
+        mut warm: Option<Self>,
     ) -> Result<Self, SinkhornError> {
         let capacity: f64 = tg.capacity.iter().sum();
         let total = volume * points.len() as f64;
@@ -241,108 +261,108 @@ impl<const D: usize> Transport<D> {
                 capacity,
             });
         }
-        let mut t = Self::rows(tg, points, volume, s)?;
-        if let Some(g) = warm.filter(|g| g.len() == tg.grid.num_cells()) {
-            t.v = t.active.iter().map(|&j| g[j as usize].exp()).collect();
+        let storage = warm.as_mut().map(|w| std::mem::take(&mut w.rows));
+        let mut t = Self::rows(tg, points, volume, s, storage.unwrap_or_default())?;
+        if let Some(w) = warm {
+            t.start_from(tg, w)?;
         }
+        let mut next = vec![];
         loop {
             t.update_rows()?;
             let c = t.kernel_columns(0.0, |p| t.u[p]);
-            t.error = (0..c.len())
-                .map(|k| tg.column_error(t.active[k] as usize, t.v[k] * c[k], t.v[k]))
-                .fold(0.0, f64::max);
+            let normal;
+            (t.error, normal) = t.column_update(tg, &c, &mut next);
             t.converged = t.error <= s.delta;
             if t.converged || t.iterations >= s.max_iterations {
                 break;
             }
-            for (k, &c) in c.iter().enumerate() {
-                t.v[k] = tg.column_scaling(t.active[k] as usize, c, t.v[k]);
-            }
-            if t.v.iter().any(|v| !v.is_normal()) {
-                return Err(SinkhornError::Diverged {
-                    iteration: t.iterations,
-                });
-            }
-        }
-        t.g = vec![0.0; tg.grid.num_cells()];
-        for (&j, v) in t.active.iter().zip(&t.v) {
-            t.g[j as usize] = v.ln();
+            t.adopt(&mut next, normal)?;
         }
         Ok(t)
     }
 
+    /// Starts from a previous plan's scalings: its column scalings `v_j` in the cells both
+    /// reach (1 in the others); then, when its points are the first of these, in order, their
+    /// row scalings `u_p` carried over (the other points' from those `v_j`) and one column
+    /// update. A cell's `v_j` stays with the cell while the liquid moves through it; a
+    /// point's `u_p` moves with the point, so where a cell that few kernels reach moves with
+    /// the liquid (a deep cell that must be full), the carried `u_p` already hold it (our
+    /// choice; Qu et al. and Levi say nothing of warm starts).
+    fn start_from(&mut self, tg: &TransportGrid<D>, w: Self) -> Result<(), SinkhornError> {
+        let mut at = 0;
+        for (&j, v) in self.active.iter().zip(&mut self.v) {
+            while w.active.get(at).is_some_and(|&i| i < j) {
+                at += 1;
+            }
+            if w.active.get(at) == Some(&j) {
+                *v = w.v[at];
+            }
+        }
+        if w.u.len() > self.u.len() {
+            return Ok(());
+        }
+        self.u = (0..self.u.len())
+            .into_par_iter()
+            .map(|p| w.u.get(p).copied().unwrap_or_else(|| self.row_scaling(p)))
+            .collect();
+        let c = self.kernel_columns(0.0, |p| self.u[p]);
+        let mut next = vec![];
+        let (_, normal) = self.column_update(tg, &c, &mut next);
+        self.adopt(&mut next, normal)
+    }
+
     /// Every point's row: the cells with capacity in the ball of its kernel, with their
-    /// `K_pj`; then the slots and the chunks of the column sums.
+    /// `K_pj`, listed into `rows` (a previous plan's, whose capacity is reused); then the
+    /// slots and the chunks of the column sums.
     fn rows(
         tg: &TransportGrid<D>,
         points: &[Vector<D>],
         volume: f64,
         s: &SinkhornSettings,
+        mut rows: Vec<Rows>,
     ) -> Result<Self, SinkhornError> {
-        let lists: Vec<(Vec<usize>, Vec<u32>, Vec<f64>)> = points
-            .par_chunks(CHUNK_POINTS)
-            .map(|chunk| {
-                let (mut row, mut cells, mut kernel) = (vec![], vec![], vec![]);
-                let mut axes = Axes::default();
-                for x in chunk {
-                    axes.ball(tg, x, s, |j, k| {
-                        cells.push(j as u32);
-                        kernel.push(k);
-                    });
-                    row.push(cells.len());
-                }
-                (row, cells, kernel)
-            })
-            .collect();
-        let (mut row, mut slot, mut kernel) = (vec![0], vec![], vec![]);
-        for (r, c, k) in lists {
-            let base = slot.len();
-            row.extend(r.into_iter().map(|e| e + base));
-            slot.extend(c);
-            kernel.extend(k);
-        }
-        if let Some(p) = (0..points.len()).find(|&p| row[p] == row[p + 1]) {
+        rows.resize_with(points.len().div_ceil(LIST_POINTS), Rows::default);
+        (rows.par_iter_mut().zip(points.par_chunks(LIST_POINTS))).for_each(|(r, chunk)| {
+            r.row.clear();
+            r.row.push(0);
+            r.slot.clear();
+            r.kernel.clear();
+            let mut axes = Axes::default();
+            for x in chunk {
+                axes.ball(tg, x, s, |j, k| {
+                    r.slot.push(j as u32);
+                    r.kernel.push(k);
+                });
+                r.row.push(r.slot.len());
+            }
+        });
+        let empty = |p: usize| row_of(&rows, p).0.is_empty();
+        if let Some(p) = (0..points.len()).into_par_iter().find_first(|&p| empty(p)) {
             return Err(SinkhornError::KernelVanishes { point: p });
         }
-        let mut index = vec![u32::MAX; tg.grid.num_cells()];
-        for &j in &slot {
-            index[j as usize] = 0;
-        }
-        let active: Vec<u32> = (0..index.len() as u32)
-            .filter(|&j| index[j as usize] == 0)
-            .collect();
-        for (k, &j) in active.iter().enumerate() {
-            index[j as usize] = k as u32;
-        }
-        slot.par_iter_mut().for_each(|j| *j = index[*j as usize]);
+        let active = reached_cells(tg.grid.num_cells(), &mut rows);
         let centre = active.iter().map(|&j| tg.center(j as usize)).collect();
         let order = sorted_by_cell(tg, points);
-        let chunks = order
-            .chunks(CHUNK_POINTS)
-            .enumerate()
+        let size = (points.len() / MIN_CHUNKS).clamp(CHUNK_POINTS.start, CHUNK_POINTS.end);
+        let chunks = (order.par_chunks(size).enumerate())
             .map(|(n, ps)| {
-                let slots = ps.iter().flat_map(|&p| {
-                    let p = p as usize;
-                    slot[row[p]..row[p + 1]].iter().map(|&k| k as usize)
-                });
+                let slots = ps.iter().flat_map(|&p| row_of(&rows, p as usize).0);
+                let slots = slots.map(|&k| k as usize);
                 let (lo, hi) = slots.fold((usize::MAX, 0), |(lo, hi), k| (lo.min(k), hi.max(k)));
                 Chunk {
-                    points: n * CHUNK_POINTS..n * CHUNK_POINTS + ps.len(),
+                    points: n * size..n * size + ps.len(),
                     window: lo..hi + 1,
                 }
             })
             .collect();
         Ok(Self {
-            g: vec![],
             iterations: 0,
             error: f64::INFINITY,
             converged: false,
             volume,
             u: vec![0.0; points.len()],
             v: vec![1.0; active.len()],
-            row,
-            slot,
-            kernel,
+            rows,
             active,
             centre,
             order,
@@ -350,27 +370,63 @@ impl<const D: usize> Transport<D> {
         })
     }
 
+    #[inline]
+    fn row(&self, p: usize) -> (&[u32], &[f64]) {
+        row_of(&self.rows, p)
+    }
+
+    /// Point `p`'s row scaling `u_p = V_p / sum_j K_pj v_j`: its volume exact.
+    fn row_scaling(&self, p: usize) -> f64 {
+        let (slot, kernel) = self.row(p);
+        let sum: f64 = (slot.iter().zip(kernel))
+            .map(|(&k, &kpj)| kpj * self.v[k as usize])
+            .sum();
+        self.volume / sum
+    }
+
     /// Row update: every point's volume exact.
     fn update_rows(&mut self) -> Result<(), SinkhornError> {
-        let (v, volume) = (&self.v, self.volume);
-        self.u = (0..self.u.len())
-            .into_par_iter()
-            .map(|p| {
-                let r = self.row[p]..self.row[p + 1];
-                let sum: f64 = (self.slot[r.clone()].iter())
-                    .zip(&self.kernel[r])
-                    .map(|(&k, &kpj)| kpj * v[k as usize])
-                    .sum();
-                volume / sum
+        let mut u = std::mem::take(&mut self.u);
+        let normal = (u.par_iter_mut().enumerate())
+            .with_min_len(LIST_POINTS)
+            .map(|(p, u)| {
+                *u = self.row_scaling(p);
+                u.is_normal()
             })
-            .collect();
+            .reduce(|| true, |a, b| a && b);
+        self.u = u;
         self.iterations += 1;
-        match self.u.iter().all(|u| u.is_normal()) {
+        match normal {
             true => Ok(()),
             false => Err(SinkhornError::Diverged {
                 iteration: self.iterations,
             }),
         }
+    }
+
+    /// The column update, every cell's marginal met, from `C_j` (per slot in `c`), into
+    /// `next`; returns the largest relative column error of the current scalings and whether
+    /// the new ones are all finite and positive (one pass for both).
+    fn column_update(&self, tg: &TransportGrid<D>, c: &[f64], next: &mut Vec<f64>) -> (f64, bool) {
+        next.resize(self.v.len(), 0.0);
+        (next.par_iter_mut().zip(&self.v).zip(c).zip(&self.active))
+            .with_min_len(SLOTS_PER_TASK)
+            .map(|(((next, &v), &c), &j)| {
+                *next = tg.column_scaling(j as usize, c, v);
+                (tg.column_error(j as usize, v * c, v), next.is_normal())
+            })
+            .reduce(|| (0.0, true), |(a, p), (b, q)| (a.max(b), p && q))
+    }
+
+    /// Takes the scalings [`Self::column_update`] put in `next`, if `normal`.
+    fn adopt(&mut self, next: &mut Vec<f64>, normal: bool) -> Result<(), SinkhornError> {
+        if !normal {
+            return Err(SinkhornError::Diverged {
+                iteration: self.iterations,
+            });
+        }
+        std::mem::swap(&mut self.v, next);
+        Ok(())
     }
 
     /// `sum_p K_pj w(p)` for every slot: each chunk scatters into its window, and the windows
@@ -386,8 +442,8 @@ impl<const D: usize> Transport<D> {
                 let mut acc = vec![zero; c.window.len()];
                 for &p in &self.order[c.points.clone()] {
                     let (p, wp) = (p as usize, w(p as usize));
-                    let r = self.row[p]..self.row[p + 1];
-                    for (&k, &kpj) in self.slot[r.clone()].iter().zip(&self.kernel[r]) {
+                    let (slot, kernel) = self.row(p);
+                    for (&k, &kpj) in slot.iter().zip(kernel) {
                         acc[k as usize - c.window.start] += wp * kpj;
                     }
                 }
@@ -423,8 +479,8 @@ impl<const D: usize> Transport<D> {
     /// centre).
     #[inline]
     pub fn for_each_in_row(&self, p: usize, mut f: impl FnMut(usize, Vector<D>, f64)) {
-        let r = self.row[p]..self.row[p + 1];
-        for (&k, &kpj) in self.slot[r.clone()].iter().zip(&self.kernel[r]) {
+        let (slot, kernel) = self.row(p);
+        for (&k, &kpj) in slot.iter().zip(kernel) {
             let k = k as usize;
             f(k, self.centre[k], self.u[p] * kpj * self.v[k]);
         }
@@ -441,10 +497,35 @@ impl<const D: usize> Transport<D> {
     }
 }
 
+/// Point `p`'s row in `rows`: its slots and their `K_pj`.
+#[inline]
+fn row_of(rows: &[Rows], p: usize) -> (&[u32], &[f64]) {
+    let r = &rows[p / LIST_POINTS];
+    let range = r.row[p % LIST_POINTS]..r.row[p % LIST_POINTS + 1];
+    (&r.slot[range.clone()], &r.kernel[range])
+}
+
+/// The cells of `num_cells` that the rows name, in grid order; the rows' slots, listed as
+/// cell indices, are rewritten to index into them.
+fn reached_cells(num_cells: usize, rows: &mut [Rows]) -> Vec<u32> {
+    let index: Vec<AtomicU32> = (0..num_cells).map(|_| AtomicU32::new(u32::MAX)).collect();
+    (rows.par_iter().flat_map_iter(|r| &r.slot))
+        .for_each(|&j| index[j as usize].store(0, Ordering::Relaxed));
+    let mut index: Vec<u32> = index.into_iter().map(AtomicU32::into_inner).collect();
+    let active: Vec<u32> = (0..num_cells as u32)
+        .filter(|&j| index[j as usize] == 0)
+        .collect();
+    for (k, &j) in active.iter().enumerate() {
+        index[j as usize] = k as u32;
+    }
+    (rows.par_iter_mut().flat_map_iter(|r| &mut r.slot)).for_each(|j| *j = index[*j as usize]);
+    active
+}
+
 /// The points' indices sorted by the cell holding them (stably).
 fn sorted_by_cell<const D: usize>(tg: &TransportGrid<D>, points: &[Vector<D>]) -> Vec<u32> {
     let mut order: Vec<u32> = (0..points.len() as u32).collect();
-    order.sort_by_cached_key(|&p| tg.grid.cell_index(cell_of(tg, &points[p as usize])));
+    order.par_sort_by_cached_key(|&p| tg.grid.cell_index(cell_of(tg, &points[p as usize])));
     order
 }
 
@@ -738,8 +819,27 @@ mod tests {
             pool.install(|| Transport::solve(&tg, &pts, v, &s, None).unwrap())
         };
         let (a, b) = (solve(1), solve(2));
-        assert_eq!((&a.g, a.iterations), (&b.g, b.iterations));
+        assert_eq!((&a.v, a.iterations), (&b.v, b.iterations));
         assert_eq!(a.columns(0.0, |_| 1.0), b.columns(0.0, |_| 1.0));
+    }
+
+    #[test]
+    fn a_warm_start_from_the_same_points_converges_at_once_and_takes_new_points() {
+        let s = SinkhornSettings { delta: 1e-6, ..S };
+        let (tg, pts, v) = half_full([16, 12], 200, 1.0, 5);
+        let cold = Transport::solve(&tg, &pts, v, &s, None).unwrap();
+        assert!(cold.iterations > 1, "{}", cold.iterations);
+        let (iterations, scalings) = (cold.iterations, cold.v.clone());
+        let warm = Transport::solve(&tg, &pts, v, &s, Some(cold)).unwrap();
+        check_marginals(&tg, &warm, pts.len(), 1e-6);
+        assert_eq!(warm.iterations, 1, "cold: {iterations}");
+        let moved = (warm.v.iter().zip(&scalings)).map(|(a, b)| (a / b - 1.0).abs());
+        assert!(moved.fold(0.0, f64::max) < 1e-5);
+        // Two more points after the same ones, the volume shared out anew.
+        let more: Vec<_> = pts.iter().chain(&pts[..2]).copied().collect();
+        let v = v * pts.len() as f64 / more.len() as f64;
+        let t = Transport::solve(&tg, &more, v, &s, Some(warm)).unwrap();
+        check_marginals(&tg, &t, more.len(), 1e-6);
     }
 
     /// Point `x`'s row alone on `tg`: its volume, barycentre and largest entry.

@@ -8,7 +8,8 @@
 //!
 //! 1. the air baseline `b_j` of every transport cell from this step's markings ([`air`]), then
 //!    the plan for the particles' positions by Sinkhorn iterations, warm-started from the
-//!    previous step's column scalings, until both marginals hold to `delta`;
+//!    previous step's plan (each particle's row scaling carried with it, the cells' column
+//!    scalings where they were reached; our choice), until both marginals hold to `delta`;
 //! 2. particles to grid with the power (GIMP) weights `w_pi = sum_j T_pj N_i(x_j) / V_p`: each
 //!    transport cell gathers the mass `sum_p T_pj` and momentum `sum_p T_pj v_p` of its
 //!    column, and splats them with the tent functions `N_i` of the faces;

@@ -112,7 +112,7 @@ impl<const D: usize> FluidMethod<D> for PowerPicSim<D> {
     fn particles_to_grid(&mut self, s: &State<D>) -> anyhow::Result<(MacField<D>, Known<D>)> {
         self.update_cells(s);
         let (pos, vel) = (&s.particles.pos, &s.particles.vel);
-        let warm = self.plan.take().map(|p| p.g);
+        let warm = self.plan.take();
         let plan = Transport::solve(&self.tg, pos, self.volume, &self.settings.sinkhorn(), warm)
             .map_err(|e| self.explain(e))?;
         let tg = &self.tg;
