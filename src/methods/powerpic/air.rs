@@ -8,33 +8,29 @@
 //! even where the particles have drifted apart, which pulls them back together; a sparse
 //! surface cell is expected to be partly air.
 
-use crate::grid::Grid;
 use crate::metrics::cell_volume;
 use crate::sim::markings::Markings;
 use crate::solvers::sinkhorn::TransportGrid;
 use rayon::prelude::*;
 
 /// `b_j` of every transport cell of `tg` (zero in cells without capacity), from the markings
-/// of the simulation grid `grid` at `mu` particles per cell.
+/// of the simulation grid at `mu` particles per cell; `cell_of[j]` is the simulation cell of
+/// transport cell `j`.
 pub fn air_baseline<const D: usize>(
     tg: &TransportGrid<D>,
-    grid: &Grid<D>,
+    cell_of: &[u32],
     markings: &Markings,
     mu: u32,
 ) -> Vec<f64> {
-    (0..tg.capacity.len())
-        .into_par_iter()
-        .map(|j| {
-            let c = grid.cell_index_of(&tg.center(j));
-            tg.capacity[j] * (1.0 - cell_volume(markings, mu, c))
-        })
+    (tg.capacity.par_iter().zip(cell_of))
+        .map(|(&capacity, &c)| capacity * (1.0 - cell_volume(markings, mu, c as usize)))
         .collect()
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::grid::Vector;
+    use crate::grid::{Grid, Vector};
     use crate::solvers::sinkhorn::Air;
 
     #[test]
@@ -64,7 +60,10 @@ mod tests {
                 air: Air::Capacity,
             };
             let mu = 2u32.pow(D as u32);
-            let b = air_baseline(&tg, &grid, &markings, mu);
+            let cell_of: Vec<u32> = (0..tg.capacity.len())
+                .map(|j| grid.cell_index_of(&tg.center(j)) as u32)
+                .collect();
+            let b = air_baseline(&tg, &cell_of, &markings, mu);
             for (j, &b) in b.iter().enumerate() {
                 let x = tg.center(j);
                 let expected = match x.iter().fold(0.0f64, |m, &v| m.max(v)) {

@@ -18,6 +18,9 @@ pub struct PowerPicSim<const D: usize> {
     /// `V_p = (2 tau)^d`, cells.
     volume: f64,
     tg: TransportGrid<D>,
+    /// The simulation cell of each transport cell (the grids are fixed: found once, not in
+    /// three passes a step).
+    cell_of: Vec<u32>,
     /// This step's plan, for the particles' positions at its start.
     plan: Option<Transport<D>>,
     /// `sum_p T_pj` per transport cell.
@@ -39,6 +42,7 @@ impl<const D: usize> PowerPicSim<D> {
                 capacity: vec![],
                 air: Air::Capacity,
             },
+            cell_of: vec![],
             plan: None,
             fill: vec![],
             air_volume: 0.0,
@@ -51,18 +55,15 @@ impl<const D: usize> PowerPicSim<D> {
     fn update_cells(&mut self, s: &State<D>) {
         let tg = &mut self.tg;
         let cell_volume = tg.h.powi(D as i32);
-        let solid = &s.solids.solid;
-        tg.capacity.par_iter_mut().enumerate().for_each(|(j, v)| {
-            let c = s
-                .grid
-                .cell_index_of(&(tg.grid.center(tg.grid.cell_coords(j)) * tg.h));
-            *v = if solid[c] { 0.0 } else { cell_volume };
+        let (solid, cell_of) = (&s.solids.solid, &self.cell_of);
+        (tg.capacity.par_iter_mut().zip(cell_of)).for_each(|(v, &c)| {
+            *v = if solid[c as usize] { 0.0 } else { cell_volume };
         });
         tg.air = match self.settings.air {
             AirForm::Capacity => Air::Capacity,
             AirForm::Baseline => Air::Baseline {
                 eta: self.settings.eta,
-                baseline: air_baseline(tg, &s.grid, &s.markings, s.config.mu()),
+                baseline: air_baseline(tg, cell_of, &s.markings, s.config.mu()),
             },
         };
     }
@@ -88,7 +89,7 @@ impl<const D: usize> PowerPicSim<D> {
     fn air_in_liquid(&self, s: &State<D>) -> f64 {
         let tg = &self.tg;
         (self.plan().active_cells().iter().map(|&j| j as usize))
-            .filter(|&j| s.markings.is_fluid(s.grid.cell_index_of(&tg.center(j))))
+            .filter(|&j| s.markings.is_fluid(self.cell_of[j] as usize))
             .map(|j| (tg.capacity[j] - self.fill[j]).max(0.0))
             .sum()
     }
@@ -106,6 +107,11 @@ impl<const D: usize> FluidMethod<D> for PowerPicSim<D> {
             capacity: vec![0.0; n],
             air: Air::Capacity,
         };
+        let tg = &self.tg;
+        self.cell_of = (0..n)
+            .into_par_iter()
+            .map(|j| s.grid.cell_index_of(&tg.center(j)) as u32)
+            .collect();
     }
 
     /// Steps 1 and 2: the plan, then each transport cell's mass and momentum to the faces.
