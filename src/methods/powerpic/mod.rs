@@ -115,6 +115,6 @@ impl MethodType for Powerpic {
 
     /// Measured peak memory over a run ([`Footprint`]; docs/benchmarks.md, "Memory").
     fn footprint(_settings: &PowerPicSettings, dim: usize) -> Footprint {
-        Footprint::of(dim, [(282.0, 975.0), (340.0, 4800.0)])
+        Footprint::of(dim, [(282.0, 850.0), (700.0, 2750.0)])
     }
 }
