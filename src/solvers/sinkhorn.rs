@@ -127,6 +127,15 @@ impl<const D: usize> TransportGrid<D> {
         self.grid.center(self.grid.cell_coords(j)) * self.h
     }
 
+    /// The cell of `grid` (the grid the transport grid refines) that holds each transport
+    /// cell's centre.
+    pub fn cells_on(&self, grid: &Grid<D>) -> Vec<u32> {
+        (0..self.capacity.len())
+            .into_par_iter()
+            .map(|j| grid.cell_index_of(&self.center(j)) as u32)
+            .collect()
+    }
+
     /// The column scaling `v_j` that makes cell `j`'s column meet its marginal, given
     /// `C_j = sum_p K_pj u_p > 0` (the module doc derives it); `v` is the current one, kept
     /// where the marginal says nothing (an empty baseline and no kernel).

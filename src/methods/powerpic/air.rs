@@ -60,10 +60,7 @@ mod tests {
                 air: Air::Capacity,
             };
             let mu = 2u32.pow(D as u32);
-            let cell_of: Vec<u32> = (0..tg.capacity.len())
-                .map(|j| grid.cell_index_of(&tg.center(j)) as u32)
-                .collect();
-            let b = air_baseline(&tg, &cell_of, &markings, mu);
+            let b = air_baseline(&tg, &tg.cells_on(&grid), &markings, mu);
             for (j, &b) in b.iter().enumerate() {
                 let x = tg.center(j);
                 let expected = match x.iter().fold(0.0f64, |m, &v| m.max(v)) {

@@ -107,11 +107,7 @@ impl<const D: usize> FluidMethod<D> for PowerPicSim<D> {
             capacity: vec![0.0; n],
             air: Air::Capacity,
         };
-        let tg = &self.tg;
-        self.cell_of = (0..n)
-            .into_par_iter()
-            .map(|j| s.grid.cell_index_of(&tg.center(j)) as u32)
-            .collect();
+        self.cell_of = self.tg.cells_on(&s.grid);
     }
 
     /// Steps 1 and 2: the plan, then each transport cell's mass and momentum to the faces.
