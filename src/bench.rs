@@ -108,8 +108,7 @@ fn bench_dim<const D: usize>(scene: &Scene, args: &BenchArgs) -> Result<Measured
         preconditioner_shown(
             sim.config.pressure_preconditioner,
             sim.grid.dims.len(),
-            sim.markings.fluid_cells(),
-            sim.grid.num_cells()
+            sim.markings.fluid_cells()
         )
     );
     crate::outln!("  {:<10} {:>12}", "stage", "median ms");
@@ -235,10 +234,10 @@ fn least_squares_slope(points: &[(f64, f64)]) -> Option<f64> {
 }
 
 /// The preconditioner a bench names: `auto` with what it chose for the last step's fluid
-/// cells (the pressure solve's rows) among the grid's `cells`, as `auto: multigrid`.
-fn preconditioner_shown(p: Preconditioner, dim: usize, rows: usize, cells: usize) -> String {
+/// cells (the pressure solve's rows), as `auto: multigrid`.
+fn preconditioner_shown(p: Preconditioner, dim: usize, rows: usize) -> String {
     match p {
-        Preconditioner::Auto => format!("auto: {}", p.for_size(dim, rows, cells).name()),
+        Preconditioner::Auto => format!("auto: {}", p.for_size(dim, rows).name()),
         p => p.name().to_string(),
     }
 }

@@ -238,8 +238,7 @@ pub struct RunArgs {
     pub obstacle: Option<ObstacleMode>,
     /// CG's preconditioner in the pressure solve (overrides
     /// `simulation.pressure_preconditioner`): auto (multigrid from 10,000 unknown rows in 2D
-    /// and 100,000 in 3D filling at least an eighth of the grid, or from 1,000,000 rows at any
-    /// fill; mic0 otherwise), mic0
+    /// and 100,000 in 3D, mic0 below), mic0
     /// (modified incomplete Cholesky) or multigrid (a geometric V-cycle).
     #[arg(long, value_enum, value_name = "PRECONDITIONER")]
     pub pressure: Option<Preconditioner>,
@@ -300,8 +299,7 @@ pub struct BenchArgs {
     pub method: Option<MethodKind>,
     /// CG's preconditioner in the pressure solve (overrides
     /// `simulation.pressure_preconditioner`): auto (multigrid from 10,000 unknown rows in 2D
-    /// and 100,000 in 3D filling at least an eighth of the grid, or from 1,000,000 rows at any
-    /// fill; mic0 otherwise), mic0
+    /// and 100,000 in 3D, mic0 below), mic0
     /// (modified incomplete Cholesky) or multigrid (a geometric V-cycle).
     #[arg(long, value_enum, value_name = "PRECONDITIONER")]
     pub pressure: Option<Preconditioner>,

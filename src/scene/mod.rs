@@ -195,10 +195,8 @@ pub struct SimulationFile {
     /// Relative tolerance of the pressure solve.
     pub pressure_tolerance: f64,
     /// CG's preconditioner in the pressure solve and idp's second solve, for every method:
-    /// auto (the default: multigrid from 10,000 unknown rows in 2D and 100,000 in 3D when
-    /// they fill at least an eighth of the grid, or from 1,000,000 rows at any fill, where it
-    /// was measured faster, mic0 otherwise; `Preconditioner::AUTO_ROWS`, `AUTO_FILL`,
-    /// `AUTO_ROWS_ANY_FILL`), mic0 (modified
+    /// auto (the default: multigrid from 10,000 unknown rows in 2D and 100,000 in 3D, where
+    /// it was measured faster, mic0 below; `Preconditioner::AUTO_ROWS`), mic0 (modified
     /// incomplete Cholesky) or multigrid (a geometric V-cycle, McAdams, Sifakis and Teran
     /// 2010: an iteration count nearly independent of the grid, and parallel). All stop at
     /// `pressure_tolerance`; results differ within it.

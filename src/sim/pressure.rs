@@ -213,8 +213,7 @@ impl<const D: usize> Poisson<D> {
     pub fn solve(&self, mut rhs: Vec<f64>, settings: &PcgSettings) -> (Vec<f64>, PcgStats) {
         remove_mean_of_closed_components(&self.a, &self.dirichlet, &mut rhs);
         let mut x = vec![0.0; self.a.len()];
-        let cells = self.row.len();
-        let stats = match settings.preconditioner.for_size(D, self.a.len(), cells) {
+        let stats = match settings.preconditioner.for_size(D, self.a.len()) {
             Preconditioner::Auto | Preconditioner::Mic0 => {
                 pcg::solve(&self.a, &rhs, &mut x, settings)
             }

@@ -85,12 +85,8 @@ impl<const D: usize> StencilMatrix<D> {
 #[serde(rename_all = "kebab-case")]
 pub enum Preconditioner {
     /// By the system's size: multigrid from [`Preconditioner::AUTO_ROWS`] rows (10,000 in 2D,
-    /// 100,000 in 3D) when the rows fill at least an eighth of the grid
-    /// ([`Preconditioner::AUTO_FILL`]), or from [`Preconditioner::AUTO_ROWS_ANY_FILL`] rows
-    /// whatever the fill; MIC(0) otherwise, where the multigrid's set-up and heavier
-    /// iterations do not pay: its hierarchy is built over the whole grid, and a thin column
-    /// keeps more rows on its coarse levels (the crossover measured in docs/benchmarks.md,
-    /// "Pressure preconditioners").
+    /// 100,000 in 3D), MIC(0) below, where the multigrid's set-up and heavier iterations do
+    /// not pay (the crossover measured in docs/benchmarks.md, "Pressure preconditioners").
     #[default]
     Auto,
     /// Modified incomplete Cholesky: cheap per iteration, but its triangular solves are
@@ -103,28 +99,18 @@ pub enum Preconditioner {
 }
 
 impl Preconditioner {
-    /// The fewest rows for which [`Preconditioner::Auto`] takes multigrid, in 2D and in 3D.
+    /// The fewest rows for which [`Preconditioner::Auto`] takes multigrid, in 2D and in 3D,
+    /// whatever part of the grid they fill: measured 2026-11-26, multigrid's pressure stage
+    /// is 0.51-0.59x MIC(0)'s on dam-2d at 256^2 (11,880 rows) and 0.74-0.93x on dam-3d at
+    /// 128^3 (115 k rows filling 5.5% of the grid), 1.0-1.08x at 100^3 (54 k).
     pub const AUTO_ROWS: [usize; 2] = [10_000, 100_000];
 
-    /// [`Preconditioner::Auto`] takes multigrid only if the rows are at least the grid's cells
-    /// over this.
-    pub const AUTO_FILL: usize = 8;
-
-    /// The fewest rows for which [`Preconditioner::Auto`] takes multigrid however little of
-    /// the grid they fill: the 300^3 drop's 2.7 M rows (10% of the grid) solve in 0.76x
-    /// MIC(0)'s time with it, the 200^3 drop's 0.84 M in 0.72-1.0x, the 128^3 dam's 115 k
-    /// (5.5%) in 1.28x.
-    pub const AUTO_ROWS_ANY_FILL: usize = 1_000_000;
-
-    /// The preconditioner a solve of `rows` rows on a `dim`-dimensional grid of `cells` cells
-    /// runs with: [`Preconditioner::Auto`] resolved by [`Preconditioner::AUTO_ROWS`],
-    /// [`Preconditioner::AUTO_FILL`] and [`Preconditioner::AUTO_ROWS_ANY_FILL`], the others
-    /// as they are.
-    pub fn for_size(self, dim: usize, rows: usize, cells: usize) -> Preconditioner {
-        let large = rows >= Self::AUTO_ROWS[dim.clamp(2, 3) - 2];
-        let filled = rows * Self::AUTO_FILL >= cells;
+    /// The preconditioner a solve of `rows` rows on a `dim`-dimensional grid runs with:
+    /// [`Preconditioner::Auto`] resolved by [`Preconditioner::AUTO_ROWS`], the others as they
+    /// are.
+    pub fn for_size(self, dim: usize, rows: usize) -> Preconditioner {
         match self {
-            Preconditioner::Auto if (large && filled) || rows >= Self::AUTO_ROWS_ANY_FILL => {
+            Preconditioner::Auto if rows >= Self::AUTO_ROWS[dim.clamp(2, 3) - 2] => {
                 Preconditioner::Multigrid
             }
             Preconditioner::Auto => Preconditioner::Mic0,
@@ -472,18 +458,11 @@ mod tests {
             (2, Preconditioner::AUTO_ROWS[0]),
             (3, Preconditioner::AUTO_ROWS[1]),
         ] {
-            let cells = rows * Preconditioner::AUTO_FILL;
-            assert_eq!(Auto.for_size(dim, rows - 1, cells), Mic0);
-            assert_eq!(Auto.for_size(dim, rows, cells), Multigrid);
-            // Too few of a larger grid's cells, unless there are very many rows.
-            assert_eq!(Auto.for_size(dim, rows, cells + 1), Mic0);
-            let many = Preconditioner::AUTO_ROWS_ANY_FILL;
-            assert_eq!(Auto.for_size(dim, many - 1, 100 * many), Mic0);
-            assert_eq!(Auto.for_size(dim, many, 100 * many), Multigrid);
+            assert_eq!(Auto.for_size(dim, rows - 1), Mic0);
+            assert_eq!(Auto.for_size(dim, rows), Multigrid);
             for p in [Mic0, Multigrid] {
-                assert_eq!(p.for_size(dim, 1, cells), p);
-                assert_eq!(p.for_size(dim, 10 * rows, cells), p);
-                assert_eq!(p.for_size(dim, rows, 1000 * cells), p);
+                assert_eq!(p.for_size(dim, 1), p);
+                assert_eq!(p.for_size(dim, 10 * rows), p);
             }
         }
         assert!(Preconditioner::AUTO_ROWS[0] < Preconditioner::AUTO_ROWS[1]);
