@@ -269,6 +269,11 @@ impl March {
 /// one parity lower disjoint layers).
 const SLAB: usize = 4;
 
+/// How much further than `phi + radius` [`lower_by_sphere`] looks for a sphere that lowers a
+/// centre, in cells: far above the rounding error of distances of a few cells, so that the
+/// test skips only spheres whose distance would not lower the centre.
+const SPHERE_TEST_SLACK: f64 = 1e-9;
+
 /// [`LevelSet::remarch`]'s mark of a cell it does not work on.
 pub const FROZEN: u32 = u32::MAX;
 
@@ -290,9 +295,15 @@ fn lower_by_sphere<const D: usize>(
     for (off, step) in reach {
         let n: [i64; D] = std::array::from_fn(|k| cell[k] as i64 + off[k]);
         if inner || (0..D).all(|k| 0 <= n[k] && n[k] < grid.dims[k] as i64) {
-            let centre = Vector::<D>::from_fn(|k, _| n[k] as f64 + 0.5);
             let c = (own + step) as usize;
-            phi[c] = phi[c].min((centre - x).norm() - radius);
+            // The sphere lowers the centre only if its distance is below `phi + radius`
+            // (rounding errors are far below the slack): no root for most centres.
+            let reach = phi[c] + radius + SPHERE_TEST_SLACK;
+            let centre = Vector::<D>::from_fn(|k, _| n[k] as f64 + 0.5);
+            let d2 = (centre - x).norm_squared();
+            if reach > 0.0 && d2 < reach * reach {
+                phi[c] = phi[c].min(d2.sqrt() - radius);
+            }
         }
     }
 }

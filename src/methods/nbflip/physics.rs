@@ -12,6 +12,7 @@ use crate::sim::markings::{DepthLevel, Markings};
 use crate::sim::transfer::{self, Known};
 use crate::sim::State;
 use rand::Rng;
+use rayon::prelude::*;
 use std::sync::Arc;
 
 /// Layers the level set is re-marched into the liquid beyond the band: `R + 2`
@@ -364,8 +365,15 @@ impl<const D: usize> Resampling<'_, D> {
         let mut rep = NbflipReport::default();
         let mut count = vec![0u32; g.num_cells()];
         let mut keep = Vec::with_capacity(p.len());
-        for x in &p.pos {
-            let (v, c) = (self.phi.interpolate(g, x), g.cell_index_of(x));
+        // The level set at every particle and its cell, in parallel; then, in order, the
+        // crowding count.
+        let found: Vec<(f64, usize)> = p
+            .pos
+            .par_iter()
+            .with_min_len(crate::PAR_GRAIN_PARTICLES)
+            .map(|x| (self.phi.interpolate(g, x), g.cell_index_of(x)))
+            .collect();
+        for (v, c) in found {
             let deleted = if v > 0.0 {
                 &mut rep.outside
             } else if v < -self.r {
