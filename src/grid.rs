@@ -18,9 +18,6 @@ pub type Vector<const D: usize> = SVector<f64, D>;
 /// Integer cell coordinates.
 pub type Cell<const D: usize> = [usize; D];
 
-/// Some faces of a MAC grid, per component: each face's index and coordinates.
-pub type FaceSet<const D: usize> = [Vec<(usize, Cell<D>)>; D];
-
 /// Cell and face layout of a `D`-dimensional MAC grid.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Grid<const D: usize> {
@@ -160,42 +157,6 @@ impl<const D: usize> Grid<D> {
                     f(start + j, c, v, w);
                 }
             });
-    }
-
-    /// The faces of the cells for which `flagged` holds, per component, each face once with
-    /// its coordinates: a pass over the cells (in parallel over layers of the last axis, one
-    /// conversion to coordinates per row along axis 0), where
-    /// the faces of a few cells are wanted and a pass over every face would visit all of them.
-    /// A cell gives its lower face on every axis, and its upper one where the cell above is
-    /// not flagged or there is none.
-    pub fn faces_of_cells(&self, flagged: impl Fn(usize) -> bool + Sync) -> FaceSet<D> {
-        let (row, rows_per_layer) = (self.dims[0], self.cell_strides[D - 1] / self.dims[0]);
-        let parts: Vec<FaceSet<D>> = (0..self.dims[D - 1])
-            .into_par_iter()
-            .map(|l| {
-                let mut out: FaceSet<D> = std::array::from_fn(|_| vec![]);
-                for r in l * rows_per_layer..(l + 1) * rows_per_layer {
-                    let first = r * row;
-                    let mut cc = self.cell_coords(first);
-                    for (x, c) in (first..first + row).enumerate() {
-                        if !flagged(c) {
-                            continue;
-                        }
-                        cc[0] = x;
-                        for (a, faces) in out.iter_mut().enumerate() {
-                            faces.push((self.face_index(a, cc), cc));
-                            if cc[a] + 1 == self.dims[a] || !flagged(c + self.cell_strides[a]) {
-                                let mut up = cc;
-                                up[a] += 1;
-                                faces.push((self.face_index(a, up), up));
-                            }
-                        }
-                    }
-                }
-                out
-            })
-            .collect();
-        std::array::from_fn(|a| parts.iter().flat_map(|p| p[a].iter().copied()).collect())
     }
 
     /// Whether `x` lies inside the domain `[0, dims)`.
@@ -674,26 +635,6 @@ mod tests {
                 g3.face_coords(a, g3.num_faces(a) - 1)
             );
         }
-    }
-
-    #[test]
-    fn the_faces_of_some_cells_are_each_of_their_faces_once_2d_and_3d() {
-        fn check<const D: usize>(dims: [usize; D]) {
-            let g = Grid::new(dims);
-            let flagged = |c: usize| !(c * 7 + c / 5).is_multiple_of(3);
-            let faces = g.faces_of_cells(flagged);
-            for (a, faces) in faces.iter().enumerate() {
-                let mut got: Vec<usize> = faces.iter().map(|&(i, _)| i).collect();
-                assert!(faces.iter().all(|&(i, f)| g.face_coords(a, i) == f));
-                got.sort_unstable();
-                let want: Vec<usize> = (0..g.num_faces(a))
-                    .filter(|&i| g.face_cells(a, i).any(flagged))
-                    .collect();
-                assert_eq!(got, want, "axis {a}");
-            }
-        }
-        check([5, 7]);
-        check([4, 3, 6]);
     }
 
     #[test]

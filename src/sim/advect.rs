@@ -6,7 +6,7 @@
 //! `dt * max|u_face| <= 1` no particle moves more than one cell along any axis: it stays in the
 //! Moore neighbourhood of its cell (sec. grid_move).
 
-use crate::grid::{AtGridPoints, FaceSet, Grid, MacField, Vector};
+use crate::grid::{AtGridPoints, Grid, MacField, Vector};
 use rayon::prelude::*;
 
 /// The margin epsilon of eq. best_cell_pos, in cells.
@@ -53,37 +53,30 @@ pub fn displace<const D: usize>(
 
 /// Semi-Lagrangian advection of the grid velocity by itself over `dt` (first order): each face
 /// takes the value found at the point its velocity traces back from, `u(x_f - dt u(x_f))`.
-/// Only the faces `faces` are advected; the others keep `u` (the band method reads the grid
-/// velocity only near its interface and deep). Every value is read from `u` before any is
-/// written.
+/// Only faces next to a cell flagged in `needed` are advected; the others keep `u` (the band
+/// method reads the grid velocity only near its interface and deep).
 pub fn advect_velocity<const D: usize>(
     grid: &Grid<D>,
-    mut u: MacField<D>,
+    u: &MacField<D>,
     dt: f64,
-    faces: &FaceSet<D>,
+    needed: &[bool],
 ) -> MacField<D> {
-    let values: [Vec<f64>; D] = std::array::from_fn(|a| {
+    let mut out = u.clone();
+    for (a, comp) in out.comp.iter_mut().enumerate() {
         let at_faces = AtGridPoints::faces(grid, a);
-        let u = &u;
-        faces[a]
-            .par_iter()
-            .with_min_len(crate::PAR_GRAIN_PARTICLES)
-            .map(|&(_, f)| {
-                let x = grid.face_point(a, f);
-                let mut back = x - dt * at_faces.interpolate(grid, u, f);
-                for k in 0..D {
-                    back[k] = back[k].clamp(0.0, grid.dims[k] as f64);
-                }
-                u.interpolate_component(grid, a, &back)
-            })
-            .collect()
-    });
-    for (a, values) in values.iter().enumerate() {
-        for (&(i, _), &v) in faces[a].iter().zip(values) {
-            u.comp[a][i] = v;
-        }
+        grid.par_for_each_face(a, comp, |_, f, v| {
+            if !grid.face_cells_at(a, f).any(|c| needed[c]) {
+                return;
+            }
+            let x = grid.face_point(a, f);
+            let mut back = x - dt * at_faces.interpolate(grid, u, f);
+            for k in 0..D {
+                back[k] = back[k].clamp(0.0, grid.dims[k] as f64);
+            }
+            *v = u.interpolate_component(grid, a, &back);
+        });
     }
-    u
+    out
 }
 
 #[cfg(test)]
@@ -101,16 +94,12 @@ mod tests {
             let f = g.face_coords(1, i);
             u.comp[1][i] = 0.5 * (f[0] as f64 + 0.5);
         }
-        // Only the faces of the cells x < 5: those of x >= 5 on axis 1 keep their values.
-        let faces = g.faces_of_cells(|c| g.cell_coords(c)[0] < 5);
-        let out = advect_velocity(&g, u.clone(), 0.5, &faces);
+        let out = advect_velocity(&g, &u, 0.5, &vec![true; g.num_cells()]);
         assert!(out.comp[0].iter().all(|&v| (v - 2.0).abs() < 1e-12));
         for i in 0..g.num_faces(1) {
             let f = g.face_coords(1, i);
             let x = f[0] as f64 + 0.5;
-            if f[0] >= 5 {
-                assert_eq!(out.comp[1][i], u.comp[1][i]);
-            } else if x > 1.5 {
+            if x > 1.5 {
                 assert!((out.comp[1][i] - 0.5 * (x - 1.0)).abs() < 1e-12);
             }
         }

@@ -6,11 +6,10 @@
 //! What the deep holds is a method's business: method ccp counts its imaginary particles in
 //! `n_deep`; narrow-band FLIP keeps the deep as a level set.
 
-use crate::grid::{Cell, FaceSet, Grid, MacField, Vector};
+use crate::grid::{Cell, Grid, MacField, Vector};
 use crate::sim::advect;
 use crate::sim::markings::{DepthLevel, Markings};
 use crate::sim::transfer::Known;
-use rayon::prelude::*;
 
 /// `R` when a scene file does not say (the paper: 3, and 6 for the dam scenes).
 pub const DEFAULT_BAND_R: u32 = 3;
@@ -89,8 +88,7 @@ impl Band {
         grid_u: &MacField<D>,
         m: &Markings,
     ) {
-        let faces = liquid_faces(grid, m);
-        combine_velocities(u, known, grid_u, &faces, |a, f, _| {
+        combine_velocities(grid, u, known, grid_u, |a, f, _| {
             grid.face_cells_at(a, f)
                 .any(|c| m.at_or_below_interface(c, self.r))
         });
@@ -101,18 +99,13 @@ impl Band {
     /// fluid cells are advected, the others keep `u`.
     pub fn advect_grid_velocity<const D: usize>(
         grid: &Grid<D>,
-        u: MacField<D>,
+        u: &MacField<D>,
         dt: f64,
         m: &Markings,
     ) -> MacField<D> {
-        advect::advect_velocity(grid, u, dt, &liquid_faces(grid, m))
+        let needed: Vec<bool> = (0..grid.num_cells()).map(|c| m.is_fluid(c)).collect();
+        advect::advect_velocity(grid, u, dt, &needed)
     }
-}
-
-/// The faces of the fluid cells of `m`: all the band methods' velocity combination may change
-/// and all their grid velocity's advection must.
-pub fn liquid_faces<const D: usize>(grid: &Grid<D>, m: &Markings) -> FaceSet<D> {
-    grid.faces_of_cells(|c| m.is_fluid(c))
 }
 
 /// The markings' particle counts with every cell whose `level` is deep counted as full (`mu`):
@@ -131,29 +124,23 @@ pub fn counts_with_full_deep(
 }
 
 /// The velocity combination of the band methods (paper alg. band line 1; Ferstl et al. 2016,
-/// sec. 4): the faces of `faces` for which `take_grid(axis, face_coords, had_particle_weight)`
-/// holds take the grid velocity `grid_u` and count as known; the others keep the particles'
-/// velocity `u` where particles gave weight. (A list of faces, those next to the liquid, not a
-/// pass over every face of the grid.)
+/// sec. 4): faces for which `take_grid(axis, face_coords, had_particle_weight)` holds take the
+/// grid velocity `grid_u` and count as known; the others keep the particles' velocity `u` where
+/// particles gave weight. (Coordinates, not indices: a pass over every face must not divide.)
 pub fn combine_velocities<const D: usize>(
+    grid: &Grid<D>,
     u: &mut MacField<D>,
     known: &mut Known<D>,
     grid_u: &MacField<D>,
-    faces: &FaceSet<D>,
     take_grid: impl Fn(usize, Cell<D>, bool) -> bool + Sync,
 ) {
-    for (a, faces) in faces.iter().enumerate() {
-        let weighted = &known[a];
-        let taken: Vec<usize> = faces
-            .par_iter()
-            .with_min_len(crate::PAR_GRAIN_PARTICLES)
-            .filter(|&&(i, f)| take_grid(a, f, weighted[i]))
-            .map(|&(i, _)| i)
-            .collect();
-        for i in taken {
-            u.comp[a][i] = grid_u.comp[a][i];
-            known[a][i] = true;
-        }
+    for (a, (u, known)) in u.comp.iter_mut().zip(known.iter_mut()).enumerate() {
+        grid.par_for_each_face_pair(a, u, known, |i, f, v, k| {
+            if take_grid(a, f, *k) {
+                *v = grid_u.comp[a][i];
+                *k = true;
+            }
+        });
     }
 }
 

@@ -7,7 +7,7 @@ use crate::grid::{Cell, Grid, MacField, Vector};
 use crate::methods::seam::{FluidMethod, MethodRecording, MethodReport};
 use crate::metrics::InvariantViolation;
 use crate::particles::Particles;
-use crate::sim::band::{combine_velocities, counts_with_full_deep, liquid_faces, Band};
+use crate::sim::band::{combine_velocities, counts_with_full_deep, Band};
 use crate::sim::markings::{DepthLevel, Markings};
 use crate::sim::transfer::{self, Known};
 use crate::sim::State;
@@ -205,9 +205,9 @@ pub fn combine<const D: usize>(
     known: &mut Known<D>,
     grid_u: &MacField<D>,
 ) {
-    let faces = liquid_faces(g, m);
-    combine_velocities(u, known, grid_u, &faces, |a, f, weighted| {
-        !weighted || phi.at_face(g, a, f) < -(r - 1.0)
+    combine_velocities(g, u, known, grid_u, |a, f, weighted| {
+        g.face_cells_at(a, f).any(|c| m.is_fluid(c))
+            && (!weighted || phi.at_face(g, a, f) < -(r - 1.0))
     });
 }
 
@@ -263,7 +263,7 @@ impl<const D: usize> FluidMethod<D> for NbflipSim<D> {
         let advected = self.advected.get_or_insert_with(|| (*self.phi).clone());
         let cells = &self.advected_over.cells;
         self.phi.advect_into(&s.grid, &u, dt, cells, advected);
-        Band::advect_grid_velocity(&s.grid, u, dt, &s.markings)
+        Band::advect_grid_velocity(&s.grid, &u, dt, &s.markings)
     }
 
     /// Steps 4 and 5; the level set's inside stays fluid.
