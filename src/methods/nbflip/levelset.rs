@@ -63,9 +63,16 @@ impl LevelSet {
     }
 
     /// The level set at the face of axis `a` with coordinates `f`, interpolated from the
-    /// centres.
+    /// centres: the mean of the two cells' values, or the one cell's on the domain's boundary
+    /// ([`LevelSet::interpolate`] at the face's centre, whose other weights are 0: the same
+    /// value, up to the sign of a zero).
     pub fn at_face<const D: usize>(&self, grid: &Grid<D>, a: usize, f: Cell<D>) -> f64 {
-        self.interpolate(grid, &grid.face_point(a, f))
+        let mut cells = grid.face_cells_at(a, f).map(|c| self.phi[c]);
+        match (cells.next(), cells.next()) {
+            (Some(lower), Some(upper)) => 0.5 * lower + 0.5 * upper,
+            (Some(only), None) => only,
+            _ => unreachable!("a face has a cell on one side at least"),
+        }
     }
 
     /// Semi-Lagrangian advection over `dt` (first order, as MantaFlow's scene advects `phi`),
@@ -262,6 +269,11 @@ impl March {
 /// one parity lower disjoint layers).
 const SLAB: usize = 4;
 
+/// How much further than `phi + radius` [`lower_by_sphere`] looks for a sphere that lowers a
+/// centre, in cells: far above the rounding error of distances of a few cells, so that the
+/// test skips only spheres whose distance would not lower the centre.
+const SPHERE_TEST_SLACK: f64 = 1e-9;
+
 /// [`LevelSet::remarch`]'s mark of a cell it does not work on.
 pub const FROZEN: u32 = u32::MAX;
 
@@ -283,9 +295,15 @@ fn lower_by_sphere<const D: usize>(
     for (off, step) in reach {
         let n: [i64; D] = std::array::from_fn(|k| cell[k] as i64 + off[k]);
         if inner || (0..D).all(|k| 0 <= n[k] && n[k] < grid.dims[k] as i64) {
-            let centre = Vector::<D>::from_fn(|k, _| n[k] as f64 + 0.5);
             let c = (own + step) as usize;
-            phi[c] = phi[c].min((centre - x).norm() - radius);
+            // The sphere lowers the centre only if its distance is below `phi + radius`
+            // (rounding errors are far below the slack): no root for most centres.
+            let reach = phi[c] + radius + SPHERE_TEST_SLACK;
+            let centre = Vector::<D>::from_fn(|k, _| n[k] as f64 + 0.5);
+            let d2 = (centre - x).norm_squared();
+            if reach > 0.0 && d2 < reach * reach {
+                phi[c] = phi[c].min(d2.sqrt() - radius);
+            }
         }
     }
 }
@@ -359,6 +377,28 @@ mod tests {
         let x = Vector::<3>::new(1.7, 2.2, 4.9);
         assert!((want.interpolate(&g, &x) - (4.9 - 5.2)).abs() < 1e-12);
         assert!((want.at_face(&g, 2, [1, 1, 4]) - (4.0 - 5.2)).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_level_set_at_a_face_is_its_interpolation_there_2d_and_3d() {
+        fn check<const D: usize>(dims: [usize; D]) {
+            let g = Grid::new(dims);
+            let ls = LevelSet {
+                phi: (0..g.num_cells())
+                    .map(|c| ((c * 13) as f64 * 0.71).sin() * 9.0)
+                    .collect(),
+            };
+            for a in 0..D {
+                for i in 0..g.num_faces(a) {
+                    let f = g.face_coords(a, i);
+                    let want = ls.interpolate(&g, &g.face_point(a, f));
+                    assert_eq!(ls.at_face(&g, a, f), want, "axis {a}, face {f:?}");
+                }
+            }
+        }
+        check([5, 4]);
+        check([1, 3]);
+        check([4, 3, 5]);
     }
 
     #[test]

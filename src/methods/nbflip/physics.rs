@@ -1,9 +1,9 @@
 //! Method nbflip's step: the hooks it implements (see the module doc of `super`).
 
 use super::levelset::{particle_radius, LevelSet, March, Side};
-use super::region::Region;
+use super::region::{Margin, Region};
 use crate::draw::{depth_level_classes, Log};
-use crate::grid::{Grid, MacField, Vector};
+use crate::grid::{Cell, Grid, MacField, Vector};
 use crate::methods::seam::{FluidMethod, MethodRecording, MethodReport};
 use crate::metrics::InvariantViolation;
 use crate::particles::Particles;
@@ -12,6 +12,7 @@ use crate::sim::markings::{DepthLevel, Markings};
 use crate::sim::transfer::{self, Known};
 use crate::sim::State;
 use rand::Rng;
+use rayon::prelude::*;
 use std::sync::Arc;
 
 /// Layers the level set is re-marched into the liquid beyond the band: `R + 2`
@@ -88,26 +89,34 @@ impl<const D: usize> NbflipSim<D> {
     /// How far (cells, along every axis) from the surface and the particles of a rebuild the
     /// next rebuild may change the level set: the surface and the particles move at most `cfl`
     /// cells a step, the interpolation, the shrink and the particles' spheres reach a cell
-    /// further each, and the re-march `R + 2` (or 3) layers beyond the cells next to the
-    /// surface.
-    fn margin(&self, cfl: f64) -> usize {
-        let deepest = self
+    /// further each, and the re-march beyond the cells next to the surface: `R + 2` layers on
+    /// the liquid's side, 3 on the other.
+    fn margin(&self, cfl: f64) -> Margin {
+        let [inside, outside] = self
             .marches()
-            .map(|m| m.layers)
-            .into_iter()
-            .max()
-            .unwrap_or(0);
-        cfl.ceil() as usize + 3 + deepest as usize + 1
+            .map(|m| cfl.ceil() as usize + 3 + m.layers as usize + 1);
+        Margin { inside, outside }
+    }
+
+    /// The region within the margin of `seeds`, with the level set's liquid and the solid
+    /// cells (which the inward re-march passes through) on the inner side.
+    fn around(&self, s: &State<D>, seeds: impl Iterator<Item = Cell<D>>) -> Region {
+        let (phi, solid) = (&self.phi.phi, &s.solids.solid);
+        let inner = |c: usize| solid[c] || phi[c] < 0.0;
+        Region::around(&s.grid, seeds, self.margin(s.config.cfl), inner)
     }
 
     /// The cells around the particles, and around the obstacles, which change the solid cells
-    /// the re-march reads.
+    /// the re-march reads; sided by the level set before the rebuild (a particle's sphere makes
+    /// liquid within the outer margin, and the inward re-march from there reaches only liquid
+    /// that was liquid before or lies within that margin).
     fn around_particles(&self, s: &State<D>) -> Region {
         let g = &s.grid;
         let obstacles = s.solids.obstacles.iter();
-        let cells = s.particles.pos.iter().map(|x| g.cell_index_of(x));
-        let cells = cells.chain(obstacles.flat_map(|o| o.cells_at(g, &o.offset)));
-        Region::around(g, cells, self.margin(s.config.cfl))
+        let cells = s.particles.pos.iter();
+        let cells = cells.map(|x| g.cell_of(x).expect("particle inside the domain"));
+        let obstacle_cells = obstacles.flat_map(|o| o.cells_at(g, &o.offset));
+        self.around(s, cells.chain(obstacle_cells.map(|c| g.cell_coords(c))))
     }
 
     /// Step 4: the level set from the advected one (if any) and the particles, on the cells
@@ -115,7 +124,11 @@ impl<const D: usize> NbflipSim<D> {
     /// advect next.
     fn rebuild_level_set(&mut self, s: &State<D>) {
         let (g, solid, pos) = (&s.grid, &s.solids.solid, &s.particles.pos);
-        let (margin, marches) = (self.margin(s.config.cfl), self.marches());
+        let marches = self.marches();
+        if self.advected.is_none() {
+            // The first rebuild: the particles' level set, on every cell.
+            self.phi = Arc::new(LevelSet::from_particles(g, pos));
+        }
         let around_particles = self.narrow.then(|| self.around_particles(s));
         let phi = Arc::make_mut(&mut self.phi);
         self.rebuilt = match &mut self.advected {
@@ -131,18 +144,16 @@ impl<const D: usize> NbflipSim<D> {
                 phi.unite_shrunk(g, advected, pos, &cells.cells);
                 cells
             }
-            None => {
-                *phi = LevelSet::from_particles(g, pos);
-                Region::all(g)
-            }
+            None => Region::all(g),
         };
         for march in marches {
             phi.remarch(g, march, solid, &self.rebuilt.cells, &mut self.layer);
         }
         self.next = match around_particles {
             Some(around) => {
-                let crossing = phi.crossing(g, solid, &self.rebuilt.cells);
-                Region::around(g, crossing, margin).union(g, &around)
+                let crossing: Vec<usize> = phi.crossing(g, solid, &self.rebuilt.cells).collect();
+                let crossing = crossing.into_iter().map(|c| g.cell_coords(c));
+                self.around(s, crossing).union(g, &around)
             }
             None => Region::all(g),
         };
@@ -364,8 +375,15 @@ impl<const D: usize> Resampling<'_, D> {
         let mut rep = NbflipReport::default();
         let mut count = vec![0u32; g.num_cells()];
         let mut keep = Vec::with_capacity(p.len());
-        for x in &p.pos {
-            let (v, c) = (self.phi.interpolate(g, x), g.cell_index_of(x));
+        // The level set at every particle and its cell, in parallel; then, in order, the
+        // crowding count.
+        let found: Vec<(f64, usize)> = p
+            .pos
+            .par_iter()
+            .with_min_len(crate::PAR_GRAIN_PARTICLES)
+            .map(|x| (self.phi.interpolate(g, x), g.cell_index_of(x)))
+            .collect();
+        for (v, c) in found {
             let deleted = if v > 0.0 {
                 &mut rep.outside
             } else if v < -self.r {

@@ -4,7 +4,7 @@
 //! keep their values: far inside the liquid the level set is `-(R + 4)`, far outside `+5`
 //! (the caps of the re-march), and a step does no work there.
 
-use crate::grid::Grid;
+use crate::grid::{Cell, Grid};
 
 /// The edge of a tile in cells: the coarse grid of tiles is `TILE^D` times smaller than the
 /// grid, so a pass over it is cheap, and a tile is small enough that the region hugs the
@@ -59,34 +59,65 @@ impl Region {
         pairs.map(|(&a, &b)| op(a, b)).collect()
     }
 
-    /// The cells of every tile within `margin` cells (in every axis) of a tile holding a seed
-    /// cell: each cell within `margin` of a seed is in the region.
+    /// The cells of every tile within `margin.outside` cells (in every axis) of a tile holding a
+    /// seed cell, and of every tile within `margin.inside` cells of one that holds a cell for
+    /// which `inner` holds: each cell within `margin.outside` of a seed is in the region, and
+    /// so is each cell of the inner side within `margin.inside`.
     pub fn around<const D: usize>(
         grid: &Grid<D>,
-        seeds: impl Iterator<Item = usize>,
-        margin: usize,
+        seeds: impl Iterator<Item = Cell<D>>,
+        margin: Margin,
+        inner: impl Fn(usize) -> bool,
     ) -> Self {
         let tiles = tiles(grid);
-        let reach = margin.div_ceil(TILE);
         let mut seeded = vec![false; tiles.num_cells()];
         for c in seeds {
-            seeded[tile_of(grid, &tiles, c)] = true;
+            seeded[tiles.cell_index(c.map(|k| k / TILE))] = true;
         }
-        let mut active = vec![false; tiles.num_cells()];
+        // 2: within the outer reach of a seed, 1: within the inner reach only.
+        let mut near = vec![0u8; tiles.num_cells()];
+        let reaches = [(margin.inside, 1), (margin.outside, 2)];
         for t in (0..tiles.num_cells()).filter(|&t| seeded[t]) {
             let tc = tiles.cell_coords(t);
-            for_each_in_box(
-                &tiles,
-                tc.map(|k| k.saturating_sub(reach)),
-                tc.map(|k| k + reach),
-                |n| active[n] = true,
-            );
+            for (margin, mark) in reaches {
+                let reach = margin.div_ceil(TILE);
+                let (lo, hi) = (tc.map(|k| k.saturating_sub(reach)), tc.map(|k| k + reach));
+                for_each_in_box(&tiles, lo, hi, |n| near[n] = near[n].max(mark));
+            }
         }
+        let active: Vec<bool> = (0..tiles.num_cells())
+            .map(|t| match near[t] {
+                2 => true,
+                1 => cells_of_tile(grid, &tiles, t).any(&inner),
+                _ => false,
+            })
+            .collect();
         Self {
             cells: cells_of_tiles(grid, &tiles, &active),
             tiles: active,
         }
     }
+}
+
+/// How far from its seeds a region reaches, in cells along every axis: on the inner side
+/// (the liquid's), and elsewhere.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Margin {
+    pub inside: usize,
+    pub outside: usize,
+}
+
+/// The cells of tile `t`, clipped to the grid.
+fn cells_of_tile<'a, const D: usize>(
+    grid: &'a Grid<D>,
+    tiles: &Grid<D>,
+    t: usize,
+) -> impl Iterator<Item = usize> + 'a {
+    let lo = tiles.cell_coords(t).map(|k| k * TILE);
+    let hi = lo.map(|k| k + TILE - 1);
+    let mut cells = vec![];
+    for_each_in_box(grid, lo, hi, |c| cells.push(c));
+    cells.into_iter()
 }
 
 /// Calls `f` with the index of every cell of `grid` with coordinates in `lo..=hi` (clipped to
@@ -133,9 +164,11 @@ mod tests {
 
     #[test]
     fn the_region_covers_the_margin_around_its_seeds_and_no_far_cell_2d_and_3d() {
-        fn check<const D: usize>(dims: [usize; D], seed: [usize; D], margin: usize) {
+        /// A seed with the inner side below `floor` along the last axis.
+        fn check<const D: usize>(dims: [usize; D], seed: [usize; D], margin: Margin, floor: usize) {
             let g = Grid::new(dims);
-            let r = Region::around(&g, std::iter::once(g.cell_index(seed)), margin);
+            let inner = |c: usize| g.cell_coords(c)[D - 1] < floor;
+            let r = Region::around(&g, std::iter::once(seed), margin, inner);
             assert!(
                 r.cells.windows(2).all(|w| w[0] < w[1]),
                 "ascending, no repeats"
@@ -144,22 +177,42 @@ mod tests {
                 let cc = g.cell_coords(c);
                 let far = (0..D).map(|k| cc[k].abs_diff(seed[k])).max().unwrap();
                 let inside = r.cells.binary_search(&c).is_ok();
-                // Within the margin: in; beyond the margin plus two tiles: out.
-                assert!(far > margin || inside, "{cc:?} missing");
-                assert!(far <= margin + 2 * TILE || !inside, "{cc:?} too far");
+                let need = match inner(c) {
+                    true => margin.inside.max(margin.outside),
+                    false => margin.outside,
+                };
+                assert!(far > need || inside, "{cc:?} missing");
+                // Beyond the larger margin plus two tiles: out; beyond the outer one plus two
+                // tiles, only the cells of a tile that has inner ones.
+                let tile_inner = cc[D - 1] / TILE * TILE < floor;
+                let widest = margin.inside.max(margin.outside);
+                assert!(!inside || far <= widest + 2 * TILE, "{cc:?} too far");
+                let near = far <= margin.outside + 2 * TILE;
+                assert!(!inside || near || tile_inner, "{cc:?} too far outside");
             }
         }
-        check([37, 30], [20, 3], 5);
+        let even = |m| Margin {
+            inside: m,
+            outside: m,
+        };
+        let sided = Margin {
+            inside: 9,
+            outside: 3,
+        };
+        check([37, 30], [20, 3], even(5), 0);
+        check([37, 30], [20, 13], sided, 12);
         let g = Grid::new([37, 30]);
-        let a = Region::around(&g, std::iter::once(g.cell_index([2, 2])), 1);
-        let b = Region::around(&g, std::iter::once(g.cell_index([30, 25])), 1);
+        let around = |c| Region::around(&g, std::iter::once(c), even(1), |_| false);
+        let (a, b) = (around([2, 2]), around([30, 25]));
         let both = a.union(&g, &b);
         assert_eq!(both.cells.len(), a.cells.len() + b.cells.len());
         assert_eq!(both.minus(&g, &a), b.cells);
         assert!(a.minus(&g, &both).is_empty());
-        check([19, 22, 17], [9, 15, 16], 6);
+        check([19, 22, 17], [9, 15, 16], even(6), 0);
+        check([19, 22, 37], [9, 15, 16], sided, 15);
         let g = Grid::new([9, 7, 5]);
         assert_eq!(Region::all(&g).cells.len(), g.num_cells());
-        assert!(Region::around(&g, std::iter::empty(), 3).cells.is_empty());
+        let none = Region::around(&g, std::iter::empty(), even(3), |_| true);
+        assert!(none.cells.is_empty());
     }
 }
