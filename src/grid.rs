@@ -159,6 +159,71 @@ impl<const D: usize> Grid<D> {
             });
     }
 
+    /// As [`Self::par_for_each_face`], but only for the faces next to a cell flagged in `near`
+    /// ([`Self::par_for_each_face_pair_near`]).
+    pub fn par_for_each_face_near<T: Send>(
+        &self,
+        axis: usize,
+        values: &mut [T],
+        near: &[bool],
+        f: impl Fn(usize, Cell<D>, &mut T) + Sync,
+    ) {
+        let mut none = vec![(); values.len()];
+        self.par_for_each_face_pair_near(axis, values, &mut none, near, |i, c, v, _| f(i, c, v));
+    }
+
+    /// As [`Self::par_for_each_face_pair`], but only for the faces next to a cell flagged in
+    /// `near` (one flag per cell), in the same order: a line of faces along axis 0 whose cells
+    /// on either side hold no flagged cell is skipped whole, so that a pass over a liquid
+    /// filling a few percent of the grid does not walk the rest of it.
+    pub fn par_for_each_face_pair_near<T: Send, U: Send>(
+        &self,
+        axis: usize,
+        a: &mut [T],
+        b: &mut [U],
+        near: &[bool],
+        f: impl Fn(usize, Cell<D>, &mut T, &mut U) + Sync,
+    ) {
+        assert_eq!(near.len(), self.num_cells());
+        assert_eq!(a.len(), self.num_faces(axis));
+        assert_eq!(b.len(), self.num_faces(axis));
+        let n0 = self.dims[0];
+        let flagged: Vec<bool> = (near
+            .par_chunks(n0)
+            .with_min_len(crate::PAR_GRAIN.div_ceil(n0)))
+        .map(|line| line.contains(&true))
+        .collect();
+        // The lines of cells beside the line of faces starting at `f0`: its own, and the one
+        // below along `axis` (for axis 0 both are the same line).
+        let beside = |f0: Cell<D>| {
+            let line = |c: Cell<D>| flagged[self.cell_index(c) / n0];
+            let below = (f0[axis] > 0).then(|| {
+                let mut c = f0;
+                c[axis] -= 1;
+                c
+            });
+            (f0[axis] < self.dims[axis] && line(f0)) || below.is_some_and(line)
+        };
+        let len = self.face_dims[axis][0];
+        a.par_chunks_mut(len)
+            .zip(b.par_chunks_mut(len))
+            .with_min_len(crate::PAR_GRAIN.div_ceil(len))
+            .enumerate()
+            .for_each(|(l, (a, b))| {
+                let start = l * len;
+                let coords = self.face_coords_from(axis, start);
+                let mut coords = coords.peekable();
+                if !beside(*coords.peek().expect("a line has faces")) {
+                    return;
+                }
+                for (((j, v), w), c) in a.iter_mut().enumerate().zip(b).zip(coords) {
+                    if self.face_cells_at(axis, c).any(|k| near[k]) {
+                        f(start + j, c, v, w);
+                    }
+                }
+            });
+    }
+
     /// Whether `x` lies inside the domain `[0, dims)`.
     pub fn contains(&self, x: &Vector<D>) -> bool {
         (0..D).all(|k| x[k] >= 0.0 && x[k] < self.extent[k])
@@ -672,6 +737,41 @@ mod tests {
         }
         check([6, 5]);
         check([5, 6, 7]);
+    }
+
+    /// The faces visited near flagged cells are exactly those with a flagged cell on a side,
+    /// each once, with its index and coordinates; sparse flags leave whole lines out.
+    #[test]
+    fn the_faces_near_flagged_cells_are_visited_exactly_2d_and_3d() {
+        fn check<const D: usize>(dims: [usize; D], every: usize) {
+            let g = Grid::new(dims);
+            let near: Vec<bool> = (0..g.num_cells())
+                .map(|c| (c * 7919) % every == 0)
+                .collect();
+            for a in 0..D {
+                let mut seen = vec![0u8; g.num_faces(a)];
+                let mut at = vec![[0usize; D]; g.num_faces(a)];
+                let mut other = vec![0u8; g.num_faces(a)];
+                g.par_for_each_face_pair_near(a, &mut seen, &mut other, &near, |i, f, s, o| {
+                    *s += 1;
+                    *o += 1;
+                    assert_eq!(g.face_index(a, f), i);
+                });
+                g.par_for_each_face_near(a, &mut at, &near, |_, f, v| *v = f);
+                for i in 0..g.num_faces(a) {
+                    let f = g.face_coords(a, i);
+                    let want = g.face_cells_at(a, f).any(|c| near[c]);
+                    assert_eq!(seen[i] == 1, want, "axis {a}, face {f:?}");
+                    assert_eq!(seen[i], other[i]);
+                    assert!(!want || at[i] == f);
+                }
+            }
+        }
+        check([7, 5], 3);
+        check([7, 5], 29);
+        check([6, 4, 5], 5);
+        check([6, 4, 5], 53);
+        check([1, 3, 2], 2);
     }
 
     #[test]

@@ -64,10 +64,7 @@ pub fn advect_velocity<const D: usize>(
     let mut out = u.clone();
     for (a, comp) in out.comp.iter_mut().enumerate() {
         let at_faces = AtGridPoints::faces(grid, a);
-        grid.par_for_each_face(a, comp, |_, f, v| {
-            if !grid.face_cells_at(a, f).any(|c| needed[c]) {
-                return;
-            }
+        grid.par_for_each_face_near(a, comp, needed, |_, f, v| {
             let x = grid.face_point(a, f);
             let mut back = x - dt * at_faces.interpolate(grid, u, f);
             for k in 0..D {

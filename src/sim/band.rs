@@ -10,6 +10,7 @@ use crate::grid::{Cell, Grid, MacField, Vector};
 use crate::sim::advect;
 use crate::sim::markings::{DepthLevel, Markings};
 use crate::sim::transfer::Known;
+use rayon::prelude::*;
 
 /// `R` when a scene file does not say (the paper: 3, and 6 for the dam scenes).
 pub const DEFAULT_BAND_R: u32 = 3;
@@ -44,6 +45,8 @@ impl Band {
     /// The band interface and deep cells, `C_<=-R`.
     pub fn at_or_below_interface(&self, m: &Markings) -> Vec<bool> {
         (0..m.kind.len())
+            .into_par_iter()
+            .with_min_len(crate::PAR_GRAIN)
             .map(|c| m.at_or_below_interface(c, self.r))
             .collect()
     }
@@ -88,10 +91,8 @@ impl Band {
         grid_u: &MacField<D>,
         m: &Markings,
     ) {
-        combine_velocities(grid, u, known, grid_u, |a, f, _| {
-            grid.face_cells_at(a, f)
-                .any(|c| m.at_or_below_interface(c, self.r))
-        });
+        let near = self.at_or_below_interface(m);
+        combine_velocities(grid, u, known, grid_u, &near, |_, _, _| true);
     }
 
     /// Alg. band line 5: the grid velocity advected semi-Lagrangian over `dt`. The next step
@@ -103,8 +104,7 @@ impl Band {
         dt: f64,
         m: &Markings,
     ) -> MacField<D> {
-        let needed: Vec<bool> = (0..grid.num_cells()).map(|c| m.is_fluid(c)).collect();
-        advect::advect_velocity(grid, u, dt, &needed)
+        advect::advect_velocity(grid, u, dt, &m.fluid())
     }
 }
 
@@ -124,18 +124,20 @@ pub fn counts_with_full_deep(
 }
 
 /// The velocity combination of the band methods (paper alg. band line 1; Ferstl et al. 2016,
-/// sec. 4): faces for which `take_grid(axis, face_coords, had_particle_weight)` holds take the
-/// grid velocity `grid_u` and count as known; the others keep the particles' velocity `u` where
-/// particles gave weight. (Coordinates, not indices: a pass over every face must not divide.)
+/// sec. 4): faces next to a cell flagged in `near` for which `take_grid(axis, face_coords,
+/// had_particle_weight)` holds take the grid velocity `grid_u` and count as known; the others
+/// keep the particles' velocity `u` where particles gave weight. (Coordinates, not indices: a
+/// pass over faces must not divide; only the lines of faces beside a flagged cell are walked.)
 pub fn combine_velocities<const D: usize>(
     grid: &Grid<D>,
     u: &mut MacField<D>,
     known: &mut Known<D>,
     grid_u: &MacField<D>,
+    near: &[bool],
     take_grid: impl Fn(usize, Cell<D>, bool) -> bool + Sync,
 ) {
     for (a, (u, known)) in u.comp.iter_mut().zip(known.iter_mut()).enumerate() {
-        grid.par_for_each_face_pair(a, u, known, |i, f, v, k| {
+        grid.par_for_each_face_pair_near(a, u, known, near, |i, f, v, k| {
             if take_grid(a, f, *k) {
                 *v = grid_u.comp[a][i];
                 *k = true;

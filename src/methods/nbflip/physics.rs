@@ -205,9 +205,8 @@ pub fn combine<const D: usize>(
     known: &mut Known<D>,
     grid_u: &MacField<D>,
 ) {
-    combine_velocities(g, u, known, grid_u, |a, f, weighted| {
-        g.face_cells_at(a, f).any(|c| m.is_fluid(c))
-            && (!weighted || phi.at_face(g, a, f) < -(r - 1.0))
+    combine_velocities(g, u, known, grid_u, &m.fluid(), |a, f, weighted| {
+        !weighted || phi.at_face(g, a, f) < -(r - 1.0)
     });
 }
 
