@@ -40,6 +40,30 @@ fn strides<const D: usize>(dims: &[usize; D]) -> [usize; D] {
     s
 }
 
+/// A set of a grid's cells, with which lines of cells along axis 0 hold any of them: what
+/// [`Grid::par_for_each_face_pair_near`] reads to skip whole lines of faces (built once, for
+/// every face component).
+pub struct NearCells {
+    /// One flag per cell.
+    cells: Vec<bool>,
+    /// One flag per line of cells along axis 0: whether it holds a flagged cell.
+    lines: Vec<bool>,
+}
+
+impl NearCells {
+    /// The cells flagged in `cells` (one flag per cell of `grid`).
+    pub fn new<const D: usize>(grid: &Grid<D>, cells: Vec<bool>) -> Self {
+        assert_eq!(cells.len(), grid.num_cells());
+        let n0 = grid.dims[0];
+        let lines = (cells
+            .par_chunks(n0)
+            .with_min_len(crate::PAR_GRAIN.div_ceil(n0)))
+        .map(|line| line.contains(&true))
+        .collect();
+        NearCells { cells, lines }
+    }
+}
+
 impl<const D: usize> Grid<D> {
     pub fn new(dims: [usize; D]) -> Self {
         assert!(dims.iter().all(|&n| n >= 1), "grid dims must be positive");
@@ -143,60 +167,40 @@ impl<const D: usize> Grid<D> {
         b: &mut [U],
         f: impl Fn(usize, Cell<D>, &mut T, &mut U) + Sync,
     ) {
-        assert_eq!(a.len(), self.num_faces(axis));
-        assert_eq!(b.len(), self.num_faces(axis));
         let layer = self.face_strides[axis][D - 1];
-        a.par_chunks_mut(layer)
-            .zip(b.par_chunks_mut(layer))
-            .with_min_len(crate::PAR_GRAIN.div_ceil(layer))
-            .enumerate()
-            .for_each(|(l, (a, b))| {
-                let start = l * layer;
-                let coords = self.face_coords_from(axis, start);
-                for (((j, v), w), c) in a.iter_mut().enumerate().zip(b).zip(coords) {
-                    f(start + j, c, v, w);
-                }
-            });
+        self.par_face_chunks(axis, a, b, layer, |_| true, f);
     }
 
-    /// As [`Self::par_for_each_face`], but only for the faces next to a cell flagged in `near`
+    /// As [`Self::par_for_each_face`], but only for the faces next to a cell of `near`
     /// ([`Self::par_for_each_face_pair_near`]).
     pub fn par_for_each_face_near<T: Send>(
         &self,
         axis: usize,
         values: &mut [T],
-        near: &[bool],
+        near: &NearCells,
         f: impl Fn(usize, Cell<D>, &mut T) + Sync,
     ) {
         let mut none = vec![(); values.len()];
         self.par_for_each_face_pair_near(axis, values, &mut none, near, |i, c, v, _| f(i, c, v));
     }
 
-    /// As [`Self::par_for_each_face_pair`], but only for the faces next to a cell flagged in
-    /// `near` (one flag per cell), in the same order: a line of faces along axis 0 whose cells
-    /// on either side hold no flagged cell is skipped whole, so that a pass over a liquid
-    /// filling a few percent of the grid does not walk the rest of it.
+    /// As [`Self::par_for_each_face_pair`], but only for the faces next to a cell of `near`,
+    /// in the same order: a line of faces along axis 0 whose cells on either side hold none is
+    /// skipped whole, so that a pass over a liquid filling a few percent of the grid does not
+    /// walk the rest of it.
     pub fn par_for_each_face_pair_near<T: Send, U: Send>(
         &self,
         axis: usize,
         a: &mut [T],
         b: &mut [U],
-        near: &[bool],
+        near: &NearCells,
         f: impl Fn(usize, Cell<D>, &mut T, &mut U) + Sync,
     ) {
-        assert_eq!(near.len(), self.num_cells());
-        assert_eq!(a.len(), self.num_faces(axis));
-        assert_eq!(b.len(), self.num_faces(axis));
-        let n0 = self.dims[0];
-        let flagged: Vec<bool> = (near
-            .par_chunks(n0)
-            .with_min_len(crate::PAR_GRAIN.div_ceil(n0)))
-        .map(|line| line.contains(&true))
-        .collect();
+        assert_eq!(near.cells.len(), self.num_cells());
         // The lines of cells beside the line of faces starting at `f0`: its own, and the one
         // below along `axis` (for axis 0 both are the same line).
+        let line = |c: Cell<D>| near.lines[self.cell_index(c) / self.dims[0]];
         let beside = |f0: Cell<D>| {
-            let line = |c: Cell<D>| flagged[self.cell_index(c) / n0];
             let below = (f0[axis] > 0).then(|| {
                 let mut c = f0;
                 c[axis] -= 1;
@@ -205,21 +209,39 @@ impl<const D: usize> Grid<D> {
             (f0[axis] < self.dims[axis] && line(f0)) || below.is_some_and(line)
         };
         let len = self.face_dims[axis][0];
-        a.par_chunks_mut(len)
-            .zip(b.par_chunks_mut(len))
-            .with_min_len(crate::PAR_GRAIN.div_ceil(len))
+        self.par_face_chunks(axis, a, b, len, beside, |i, c, v, w| {
+            if self.face_cells_at(axis, c).any(|k| near.cells[k]) {
+                f(i, c, v, w);
+            }
+        });
+    }
+
+    /// Calls `f(face_index, face_coords, a_entry, b_entry)` for the faces of component `axis`
+    /// in chunks of `chunk` consecutive faces, the chunks in parallel, skipping each chunk
+    /// for whose first face's coordinates `keep` is false.
+    fn par_face_chunks<T: Send, U: Send>(
+        &self,
+        axis: usize,
+        a: &mut [T],
+        b: &mut [U],
+        chunk: usize,
+        keep: impl Fn(Cell<D>) -> bool + Sync,
+        f: impl Fn(usize, Cell<D>, &mut T, &mut U) + Sync,
+    ) {
+        assert_eq!(a.len(), self.num_faces(axis));
+        assert_eq!(b.len(), self.num_faces(axis));
+        a.par_chunks_mut(chunk)
+            .zip(b.par_chunks_mut(chunk))
+            .with_min_len(crate::PAR_GRAIN.div_ceil(chunk))
             .enumerate()
             .for_each(|(l, (a, b))| {
-                let start = l * len;
-                let coords = self.face_coords_from(axis, start);
-                let mut coords = coords.peekable();
-                if !beside(*coords.peek().expect("a line has faces")) {
+                let start = l * chunk;
+                let mut coords = self.face_coords_from(axis, start).peekable();
+                if !keep(*coords.peek().expect("a chunk has faces")) {
                     return;
                 }
                 for (((j, v), w), c) in a.iter_mut().enumerate().zip(b).zip(coords) {
-                    if self.face_cells_at(axis, c).any(|k| near[k]) {
-                        f(start + j, c, v, w);
-                    }
+                    f(start + j, c, v, w);
                 }
             });
     }
@@ -745,9 +767,10 @@ mod tests {
     fn the_faces_near_flagged_cells_are_visited_exactly_2d_and_3d() {
         fn check<const D: usize>(dims: [usize; D], every: usize) {
             let g = Grid::new(dims);
-            let near: Vec<bool> = (0..g.num_cells())
+            let flags: Vec<bool> = (0..g.num_cells())
                 .map(|c| (c * 7919) % every == 0)
                 .collect();
+            let near = NearCells::new(&g, flags.clone());
             for a in 0..D {
                 let mut seen = vec![0u8; g.num_faces(a)];
                 let mut at = vec![[0usize; D]; g.num_faces(a)];
@@ -760,7 +783,7 @@ mod tests {
                 g.par_for_each_face_near(a, &mut at, &near, |_, f, v| *v = f);
                 for i in 0..g.num_faces(a) {
                     let f = g.face_coords(a, i);
-                    let want = g.face_cells_at(a, f).any(|c| near[c]);
+                    let want = g.face_cells_at(a, f).any(|c| flags[c]);
                     assert_eq!(seen[i] == 1, want, "axis {a}, face {f:?}");
                     assert_eq!(seen[i], other[i]);
                     assert!(!want || at[i] == f);

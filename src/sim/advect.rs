@@ -6,7 +6,7 @@
 //! `dt * max|u_face| <= 1` no particle moves more than one cell along any axis: it stays in the
 //! Moore neighbourhood of its cell (sec. grid_move).
 
-use crate::grid::{AtGridPoints, Grid, MacField, Vector};
+use crate::grid::{AtGridPoints, Grid, MacField, NearCells, Vector};
 use rayon::prelude::*;
 
 /// The margin epsilon of eq. best_cell_pos, in cells.
@@ -53,13 +53,13 @@ pub fn displace<const D: usize>(
 
 /// Semi-Lagrangian advection of the grid velocity by itself over `dt` (first order): each face
 /// takes the value found at the point its velocity traces back from, `u(x_f - dt u(x_f))`.
-/// Only faces next to a cell flagged in `needed` are advected; the others keep `u` (the band
+/// Only faces next to a cell of `needed` are advected; the others keep `u` (the band
 /// method reads the grid velocity only near its interface and deep).
 pub fn advect_velocity<const D: usize>(
     grid: &Grid<D>,
     u: &MacField<D>,
     dt: f64,
-    needed: &[bool],
+    needed: &NearCells,
 ) -> MacField<D> {
     let mut out = u.clone();
     for (a, comp) in out.comp.iter_mut().enumerate() {
@@ -91,7 +91,7 @@ mod tests {
             let f = g.face_coords(1, i);
             u.comp[1][i] = 0.5 * (f[0] as f64 + 0.5);
         }
-        let out = advect_velocity(&g, &u, 0.5, &vec![true; g.num_cells()]);
+        let out = advect_velocity(&g, &u, 0.5, &NearCells::new(&g, vec![true; g.num_cells()]));
         assert!(out.comp[0].iter().all(|&v| (v - 2.0).abs() < 1e-12));
         for i in 0..g.num_faces(1) {
             let f = g.face_coords(1, i);

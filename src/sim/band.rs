@@ -6,7 +6,7 @@
 //! What the deep holds is a method's business: method ccp counts its imaginary particles in
 //! `n_deep`; narrow-band FLIP keeps the deep as a level set.
 
-use crate::grid::{Cell, Grid, MacField, Vector};
+use crate::grid::{Cell, Grid, MacField, NearCells, Vector};
 use crate::sim::advect;
 use crate::sim::markings::{DepthLevel, Markings};
 use crate::sim::transfer::Known;
@@ -91,7 +91,7 @@ impl Band {
         grid_u: &MacField<D>,
         m: &Markings,
     ) {
-        let near = self.at_or_below_interface(m);
+        let near = NearCells::new(grid, self.at_or_below_interface(m));
         combine_velocities(grid, u, known, grid_u, &near, |_, _, _| true);
     }
 
@@ -104,7 +104,7 @@ impl Band {
         dt: f64,
         m: &Markings,
     ) -> MacField<D> {
-        advect::advect_velocity(grid, u, dt, &m.fluid())
+        advect::advect_velocity(grid, u, dt, &NearCells::new(grid, m.fluid()))
     }
 }
 
@@ -124,7 +124,7 @@ pub fn counts_with_full_deep(
 }
 
 /// The velocity combination of the band methods (paper alg. band line 1; Ferstl et al. 2016,
-/// sec. 4): faces next to a cell flagged in `near` for which `take_grid(axis, face_coords,
+/// sec. 4): faces next to a cell of `near` for which `take_grid(axis, face_coords,
 /// had_particle_weight)` holds take the grid velocity `grid_u` and count as known; the others
 /// keep the particles' velocity `u` where particles gave weight. (Coordinates, not indices: a
 /// pass over faces must not divide; only the lines of faces beside a flagged cell are walked.)
@@ -133,7 +133,7 @@ pub fn combine_velocities<const D: usize>(
     u: &mut MacField<D>,
     known: &mut Known<D>,
     grid_u: &MacField<D>,
-    near: &[bool],
+    near: &NearCells,
     take_grid: impl Fn(usize, Cell<D>, bool) -> bool + Sync,
 ) {
     for (a, (u, known)) in u.comp.iter_mut().zip(known.iter_mut()).enumerate() {

@@ -3,7 +3,7 @@
 use super::levelset::{particle_radius, LevelSet, March, Side};
 use super::region::{Margin, Region};
 use crate::draw::{depth_level_classes, Log};
-use crate::grid::{Cell, Grid, MacField, Vector};
+use crate::grid::{Cell, Grid, MacField, NearCells, Vector};
 use crate::methods::seam::{FluidMethod, MethodRecording, MethodReport};
 use crate::metrics::InvariantViolation;
 use crate::particles::Particles;
@@ -205,7 +205,8 @@ pub fn combine<const D: usize>(
     known: &mut Known<D>,
     grid_u: &MacField<D>,
 ) {
-    combine_velocities(g, u, known, grid_u, &m.fluid(), |a, f, weighted| {
+    let fluid = NearCells::new(g, m.fluid());
+    combine_velocities(g, u, known, grid_u, &fluid, |a, f, weighted| {
         !weighted || phi.at_face(g, a, f) < -(r - 1.0)
     });
 }
