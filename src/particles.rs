@@ -25,12 +25,19 @@ impl<const D: usize> Particles<D> {
         self.vel.push(v);
     }
 
-    /// Keeps the particles flagged in `keep` (one flag per particle), in order.
+    /// Keeps the particles flagged in `keep` (one flag per particle), in order. When fewer than
+    /// half remain (a band method thinning the seeded liquid to its band), the storage they no
+    /// longer need goes back to the system: at the paper's scale the deep's 45 M seeded
+    /// particles would otherwise keep 2 GiB resident for the whole run.
     pub fn retain_flagged(&mut self, keep: &[bool]) {
         let mut it = keep.iter();
         self.pos.retain(|_| *it.next().unwrap());
         let mut it = keep.iter();
         self.vel.retain(|_| *it.next().unwrap());
+        if self.pos.capacity() > 2 * self.pos.len() {
+            self.pos.shrink_to_fit();
+            self.vel.shrink_to_fit();
+        }
     }
 }
 
@@ -225,6 +232,27 @@ pub fn seed<const D: usize>(
 mod tests {
     use super::*;
     use rand::SeedableRng;
+
+    #[test]
+    fn thinning_keeps_the_order_and_returns_the_storage() {
+        let mut p = Particles::<3>::default();
+        for i in 0..1000 {
+            p.push(Vector::repeat(i as f64), Vector::repeat(-(i as f64)));
+        }
+        // A tenth kept: the storage shrinks to what they need.
+        let keep: Vec<bool> = (0..1000).map(|i| i % 10 == 3).collect();
+        p.retain_flagged(&keep);
+        assert_eq!(p.len(), 100);
+        assert!(p.pos.iter().zip(&p.vel).enumerate().all(|(k, (x, v))| {
+            let i = (10 * k + 3) as f64;
+            x[0] == i && v[2] == -i
+        }));
+        assert!(p.pos.capacity() <= 2 * p.len() && p.vel.capacity() <= 2 * p.len());
+        // Most kept: no reallocation.
+        let capacity = p.pos.capacity();
+        p.retain_flagged(&(0..100).map(|i| i != 0).collect::<Vec<_>>());
+        assert_eq!((p.len(), p.pos.capacity()), (99, capacity));
+    }
 
     #[test]
     fn seeding_fills_a_box_with_exactly_mu_per_cell() {
