@@ -89,6 +89,7 @@ fn bench_dim<const D: usize>(scene: &Scene, args: &BenchArgs) -> Result<Measured
     let mut method = scene.method.clone();
     method.ccp.cross_check = args.cross_check;
     let mut runner = Runner::new(Simulation::<D>::new(scene.config::<D>(), &method));
+    let started = peak_memory_mib();
     runner.run(Limit::Steps(args.warmup), || false, |_, _| Ok(()))?;
     runner.reset_summary();
     runner.run(
@@ -138,10 +139,17 @@ fn bench_dim<const D: usize>(scene: &Scene, args: &BenchArgs) -> Result<Measured
         );
     }
     s.method_lines.iter().for_each(|l| crate::outln!("  {l}"));
-    if let Some(m) = peak_memory_mib() {
-        let estimate = scene.memory_estimate(false).bytes() / (1u64 << 20) as f64;
+    if let (Some(m), Some(started)) = (peak_memory_mib(), started) {
+        let e = scene.memory_estimate(false);
         crate::outln!(
-            "  peak memory (process so far): {m:.0} MiB; estimated up front {estimate:.0} MiB"
+            "  peak memory (process so far): {m:.0} MiB ({started:.0} after seeding and the \
+             method's start); estimated up front {:.0} MiB (from {} cells, {} seeded fluid \
+             cells, {:.0} particles seeded, {:.0} held)",
+            e.bytes() / (1u64 << 20) as f64,
+            e.cells,
+            e.fluid_cells,
+            e.particles,
+            e.held
         );
     }
     Ok(Measured {

@@ -41,8 +41,8 @@ pub mod powerpic;
 mod seam;
 
 pub use seam::{
-    FluidMethod, Footprint, MethodInfo, MethodOption, MethodRecording, MethodReport, MethodSummary,
-    MethodType, NoReport, NoSummary, SettingContext, SettingError,
+    FluidMethod, Footprint, Holds, MethodInfo, MethodOption, MethodRecording, MethodReport,
+    MethodSummary, MethodType, NoReport, NoSummary, SettingContext, SettingError, StartPeak,
 };
 
 /// Registers the methods (each module declared above, where `cargo fmt` sees it): makes

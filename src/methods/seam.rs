@@ -99,23 +99,49 @@ pub struct SettingContext {
     pub per_axis: usize,
 }
 
-/// A method's peak memory, measured: resident bytes per grid cell and per particle seeded, the
-/// fit behind the up-front estimate ([`crate::scene::memory`]; the measurements and the
-/// command that repeats them are in docs/benchmarks.md, "Memory").
+/// A method's peak memory, measured: resident bytes per grid cell, per fluid cell and per
+/// particle held, the fit behind the up-front estimate ([`crate::scene::memory`]; the
+/// measurements and the command that repeats them are in docs/benchmarks.md, "Memory").
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Footprint {
     pub per_cell: f64,
+    /// Per cell of the seeded liquid: what only the liquid's cells store (the pressure rows,
+    /// the band's bookkeeping).
+    pub per_fluid_cell: f64,
     pub per_particle: f64,
+    /// Which of the seeded particles the method holds.
+    pub holds: Holds,
+}
+
+/// The particles a method holds after its start.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Holds {
+    /// Every particle seeded (and emitted).
+    All,
+    /// Those of the cells at most `R` below the seeded liquid's surface (and every particle
+    /// emitted): the band of ccp and of narrow-band FLIP, which drop the deeper ones after
+    /// holding them all at the start.
+    Band { r: u32, start: StartPeak },
+}
+
+/// The peak while a band method starts, before it drops the deep particles: bytes per
+/// particle seeded (the particles and the start's own per-particle scratch) and per cell.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StartPeak {
+    pub per_particle: f64,
+    pub per_cell: f64,
 }
 
 impl Footprint {
-    /// The footprint in `dim` dimensions, from the measured `[2D, 3D]` pairs of bytes per cell
-    /// and bytes per particle.
+    /// The footprint in `dim` dimensions of a method holding every particle, from the measured
+    /// `[2D, 3D]` pairs of bytes per cell and bytes per particle.
     pub fn of(dim: usize, measured: [(f64, f64); 2]) -> Self {
         let (per_cell, per_particle) = measured[dim.clamp(2, 3) - 2];
         Self {
             per_cell,
+            per_fluid_cell: 0.0,
             per_particle,
+            holds: Holds::All,
         }
     }
 }
@@ -153,7 +179,8 @@ pub trait MethodType {
     }
     fn build<const D: usize>(settings: &Self::Settings) -> Box<dyn FluidMethod<D>>;
     fn summary<const D: usize>(settings: &Self::Settings) -> Box<dyn MethodSummary<D>>;
-    /// Its peak memory over a run in `dim` dimensions with these settings.
+    /// Its peak memory over a run in `dim` dimensions with these settings (the particles of its
+    /// band, if it holds one, are counted up front from the seeded liquid).
     fn footprint(settings: &Self::Settings, dim: usize) -> Footprint;
 }
 

@@ -2,13 +2,19 @@
 //! particle counts with its method's measured [`Footprint`], against the memory this machine
 //! has available (Linux `MemAvailable`).
 //!
-//! The estimate is `BASE + per_cell * cells + per_particle * particles (+ the recording's)`,
-//! where `particles` counts what is seeded plus what emitters may add. The footprints are fits
+//! The estimate is `BASE + per_cell * cells + per_fluid_cell * fluid cells + per_particle *
+//! particles held (+ the recording's)`, where the fluid cells are the seeded liquid's and the
+//! particles held are those seeded plus what emitters may add; a band method holds only the
+//! band's, counted on the seeded liquid's first markings, but holds every particle seeded while
+//! it starts, which is a second peak the estimate takes the larger of. The footprints are fits
 //! to the peak resident memory of whole runs (docs/benchmarks.md, "Memory", gives the
 //! measurements, the ratio of estimate to peak per method and the command that repeats them).
 
 use super::Scene;
 use crate::grid::Grid;
+use crate::methods::Holds;
+use crate::sim::markings::{DepthLevel, Markings};
+use crate::sim::solids::Solids;
 use anyhow::{bail, Result};
 
 /// The process before any simulation: code, the thread pool, the scene.
@@ -26,11 +32,18 @@ const MIB: f64 = (1u64 << 20) as f64;
 #[derive(Clone, Copy, Debug)]
 pub struct MemoryEstimate {
     pub cells: usize,
+    /// Cells of the seeded liquid.
+    pub fluid_cells: usize,
     /// Particles seeded, plus what the emitters may add (up to their fill, or a full tank).
     pub particles: f64,
-    /// The simulation's share: the cells' and the particles' bytes.
+    /// Of those, the particles the method holds (a band method drops the deeper ones).
+    pub held: f64,
+    /// The simulation's share once it runs: the cells' and the particles' bytes.
     pub cell_bytes: f64,
     pub particle_bytes: f64,
+    /// The simulation's share while a band method starts, holding every particle seeded (0
+    /// for the others, whose share only grows from there).
+    pub start_bytes: f64,
     /// What the recording adds per particle (0 without one).
     pub recording_bytes: f64,
     /// Whether the run is recorded (the recording's fixed part counts once per process).
@@ -45,7 +58,7 @@ impl MemoryEstimate {
 
     /// This run's own share: what one more run side by side adds.
     fn run_bytes(&self) -> f64 {
-        self.cell_bytes + self.particle_bytes + self.recording_bytes
+        (self.cell_bytes + self.particle_bytes).max(self.start_bytes) + self.recording_bytes
     }
 }
 
@@ -68,20 +81,32 @@ impl Scene {
         let grid = Grid::new(config.dims);
         let cells = grid.num_cells();
         let mu = self.file.simulation.ppc as f64;
-        let seeded: usize = config.fluid.iter().map(|r| r.cells(&grid).count()).sum();
+        let footprint = self.method.footprint(D);
+        let seeded = SeededLiquid::new(&config, &grid, footprint.holds);
         // The largest fill any emitter may reach (0 without emitters).
         let emitted = (self.file.emitter.iter())
             .map(|e| e.until_fill.unwrap_or(1.0))
             .fold(0.0, f64::max);
-        let particles = mu * (seeded as f64 + emitted * cells as f64);
-        let footprint = self.method.footprint(D);
+        let emitted = mu * emitted * cells as f64;
+        let particles = mu * seeded.cells as f64 + emitted;
+        let held = mu * seeded.held_cells as f64 + emitted;
+        let start_bytes = match footprint.holds {
+            Holds::All => 0.0,
+            Holds::Band { start, .. } => {
+                start.per_particle * mu * seeded.cells as f64 + start.per_cell * cells as f64
+            }
+        };
         MemoryEstimate {
             cells,
+            fluid_cells: seeded.cells,
             particles,
-            cell_bytes: footprint.per_cell * cells as f64,
-            particle_bytes: footprint.per_particle * particles,
+            held,
+            cell_bytes: footprint.per_cell * cells as f64
+                + footprint.per_fluid_cell * seeded.cells as f64,
+            particle_bytes: footprint.per_particle * held,
+            start_bytes,
             recording_bytes: match recorded {
-                true => RECORDING_PER_PARTICLE[D - 2] * particles,
+                true => RECORDING_PER_PARTICLE[D - 2] * held,
                 false => 0.0,
             },
             recorded,
@@ -141,4 +166,51 @@ fn available_bytes() -> Option<f64> {
     let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
     let kib: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
     Some(kib * 1024.0)
+}
+
+/// The liquid a scene seeds, counted in cells: all of them, and those whose particles the
+/// method holds.
+struct SeededLiquid {
+    cells: usize,
+    held_cells: usize,
+}
+
+impl SeededLiquid {
+    /// With a band, the cells at most `R` below the surface of the seeded liquid's first
+    /// markings (the markings a run starts from, from the cells instead of the particles).
+    fn new<const D: usize>(
+        config: &crate::sim::SimConfig<D>,
+        grid: &Grid<D>,
+        holds: Holds,
+    ) -> Self {
+        let solids = Solids::new(
+            grid,
+            &config.solids,
+            &config.obstacles,
+            config.obstacle_mode,
+        );
+        let mut liquid = vec![false; grid.num_cells()];
+        for region in &config.fluid {
+            region
+                .cells(grid)
+                .for_each(|c| liquid[c] |= !solids.solid[c]);
+        }
+        let cells = liquid.iter().filter(|&&l| l).count();
+        let held_cells = match holds {
+            Holds::All => cells,
+            Holds::Band { r, .. } => {
+                let m = Markings::compute_keeping(
+                    grid,
+                    &[],
+                    &solids.solid,
+                    Some(&liquid),
+                    solids.moving_mask(),
+                );
+                (0..m.kind.len())
+                    .filter(|&c| m.is_fluid(c) && m.level(c, r) != DepthLevel::Deep)
+                    .count()
+            }
+        };
+        Self { cells, held_cells }
+    }
 }

@@ -298,3 +298,47 @@ fn the_memory_estimate_is_not_below_a_runs_peak() {
         );
     }
 }
+
+/// The estimate counts the particles a band method holds from the seeded liquid's first
+/// markings, before anything is seeded: ccp's band (the cells at most `R` deep) up to the cells
+/// a region covers only in part, which it counts full or empty by their centre (5 % of the
+/// dam's band at 32 cells; a layer of cells more or less would be 25 %), narrow-band FLIP's
+/// from above (its level set's band
+/// is thinner than `R + 1` layers of cells, and it seeds no particle in the surface layer).
+/// Methods without a band hold all they seed (counted as `mu` per cell whose centre a region
+/// the same 5 % on the dam at 32 cells).
+#[test]
+fn the_memory_estimate_counts_the_particles_a_band_holds() {
+    use crate::common::{load, simulation, with};
+    use cellflip::methods::ccp::BandMode;
+    use cellflip::methods::MethodKind;
+    for (scene, res) in [("drop-3d", 40), ("falling-obstacle-3d", 32), ("dam-3d", 32)] {
+        let o = |m, band| Overrides {
+            cells: Some(res),
+            ..with(m, band)
+        };
+        let held = |scene: &Scene| {
+            let sim = simulation::<3>(scene, false);
+            (scene.memory_estimate(false).held, sim.state.particles.len() as f64)
+        };
+        let (estimate, ccp) = held(&load(scene, &o(MethodKind::Ccp, Some(BandMode::Paths))));
+        assert!(
+            (estimate / ccp - 1.0).abs() < 0.06,
+            "{scene}: ccp holds {ccp} particles, estimated {estimate}"
+        );
+        let (estimate, nbflip) = held(&load(scene, &o(MethodKind::Nbflip, None)));
+        assert!(
+            nbflip <= estimate && estimate < 1.7 * nbflip,
+            "{scene}: nbflip holds {nbflip} particles, estimated {estimate}"
+        );
+        let flip = load(scene, &o(MethodKind::Flip, None));
+        let e = flip.memory_estimate(false);
+        assert_eq!(e.held, e.particles, "{scene}: flip holds what it seeds");
+        let seeded = held(&flip).1;
+        assert!(
+            (e.particles / seeded - 1.0).abs() < 0.06,
+            "{scene}: flip seeds {seeded} particles, estimated {}",
+            e.particles
+        );
+    }
+}

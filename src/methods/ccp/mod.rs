@@ -19,8 +19,8 @@ pub use record::CcpReport;
 pub use settings::{BandMode, CcpArgs, CcpSettings, Directions, Solver};
 
 use super::seam::{
-    FluidMethod, Footprint, MethodInfo, MethodOption, MethodSummary, MethodType, SettingContext,
-    SettingError,
+    FluidMethod, Footprint, Holds, MethodInfo, MethodOption, MethodSummary, MethodType,
+    SettingContext, SettingError, StartPeak,
 };
 use crate::draw::{LayerView, Needs};
 use crate::sim::solids::ObstacleMode;
@@ -68,14 +68,27 @@ impl MethodType for Ccp {
         Box::new(Totals::new(s))
     }
 
-    /// Measured peak memory over a run ([`Footprint`]; docs/benchmarks.md, "Memory"): the band
-    /// stores more per cell (its levels and the deep's bookkeeping) and far less per particle
-    /// (the correction sees the band's particles only). In 2D the band was not measured apart: it takes the figures without it.
+    /// Measured peak memory over a run ([`Footprint`]; docs/benchmarks.md, "Memory"). With the
+    /// band in 3D: a fit to whole runs of its held particles, the liquid's cells and the grid's,
+    /// and the peak while it starts holding every particle seeded; in 2D the band was not
+    /// measured apart, and takes the figures without it.
     fn footprint(s: &CcpSettings, dim: usize) -> Footprint {
         const IN_2D: (f64, f64) = (362.0, 470.0);
-        match s.band {
-            BandMode::None => Footprint::of(dim, [IN_2D, (226.0, 560.0)]),
-            _ => Footprint::of(dim, [IN_2D, (380.0, 90.0)]),
+        match (s.band, dim) {
+            (BandMode::None, _) => Footprint::of(dim, [IN_2D, (226.0, 560.0)]),
+            (_, 2) => Footprint::of(dim, [IN_2D, IN_2D]),
+            _ => Footprint {
+                per_cell: 341.0,
+                per_fluid_cell: 135.0,
+                per_particle: 166.0,
+                holds: Holds::Band {
+                    r: s.band_r,
+                    start: StartPeak {
+                        per_particle: 55.0,
+                        per_cell: 33.0,
+                    },
+                },
+            },
         }
     }
 }

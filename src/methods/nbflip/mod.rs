@@ -34,8 +34,8 @@ pub mod region;
 pub use physics::{combine, level, NbflipReport, Resampling};
 
 use super::seam::{
-    FluidMethod, Footprint, MethodInfo, MethodOption, MethodSummary, MethodType, SettingContext,
-    SettingError,
+    FluidMethod, Footprint, Holds, MethodInfo, MethodOption, MethodSummary, MethodType,
+    SettingContext, SettingError, StartPeak,
 };
 use crate::sim::band::{check_band_r, DEFAULT_BAND_R};
 use crate::sim::solids::ObstacleMode;
@@ -92,8 +92,24 @@ impl MethodType for Nbflip {
         Box::new(Totals::new(s.band_r))
     }
 
-    /// Measured peak memory over a run ([`Footprint`]; docs/benchmarks.md, "Memory").
-    fn footprint(_settings: &NbflipSettings, dim: usize) -> Footprint {
-        Footprint::of(dim, [(128.0, 90.0), (315.0, 60.0)])
+    /// Measured peak memory over a run ([`Footprint`]; docs/benchmarks.md, "Memory"). In 3D a
+    /// fit to whole runs of its held particles, the liquid's cells and the grid's, and the peak
+    /// while it starts, holding every particle seeded and resampling them all.
+    fn footprint(s: &NbflipSettings, dim: usize) -> Footprint {
+        match dim {
+            2 => Footprint::of(dim, [(128.0, 90.0), (315.0, 60.0)]),
+            _ => Footprint {
+                per_cell: 307.0,
+                per_fluid_cell: 121.0,
+                per_particle: 50.0,
+                holds: Holds::Band {
+                    r: s.band_r,
+                    start: StartPeak {
+                        per_particle: 74.0,
+                        per_cell: 56.0,
+                    },
+                },
+            },
+        }
     }
 }
