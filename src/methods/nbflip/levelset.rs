@@ -126,11 +126,11 @@ impl LevelSet {
     /// nothing is allocated per particle (collecting the lowered values took 4.8 GiB while
     /// the 11 M particles of deep-pool-3d at 128^3 were first thinned).
     fn unite_spheres<const D: usize>(&mut self, grid: &Grid<D>, pos: &[Vector<D>]) {
-        let reach: Vec<([i64; D], isize)> = (0..3usize.pow(D as u32))
+        let reach: Vec<([usize; D], isize)> = (0..3usize.pow(D as u32))
             .map(|code| {
-                let off = std::array::from_fn(|k| (code / 3usize.pow(k as u32) % 3) as i64 - 1);
-                let step = (0..D).map(|k| off[k] as isize * grid.cell_stride(k) as isize);
-                (off, step.sum())
+                let digits = std::array::from_fn(|k| code / 3usize.pow(k as u32) % 3);
+                let step = (0..D).map(|k| (digits[k] as isize - 1) * grid.cell_stride(k) as isize);
+                (digits, step.sum())
             })
             .collect();
         let layers = grid.dims[D - 1];
@@ -278,12 +278,15 @@ const SPHERE_TEST_SLACK: f64 = 1e-9;
 pub const FROZEN: u32 = u32::MAX;
 
 /// [`LevelSet::unite_spheres`] for the particle at `x`: the centres of its cell's Moore
-/// neighbourhood (`reach`: offsets and their index steps) lowered to the distance from `x`
-/// minus [`particle_radius`], in `phi`, the part of the level set from cell `offset` on. The
-/// bounds are checked only for a cell on the domain's boundary.
+/// neighbourhood (`reach`: per axis the offset plus one, and the index step) lowered to the
+/// distance from `x` minus [`particle_radius`], in `phi`, the part of the level set from cell
+/// `offset` on. The bounds are checked only for a cell on the domain's boundary. The squared
+/// distances are summed from the `3 D` squared differences along the axes, in axis order:
+/// bit for bit `norm_squared` of the difference of the centre and `x`, which sums the same
+/// squares in the same order.
 fn lower_by_sphere<const D: usize>(
     grid: &Grid<D>,
-    reach: &[([i64; D], isize)],
+    reach: &[([usize; D], isize)],
     x: &Vector<D>,
     phi: &mut [f64],
     offset: usize,
@@ -292,15 +295,22 @@ fn lower_by_sphere<const D: usize>(
     let cell = grid.cell_of(x).expect("particle inside the domain");
     let own = grid.cell_index(cell) as isize - offset as isize;
     let inner = (0..D).all(|k| 0 < cell[k] && cell[k] + 1 < grid.dims[k]);
-    for (off, step) in reach {
-        let n: [i64; D] = std::array::from_fn(|k| cell[k] as i64 + off[k]);
-        if inner || (0..D).all(|k| 0 <= n[k] && n[k] < grid.dims[k] as i64) {
+    // Per axis, the squared difference to the centres one below `x`'s cell, in it and above
+    // (centre `cell + j - 1 + 1/2`, exact).
+    let squares: [[f64; 3]; D] = std::array::from_fn(|k| {
+        std::array::from_fn(|j| {
+            let d = ((cell[k] + j) as f64 - 0.5) - x[k];
+            d * d
+        })
+    });
+    for (digits, step) in reach {
+        let within = |k: usize| (cell[k] + digits[k]).wrapping_sub(1) < grid.dims[k];
+        if inner || (0..D).all(within) {
             let c = (own + step) as usize;
             // The sphere lowers the centre only if its distance is below `phi + radius`
             // (rounding errors are far below the slack): no root for most centres.
             let reach = phi[c] + radius + SPHERE_TEST_SLACK;
-            let centre = Vector::<D>::from_fn(|k, _| n[k] as f64 + 0.5);
-            let d2 = (centre - x).norm_squared();
+            let d2 = (1..D).fold(squares[0][digits[0]], |s, k| s + squares[k][digits[k]]);
             if reach > 0.0 && d2 < reach * reach {
                 phi[c] = phi[c].min(d2.sqrt() - radius);
             }
