@@ -200,25 +200,18 @@ impl LevelSet {
             .collect();
         ring.iter().for_each(|&c| layer[c] = 2);
         for d in 2..=march.layers {
-            let mut next: Vec<usize> = ring
-                .iter()
-                .flat_map(|&c| neighbours(grid, c))
-                .filter(|&n| layer[n] == 0)
-                .collect();
-            next.sort_unstable();
-            next.dedup();
-            let values: Vec<f64> = next
-                .iter()
-                .map(|&c| {
-                    let (sum, n) = neighbours(grid, c)
-                        .filter(|&n| layer[n] == d)
-                        .fold((0.0, 0), |(s, k), n| (s + self.phi[n], k + 1));
-                    sum / n as f64 + sign
-                })
-                .collect();
-            for (&c, v) in next.iter().zip(values) {
-                self.phi[c] = v;
-                layer[c] = d + 1;
+            // Layer `d + 1`: the cells not reached next to layer `d`, each marked and given
+            // the mean of its layer-`d` neighbours as it is found. Its value reads layer `d`
+            // only, so the order in which the cells are found does not change it.
+            let mut next = vec![];
+            for &c in &ring {
+                for n in neighbours(grid, c) {
+                    if layer[n] == 0 {
+                        layer[n] = d + 1;
+                        self.phi[n] = mean_of_layer(grid, &self.phi, layer, n, d) + sign;
+                        next.push(n);
+                    }
+                }
             }
             ring = next;
         }
@@ -231,19 +224,19 @@ impl LevelSet {
         }
     }
 
-    /// The cells of `cells` at the zero crossing: liquid cells (not solid, `phi < 0`) next to
-    /// a cell that is neither.
-    pub fn crossing<'a, const D: usize>(
-        &'a self,
-        grid: &'a Grid<D>,
-        solid: &'a [bool],
-        cells: &'a [usize],
-    ) -> impl Iterator<Item = usize> + 'a {
+    /// The cells of `cells` at the zero crossing, ascending: liquid cells (not solid,
+    /// `phi < 0`) next to a cell that is neither; found in parallel.
+    pub fn crossing<const D: usize>(
+        &self,
+        grid: &Grid<D>,
+        solid: &[bool],
+        cells: &[usize],
+    ) -> Vec<usize> {
         let liquid = |c: usize| !solid[c] && self.phi[c] < 0.0;
-        cells
-            .iter()
+        (cells.par_iter().with_min_len(crate::PAR_GRAIN))
             .copied()
-            .filter(move |&c| liquid(c) && neighbours(grid, c).any(|n| !liquid(n)))
+            .filter(|&c| liquid(c) && neighbours(grid, c).any(|n| !liquid(n)))
+            .collect()
     }
 }
 
@@ -316,6 +309,21 @@ fn lower_by_sphere<const D: usize>(
             }
         }
     }
+}
+
+/// The mean of `phi` over the von Neumann neighbours of cell `c` in layer `d` of a re-march
+/// (`layer`), summed in [`neighbours`]' order.
+fn mean_of_layer<const D: usize>(
+    grid: &Grid<D>,
+    phi: &[f64],
+    layer: &[u32],
+    c: usize,
+    d: u32,
+) -> f64 {
+    let (sum, n) = neighbours(grid, c)
+        .filter(|&n| layer[n] == d)
+        .fold((0.0, 0), |(s, k), n| (s + phi[n], k + 1));
+    sum / n as f64
 }
 
 /// The von Neumann neighbours of cell `c` inside the domain, axis by axis, the lower one

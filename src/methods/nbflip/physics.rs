@@ -151,7 +151,7 @@ impl<const D: usize> NbflipSim<D> {
         }
         self.next = match around_particles {
             Some(around) => {
-                let crossing: Vec<usize> = phi.crossing(g, solid, &self.rebuilt.cells).collect();
+                let crossing = phi.crossing(g, solid, &self.rebuilt.cells);
                 let crossing = crossing.into_iter().map(|c| g.cell_coords(c));
                 self.around(s, crossing).union(g, &around)
             }
