@@ -5,7 +5,6 @@
 //! (the caps of the re-march), and a step does no work there.
 
 use crate::grid::{Cell, Grid};
-use rayon::prelude::*;
 
 /// The edge of a tile in cells: the coarse grid of tiles is `TILE^D` times smaller than the
 /// grid, so a pass over it is cheap, and a tile is small enough that the region hugs the
@@ -63,13 +62,12 @@ impl Region {
     /// The cells of every tile within `margin.outside` cells (in every axis) of a tile holding a
     /// seed cell, and of every tile within `margin.inside` cells of one that holds a cell for
     /// which `inner` holds: each cell within `margin.outside` of a seed is in the region, and
-    /// so is each cell of the inner side within `margin.inside`. The tiles of the inner side are
-    /// tested in parallel.
+    /// so is each cell of the inner side within `margin.inside`.
     pub fn around<const D: usize>(
         grid: &Grid<D>,
         seeds: impl Iterator<Item = Cell<D>>,
         margin: Margin,
-        inner: impl Fn(usize) -> bool + Sync,
+        inner: impl Fn(usize) -> bool,
     ) -> Self {
         let tiles = tiles(grid);
         let mut seeded = vec![false; tiles.num_cells()];
@@ -79,8 +77,6 @@ impl Region {
         let [inside, outside] = [margin.inside, margin.outside]
             .map(|margin| dilate(&tiles, &seeded, margin.div_ceil(TILE)));
         let active: Vec<bool> = (0..tiles.num_cells())
-            .into_par_iter()
-            .with_min_len(TILES_PER_JOB)
             .map(|t| outside[t] || inside[t] && cells_of_tile(grid, &tiles, t).any(&inner))
             .collect();
         Self {
@@ -97,10 +93,6 @@ pub struct Margin {
     pub inside: usize,
     pub outside: usize,
 }
-
-/// Tiles per job where [`Region::around`] tests the tiles for cells of the inner side (up to
-/// `TILE^D` cells each).
-const TILES_PER_JOB: usize = 256;
 
 /// Per tile, whether it lies within `reach` tiles, along every axis, of a tile of `from`: the
 /// box around each, found one axis after the other (a box is the product of its intervals).
@@ -120,37 +112,20 @@ fn dilate<const D: usize>(tiles: &Grid<D>, from: &[bool], reach: usize) -> Vec<b
     near
 }
 
-/// The cells of tile `t`, clipped to the grid.
+/// The cells of tile `t`, clipped to the grid, axis 0 fastest; nothing is allocated, so that
+/// a search stops at the first cell found.
 fn cells_of_tile<'a, const D: usize>(
     grid: &'a Grid<D>,
     tiles: &Grid<D>,
     t: usize,
 ) -> impl Iterator<Item = usize> + 'a {
     let lo = tiles.cell_coords(t).map(|k| k * TILE);
-    let hi = lo.map(|k| k + TILE - 1);
-    let mut cells = vec![];
-    for_each_in_box(grid, lo, hi, |c| cells.push(c));
-    cells.into_iter()
-}
-
-/// Calls `f` with the index of every cell of `grid` with coordinates in `lo..=hi` (clipped to
-/// the grid), in ascending order.
-fn for_each_in_box<const D: usize>(
-    grid: &Grid<D>,
-    lo: [usize; D],
-    hi: [usize; D],
-    mut f: impl FnMut(usize),
-) {
-    let hi: [usize; D] = std::array::from_fn(|k| hi[k].min(grid.dims[k] - 1));
-    let mut c = lo;
-    loop {
-        f(grid.cell_index(c));
-        let Some(k) = (0..D).find(|&k| c[k] < hi[k]) else {
-            return;
-        };
-        c[k] += 1;
-        (0..k).for_each(|j| c[j] = lo[j]);
-    }
+    (0..TILE.pow(D as u32)).filter_map(move |i| {
+        let c: Cell<D> = std::array::from_fn(|k| lo[k] + i / TILE.pow(k as u32) % TILE);
+        (0..D)
+            .all(|k| c[k] < grid.dims[k])
+            .then(|| grid.cell_index(c))
+    })
 }
 
 /// The cells of the active tiles, ascending: row by row along axis 0, a row's runs of active
