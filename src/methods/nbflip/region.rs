@@ -112,20 +112,37 @@ fn dilate<const D: usize>(tiles: &Grid<D>, from: &[bool], reach: usize) -> Vec<b
     near
 }
 
-/// The cells of tile `t`, clipped to the grid, axis 0 fastest; nothing is allocated, so that
-/// a search stops at the first cell found.
+/// The cells of tile `t`, clipped to the grid.
 fn cells_of_tile<'a, const D: usize>(
     grid: &'a Grid<D>,
     tiles: &Grid<D>,
     t: usize,
 ) -> impl Iterator<Item = usize> + 'a {
     let lo = tiles.cell_coords(t).map(|k| k * TILE);
-    (0..TILE.pow(D as u32)).filter_map(move |i| {
-        let c: Cell<D> = std::array::from_fn(|k| lo[k] + i / TILE.pow(k as u32) % TILE);
-        (0..D)
-            .all(|k| c[k] < grid.dims[k])
-            .then(|| grid.cell_index(c))
-    })
+    let hi = lo.map(|k| k + TILE - 1);
+    let mut cells = vec![];
+    for_each_in_box(grid, lo, hi, |c| cells.push(c));
+    cells.into_iter()
+}
+
+/// Calls `f` with the index of every cell of `grid` with coordinates in `lo..=hi` (clipped to
+/// the grid), in ascending order.
+fn for_each_in_box<const D: usize>(
+    grid: &Grid<D>,
+    lo: [usize; D],
+    hi: [usize; D],
+    mut f: impl FnMut(usize),
+) {
+    let hi: [usize; D] = std::array::from_fn(|k| hi[k].min(grid.dims[k] - 1));
+    let mut c = lo;
+    loop {
+        f(grid.cell_index(c));
+        let Some(k) = (0..D).find(|&k| c[k] < hi[k]) else {
+            return;
+        };
+        c[k] += 1;
+        (0..k).for_each(|j| c[j] = lo[j]);
+    }
 }
 
 /// The cells of the active tiles, ascending: row by row along axis 0, a row's runs of active
