@@ -126,11 +126,11 @@ impl LevelSet {
     /// nothing is allocated per particle (collecting the lowered values took 4.8 GiB while
     /// the 11 M particles of deep-pool-3d at 128^3 were first thinned).
     fn unite_spheres<const D: usize>(&mut self, grid: &Grid<D>, pos: &[Vector<D>]) {
-        let reach: Vec<([i64; D], isize)> = (0..3usize.pow(D as u32))
+        let reach: Vec<([usize; D], isize)> = (0..3usize.pow(D as u32))
             .map(|code| {
-                let off = std::array::from_fn(|k| (code / 3usize.pow(k as u32) % 3) as i64 - 1);
-                let step = (0..D).map(|k| off[k] as isize * grid.cell_stride(k) as isize);
-                (off, step.sum())
+                let digits = std::array::from_fn(|k| code / 3usize.pow(k as u32) % 3);
+                let step = (0..D).map(|k| (digits[k] as isize - 1) * grid.cell_stride(k) as isize);
+                (digits, step.sum())
             })
             .collect();
         let layers = grid.dims[D - 1];
@@ -200,25 +200,18 @@ impl LevelSet {
             .collect();
         ring.iter().for_each(|&c| layer[c] = 2);
         for d in 2..=march.layers {
-            let mut next: Vec<usize> = ring
-                .iter()
-                .flat_map(|&c| neighbours(grid, c))
-                .filter(|&n| layer[n] == 0)
-                .collect();
-            next.sort_unstable();
-            next.dedup();
-            let values: Vec<f64> = next
-                .iter()
-                .map(|&c| {
-                    let (sum, n) = neighbours(grid, c)
-                        .filter(|&n| layer[n] == d)
-                        .fold((0.0, 0), |(s, k), n| (s + self.phi[n], k + 1));
-                    sum / n as f64 + sign
-                })
-                .collect();
-            for (&c, v) in next.iter().zip(values) {
-                self.phi[c] = v;
-                layer[c] = d + 1;
+            // Layer `d + 1`: the cells not reached next to layer `d`, each marked and given
+            // the mean of its layer-`d` neighbours as it is found. Its value reads layer `d`
+            // only, so the order in which the cells are found does not change it.
+            let mut next = vec![];
+            for &c in &ring {
+                for n in neighbours(grid, c) {
+                    if layer[n] == 0 {
+                        layer[n] = d + 1;
+                        self.phi[n] = mean_of_layer(grid, &self.phi, layer, n, d) + sign;
+                        next.push(n);
+                    }
+                }
             }
             ring = next;
         }
@@ -231,19 +224,19 @@ impl LevelSet {
         }
     }
 
-    /// The cells of `cells` at the zero crossing: liquid cells (not solid, `phi < 0`) next to
-    /// a cell that is neither.
-    pub fn crossing<'a, const D: usize>(
-        &'a self,
-        grid: &'a Grid<D>,
-        solid: &'a [bool],
-        cells: &'a [usize],
-    ) -> impl Iterator<Item = usize> + 'a {
+    /// The cells of `cells` at the zero crossing, ascending: liquid cells (not solid,
+    /// `phi < 0`) next to a cell that is neither; found in parallel.
+    pub fn crossing<const D: usize>(
+        &self,
+        grid: &Grid<D>,
+        solid: &[bool],
+        cells: &[usize],
+    ) -> Vec<usize> {
         let liquid = |c: usize| !solid[c] && self.phi[c] < 0.0;
-        cells
-            .iter()
+        (cells.par_iter().with_min_len(crate::PAR_GRAIN))
             .copied()
-            .filter(move |&c| liquid(c) && neighbours(grid, c).any(|n| !liquid(n)))
+            .filter(|&c| liquid(c) && neighbours(grid, c).any(|n| !liquid(n)))
+            .collect()
     }
 }
 
@@ -278,12 +271,15 @@ const SPHERE_TEST_SLACK: f64 = 1e-9;
 pub const FROZEN: u32 = u32::MAX;
 
 /// [`LevelSet::unite_spheres`] for the particle at `x`: the centres of its cell's Moore
-/// neighbourhood (`reach`: offsets and their index steps) lowered to the distance from `x`
-/// minus [`particle_radius`], in `phi`, the part of the level set from cell `offset` on. The
-/// bounds are checked only for a cell on the domain's boundary.
+/// neighbourhood (`reach`: per axis the offset plus one, and the index step) lowered to the
+/// distance from `x` minus [`particle_radius`], in `phi`, the part of the level set from cell
+/// `offset` on. The bounds are checked only for a cell on the domain's boundary. The squared
+/// distances are summed from the `3 D` squared differences along the axes, in axis order:
+/// bit for bit `norm_squared` of the difference of the centre and `x`, which sums the same
+/// squares in the same order.
 fn lower_by_sphere<const D: usize>(
     grid: &Grid<D>,
-    reach: &[([i64; D], isize)],
+    reach: &[([usize; D], isize)],
     x: &Vector<D>,
     phi: &mut [f64],
     offset: usize,
@@ -292,20 +288,42 @@ fn lower_by_sphere<const D: usize>(
     let cell = grid.cell_of(x).expect("particle inside the domain");
     let own = grid.cell_index(cell) as isize - offset as isize;
     let inner = (0..D).all(|k| 0 < cell[k] && cell[k] + 1 < grid.dims[k]);
-    for (off, step) in reach {
-        let n: [i64; D] = std::array::from_fn(|k| cell[k] as i64 + off[k]);
-        if inner || (0..D).all(|k| 0 <= n[k] && n[k] < grid.dims[k] as i64) {
+    // Per axis, the squared difference to the centres one below `x`'s cell, in it and above
+    // (centre `cell + j - 1 + 1/2`, exact).
+    let squares: [[f64; 3]; D] = std::array::from_fn(|k| {
+        std::array::from_fn(|j| {
+            let d = ((cell[k] + j) as f64 - 0.5) - x[k];
+            d * d
+        })
+    });
+    for (digits, step) in reach {
+        let within = |k: usize| (cell[k] + digits[k]).wrapping_sub(1) < grid.dims[k];
+        if inner || (0..D).all(within) {
             let c = (own + step) as usize;
             // The sphere lowers the centre only if its distance is below `phi + radius`
             // (rounding errors are far below the slack): no root for most centres.
             let reach = phi[c] + radius + SPHERE_TEST_SLACK;
-            let centre = Vector::<D>::from_fn(|k, _| n[k] as f64 + 0.5);
-            let d2 = (centre - x).norm_squared();
+            let d2 = (1..D).fold(squares[0][digits[0]], |s, k| s + squares[k][digits[k]]);
             if reach > 0.0 && d2 < reach * reach {
                 phi[c] = phi[c].min(d2.sqrt() - radius);
             }
         }
     }
+}
+
+/// The mean of `phi` over the von Neumann neighbours of cell `c` in layer `d` of a re-march
+/// (`layer`), summed in [`neighbours`]' order.
+fn mean_of_layer<const D: usize>(
+    grid: &Grid<D>,
+    phi: &[f64],
+    layer: &[u32],
+    c: usize,
+    d: u32,
+) -> f64 {
+    let (sum, n) = neighbours(grid, c)
+        .filter(|&n| layer[n] == d)
+        .fold((0.0, 0), |(s, k), n| (s + phi[n], k + 1));
+    sum / n as f64
 }
 
 /// The von Neumann neighbours of cell `c` inside the domain, axis by axis, the lower one

@@ -151,7 +151,7 @@ impl<const D: usize> NbflipSim<D> {
         }
         self.next = match around_particles {
             Some(around) => {
-                let crossing: Vec<usize> = phi.crossing(g, solid, &self.rebuilt.cells).collect();
+                let crossing = phi.crossing(g, solid, &self.rebuilt.cells);
                 let crossing = crossing.into_iter().map(|c| g.cell_coords(c));
                 self.around(s, crossing).union(g, &around)
             }
@@ -275,23 +275,23 @@ impl<const D: usize> FluidMethod<D> for NbflipSim<D> {
         self.not_held += rep.deleted() as isize - rep.seeded as isize;
         self.first_seed = s.particles.len() - rep.seeded;
         self.step.add(&rep);
-        Some(
-            (0..s.grid.num_cells())
-                .map(|c| self.phi.phi[c] < 0.0)
-                .collect(),
-        )
+        let phi = self.phi.phi.par_iter().with_min_len(crate::PAR_GRAIN);
+        Some(phi.map(|&v| v < 0.0).collect())
     }
 
     /// What resampling guarantees: every particle it kept lies inside the liquid and at most
     /// `R` below its surface, and every particle it seeded lies in a band cell below the
-    /// surface layer; every such cell holds at least `mu` particles.
+    /// surface layer; every such cell holds at least `mu` particles. The level set at the
+    /// particles kept is interpolated in parallel; the first particle outside the band, in
+    /// order, is the one reported.
     fn check_invariants(&self, s: &State<D>) -> Result<(), InvariantViolation> {
         let (g, pos) = (&s.grid, &s.particles.pos);
-        if let Some(x) = pos[..self.first_seed].iter().find(|x| {
-            let phi = self.phi.interpolate(g, x);
-            !(-self.r()..=0.0).contains(&phi)
-        }) {
-            let phi = self.phi.interpolate(g, x);
+        let kept = pos[..self.first_seed].par_iter();
+        let outside = kept
+            .with_min_len(crate::PAR_GRAIN_PARTICLES)
+            .map(|x| (x, self.phi.interpolate(g, x)))
+            .find_first(|(_, phi)| !(-self.r()..=0.0).contains(phi));
+        if let Some((x, phi)) = outside {
             return Err(InvariantViolation(format!(
                 "a particle at {:?} has phi = {phi:.3} after resampling, outside the band [-{}, 0]",
                 x.as_slice(),

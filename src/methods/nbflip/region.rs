@@ -74,23 +74,10 @@ impl Region {
         for c in seeds {
             seeded[tiles.cell_index(c.map(|k| k / TILE))] = true;
         }
-        // 2: within the outer reach of a seed, 1: within the inner reach only.
-        let mut near = vec![0u8; tiles.num_cells()];
-        let reaches = [(margin.inside, 1), (margin.outside, 2)];
-        for t in (0..tiles.num_cells()).filter(|&t| seeded[t]) {
-            let tc = tiles.cell_coords(t);
-            for (margin, mark) in reaches {
-                let reach = margin.div_ceil(TILE);
-                let (lo, hi) = (tc.map(|k| k.saturating_sub(reach)), tc.map(|k| k + reach));
-                for_each_in_box(&tiles, lo, hi, |n| near[n] = near[n].max(mark));
-            }
-        }
+        let [inside, outside] = [margin.inside, margin.outside]
+            .map(|margin| dilate(&tiles, &seeded, margin.div_ceil(TILE)));
         let active: Vec<bool> = (0..tiles.num_cells())
-            .map(|t| match near[t] {
-                2 => true,
-                1 => cells_of_tile(grid, &tiles, t).any(&inner),
-                _ => false,
-            })
+            .map(|t| outside[t] || inside[t] && cells_of_tile(grid, &tiles, t).any(&inner))
             .collect();
         Self {
             cells: cells_of_tiles(grid, &tiles, &active),
@@ -105,6 +92,24 @@ impl Region {
 pub struct Margin {
     pub inside: usize,
     pub outside: usize,
+}
+
+/// Per tile, whether it lies within `reach` tiles, along every axis, of a tile of `from`: the
+/// box around each, found one axis after the other (a box is the product of its intervals).
+fn dilate<const D: usize>(tiles: &Grid<D>, from: &[bool], reach: usize) -> Vec<bool> {
+    let mut near = from.to_vec();
+    for a in 0..D {
+        let stride = tiles.cell_stride(a);
+        let before = near.clone();
+        for t in (0..before.len()).filter(|&t| before[t]) {
+            let i = tiles.cell_coords(t)[a];
+            let line = t - i * stride;
+            for j in i.saturating_sub(reach)..(i + reach + 1).min(tiles.dims[a]) {
+                near[line + j * stride] = true;
+            }
+        }
+    }
+    near
 }
 
 /// The cells of tile `t`, clipped to the grid.
