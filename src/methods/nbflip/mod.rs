@@ -94,7 +94,7 @@ impl MethodType for Nbflip {
 
     /// Measured peak memory over a run ([`Footprint`]; docs/benchmarks.md, "Memory"). In 3D a
     /// fit to whole runs of its held particles, the liquid's cells and the grid's, and the peak
-    /// while it starts, holding every particle seeded and resampling them all.
+    /// while it starts, holding every particle seeded and resampling them all (a chunk at a time).
     fn footprint(s: &NbflipSettings, dim: usize) -> Footprint {
         match dim {
             2 => Footprint::of(dim, [(128.0, 90.0), (315.0, 60.0)]),
@@ -105,8 +105,8 @@ impl MethodType for Nbflip {
                 holds: Holds::Band {
                     r: s.band_r,
                     start: StartPeak {
-                        per_particle: 74.0,
-                        per_cell: 56.0,
+                        per_particle: 59.0,
+                        per_cell: 57.0,
                     },
                 },
             },

@@ -20,6 +20,8 @@ use std::sync::Arc;
 const INSIDE_LAYERS_BEYOND_BAND: u32 = 2;
 /// Layers it is re-marched into the air (`extrapolateLsSimple(distance = 3)`, ibid.).
 const OUTSIDE_LAYERS: u32 = 3;
+/// Particles resampling looks up at a time.
+const RESAMPLING_CHUNK: usize = 1 << 16;
 /// A cell holds at most this many times `mu` particles away from the surface
 /// (`maxParticles = 2 minParticles`, ibid.).
 const MAX_PER_MU: u32 = 2;
@@ -375,28 +377,29 @@ impl<const D: usize> Resampling<'_, D> {
         let mut rep = NbflipReport::default();
         let mut count = vec![0u32; g.num_cells()];
         let mut keep = Vec::with_capacity(p.len());
-        // The level set at every particle and its cell, in parallel; then, in order, the
-        // crowding count.
-        let found: Vec<(f64, usize)> = p
-            .pos
-            .par_iter()
-            .with_min_len(crate::PAR_GRAIN_PARTICLES)
-            .map(|x| (self.phi.interpolate(g, x), g.cell_index_of(x)))
-            .collect();
-        for (v, c) in found {
-            let deleted = if v > 0.0 {
-                &mut rep.outside
-            } else if v < -self.r {
-                &mut rep.below
-            } else if v <= surface_layer(D) && count[c] >= MAX_PER_MU * mu {
-                &mut rep.crowded
-            } else {
-                count[c] += 1;
-                keep.push(true);
-                continue;
-            };
-            *deleted += 1;
-            keep.push(false);
+        // The level set at the particles and their cells, in parallel, a chunk at a time (the
+        // first resampling sees every particle seeded: a list for all of them would add 16
+        // bytes to each); then, in order, the crowding count.
+        let mut found: Vec<(f64, usize)> = Vec::with_capacity(RESAMPLING_CHUNK.min(p.len()));
+        for chunk in p.pos.chunks(RESAMPLING_CHUNK) {
+            (chunk.par_iter().with_min_len(crate::PAR_GRAIN_PARTICLES))
+                .map(|x| (self.phi.interpolate(g, x), g.cell_index_of(x)))
+                .collect_into_vec(&mut found);
+            for &(v, c) in &found {
+                let deleted = if v > 0.0 {
+                    &mut rep.outside
+                } else if v < -self.r {
+                    &mut rep.below
+                } else if v <= surface_layer(D) && count[c] >= MAX_PER_MU * mu {
+                    &mut rep.crowded
+                } else {
+                    count[c] += 1;
+                    keep.push(true);
+                    continue;
+                };
+                *deleted += 1;
+                keep.push(false);
+            }
         }
         p.retain_flagged(&keep);
         let cells = self.cells.iter().copied();
