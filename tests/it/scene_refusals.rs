@@ -319,7 +319,10 @@ fn the_memory_estimate_counts_the_particles_a_band_holds() {
         };
         let held = |scene: &Scene| {
             let sim = simulation::<3>(scene, false);
-            (scene.memory_estimate(false).held, sim.state.particles.len() as f64)
+            (
+                scene.memory_estimate(false).held,
+                sim.state.particles.len() as f64,
+            )
         };
         let (estimate, ccp) = held(&load(scene, &o(MethodKind::Ccp, Some(BandMode::Paths))));
         assert!(
