@@ -137,6 +137,11 @@ impl Footprint {
     /// `[2D, 3D]` pairs of bytes per cell and bytes per particle.
     pub fn of(dim: usize, measured: [(f64, f64); 2]) -> Self {
         let (per_cell, per_particle) = measured[dim.clamp(2, 3) - 2];
+        Self::all(per_cell, per_particle)
+    }
+
+    /// The footprint of a method holding every particle, in the dimension it was measured in.
+    pub fn all(per_cell: f64, per_particle: f64) -> Self {
         Self {
             per_cell,
             per_fluid_cell: 0.0,

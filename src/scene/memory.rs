@@ -13,8 +13,10 @@
 use super::Scene;
 use crate::grid::Grid;
 use crate::methods::Holds;
+use crate::sim::band::Band;
 use crate::sim::markings::{DepthLevel, Markings};
 use crate::sim::solids::Solids;
+use crate::sim::SimConfig;
 use anyhow::{bail, Result};
 
 /// The process before any simulation: code, the thread pool, the scene.
@@ -178,11 +180,7 @@ struct SeededLiquid {
 impl SeededLiquid {
     /// With a band, the cells at most `R` below the surface of the seeded liquid's first
     /// markings (the markings a run starts from, from the cells instead of the particles).
-    fn new<const D: usize>(
-        config: &crate::sim::SimConfig<D>,
-        grid: &Grid<D>,
-        holds: Holds,
-    ) -> Self {
+    fn new<const D: usize>(config: &SimConfig<D>, grid: &Grid<D>, holds: Holds) -> Self {
         let solids = Solids::new(
             grid,
             &config.solids,
@@ -206,8 +204,11 @@ impl SeededLiquid {
                     Some(&liquid),
                     solids.moving_mask(),
                 );
+                let band = Band { r };
                 (0..m.kind.len())
-                    .filter(|&c| m.is_fluid(c) && m.level(c, r) != DepthLevel::Deep)
+                    .filter(|&c| {
+                        !matches!(band.level(&m, c), DepthLevel::NotFluid | DepthLevel::Deep)
+                    })
                     .count()
             }
         };

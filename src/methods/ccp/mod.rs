@@ -73,10 +73,8 @@ impl MethodType for Ccp {
     /// and the peak while it starts holding every particle seeded; in 2D the band was not
     /// measured apart, and takes the figures without it.
     fn footprint(s: &CcpSettings, dim: usize) -> Footprint {
-        const IN_2D: (f64, f64) = (362.0, 470.0);
         match (s.band, dim) {
-            (BandMode::None, _) => Footprint::of(dim, [IN_2D, (226.0, 560.0)]),
-            (_, 2) => Footprint::of(dim, [IN_2D, IN_2D]),
+            (BandMode::None, _) | (_, 2) => Footprint::of(dim, [(362.0, 470.0), (226.0, 560.0)]),
             _ => Footprint {
                 per_cell: 341.0,
                 per_fluid_cell: 135.0,

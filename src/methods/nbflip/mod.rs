@@ -92,12 +92,13 @@ impl MethodType for Nbflip {
         Box::new(Totals::new(s.band_r))
     }
 
-    /// Measured peak memory over a run ([`Footprint`]; docs/benchmarks.md, "Memory"). In 3D a
+    /// Measured peak memory over a run ([`Footprint`]; docs/benchmarks.md, "Memory"): in 2D as
+    /// a method holding every particle (its band was not measured apart there); in 3D a
     /// fit to whole runs of its held particles, the liquid's cells and the grid's, and the peak
     /// while it starts, holding every particle seeded and resampling them all (a chunk at a time).
     fn footprint(s: &NbflipSettings, dim: usize) -> Footprint {
         match dim {
-            2 => Footprint::of(dim, [(128.0, 90.0), (315.0, 60.0)]),
+            2 => Footprint::all(128.0, 90.0),
             _ => Footprint {
                 per_cell: 307.0,
                 per_fluid_cell: 121.0,
