@@ -8,7 +8,7 @@
 //! grid part carries the liquid where the band holds no particles; the particles carry the
 //! surface.
 
-use crate::grid::{for_each_cell_weight, AtGridPoints, Cell, Grid, MacField, Vector};
+use crate::grid::{AtGridPoints, Cell, Grid, MacField, Vector};
 use rayon::prelude::*;
 
 /// A level set on cell centres, in cells; negative inside.
@@ -55,10 +55,40 @@ impl LevelSet {
 
     /// Multilinear interpolation at `x`, with points nearer a wall than the outermost cell
     /// centres clamped onto them.
+    /// The cells and weights are those of [`for_each_cell_weight`] at the clamped point, in
+    /// its order (the weight multiplied axis by axis; corners of weight 0 skipped), found from
+    /// one base index: after the clamp no lower corner leaves the grid, and an upper one does
+    /// only with weight 0.
+    #[inline]
     pub fn interpolate<const D: usize>(&self, grid: &Grid<D>, x: &Vector<D>) -> f64 {
-        let x = Vector::<D>::from_fn(|k, _| x[k].clamp(0.5, grid.dims[k] as f64 - 0.5));
+        let (mut base, mut up, mut frac) = (0, [0; D], [0.0; D]);
+        for k in 0..D {
+            let s = x[k].clamp(0.5, grid.dims[k] as f64 - 0.5) - 0.5;
+            let lower = s.floor();
+            frac[k] = s - lower;
+            let lower = lower as usize;
+            base += lower * grid.cell_stride(k);
+            up[k] = if lower + 1 < grid.dims[k] {
+                grid.cell_stride(k)
+            } else {
+                0
+            };
+        }
         let mut v = 0.0;
-        for_each_cell_weight(grid, &x, |c, w| v += w * self.phi[c]);
+        for corner in 0..1usize << D {
+            let (mut w, mut c) = (1.0, base);
+            for k in 0..D {
+                if (corner >> k) & 1 == 1 {
+                    w *= frac[k];
+                    c += up[k];
+                } else {
+                    w *= 1.0 - frac[k];
+                }
+            }
+            if w != 0.0 {
+                v += w * self.phi[c];
+            }
+        }
         v
     }
 
