@@ -602,7 +602,7 @@ impl<const D: usize> FaceStencil<D> {
 
     /// `sum_c w_c value(face_c)`, in corner order (as [`Self::apply`]), for a field whose
     /// values are computed where they are read.
-    pub fn apply_with(&self, mut value: impl FnMut(usize) -> f64) -> f64 {
+    pub fn apply_with(&self, value: impl Fn(usize) -> f64) -> f64 {
         self.weights().fold(0.0, |v, (i, w)| v + w * value(i))
     }
 

@@ -110,34 +110,16 @@ impl<const D: usize> GridVelocity<D> {
 
     /// Multilinear interpolation at `x` ([`MacField::interpolate`] of the advected field).
     pub fn interpolate(&self, grid: &Grid<D>, x: &Vector<D>) -> Vector<D> {
-        self.interpolate_in_cell(grid, std::slice::from_ref(x))[0]
-    }
-
-    /// [`Self::interpolate`] at each of `points`, which lie in one cell (particles seeded
-    /// there): their stencils share most of their faces (at most `2 3^(D-1)` per component),
-    /// and each advected face value is computed once.
-    pub fn interpolate_in_cell(&self, grid: &Grid<D>, points: &[Vector<D>]) -> Vec<Vector<D>> {
-        if self.advection.is_none() {
-            return points.iter().map(|x| self.u.interpolate(grid, x)).collect();
+        match self.advection {
+            None => self.u.interpolate(grid, x),
+            Some(_) => {
+                let at = FacePoint::new(grid, x);
+                Vector::<D>::from_fn(|a, _| {
+                    let value = |i| self.at_face(grid, a, i, grid.face_coords(a, i));
+                    FaceStencil::at(grid, &at, a).apply_with(value)
+                })
+            }
         }
-        let mut found: Vec<(usize, usize, f64)> = vec![];
-        let mut value = |a: usize, i: usize| match found.iter().find(|f| (f.0, f.1) == (a, i)) {
-            Some(&(_, _, v)) => v,
-            None => {
-                let v = self.at_face(grid, a, i, grid.face_coords(a, i));
-                found.push((a, i, v));
-                v
-            }
-        };
-        let at = |x| {
-            let point = FacePoint::new(grid, x);
-            let mut v = Vector::<D>::zeros();
-            for a in 0..D {
-                v[a] = FaceStencil::at(grid, &point, a).apply_with(|i| value(a, i));
-            }
-            v
-        };
-        points.iter().map(at).collect()
     }
 }
 

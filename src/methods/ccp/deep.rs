@@ -104,20 +104,15 @@ pub fn exchange_with_deep<const D: usize>(
                 break;
             }
             let cell = grid.cell_coords(c);
-            let n = (mu.saturating_sub(markings.count[c]) as usize).min(excess);
-            let xs: Vec<Vector<D>> = (0..n)
-                .map(|_| {
-                    Vector::<D>::from_fn(|k, _| {
-                        cell[k] as f64 + rng.random_range(CELL_MARGIN..1.0 - CELL_MARGIN)
-                    })
-                })
-                .collect();
-            for (x, v) in xs.iter().zip(velocity.interpolate_in_cell(grid, &xs)) {
-                particles.push(*x, v);
+            while markings.count[c] < mu && excess > 0 {
+                let x = Vector::<D>::from_fn(|k, _| {
+                    cell[k] as f64 + rng.random_range(CELL_MARGIN..1.0 - CELL_MARGIN)
+                });
+                particles.push(x, velocity.interpolate(grid, &x));
+                markings.count[c] += 1;
+                excess -= 1;
+                out.added += 1;
             }
-            markings.count[c] += n as u32;
-            excess -= n;
-            out.added += n;
         }
     }
     *n_deep -= out.added;

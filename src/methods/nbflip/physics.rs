@@ -408,21 +408,14 @@ impl<const D: usize> Resampling<'_, D> {
             }
         }
         p.retain_flagged(&keep);
-        // The seeds' places in order, from the random stream; their velocities in parallel.
         let cells = self.cells.iter().copied();
-        let seeds: Vec<Vec<Vector<D>>> = (cells.filter(|&c| count[c] < mu && self.seedable(c)))
-            .map(|c| {
-                let corner = Vector::<D>::from_fn(|k, _| g.cell_coords(c)[k] as f64);
-                let place = |_| corner + Vector::<D>::from_fn(|_, _| rng.random::<f64>());
-                (count[c]..mu).map(place).collect()
-            })
-            .collect();
-        let velocities: Vec<_> = (seeds.par_iter())
-            .map(|xs| u.interpolate_in_cell(g, xs))
-            .collect();
-        for (xs, vs) in seeds.iter().zip(velocities) {
-            xs.iter().zip(vs).for_each(|(x, v)| p.push(*x, v));
-            rep.seeded += xs.len();
+        for c in cells.filter(|&c| count[c] < mu && self.seedable(c)) {
+            let corner = Vector::<D>::from_fn(|k, _| g.cell_coords(c)[k] as f64);
+            for _ in count[c]..mu {
+                let x = corner + Vector::<D>::from_fn(|_, _| rng.random::<f64>());
+                p.push(x, u.interpolate(g, &x));
+                rep.seeded += 1;
+            }
         }
         rep
     }
