@@ -62,11 +62,6 @@ impl NearCells {
         .collect();
         NearCells { cells, lines }
     }
-
-    /// Whether cell `c` is flagged.
-    pub fn contains(&self, c: usize) -> bool {
-        self.cells[c]
-    }
 }
 
 impl<const D: usize> Grid<D> {
@@ -598,12 +593,6 @@ impl<const D: usize> FaceStencil<D> {
     /// The faces and their weights.
     pub fn weights(&self) -> impl Iterator<Item = (usize, f64)> + '_ {
         (0..Self::CORNERS).map(|c| (self.idx[c], self.w[c]))
-    }
-
-    /// `sum_c w_c value(face_c)`, in corner order (as [`Self::apply`]), for a field whose
-    /// values are computed where they are read.
-    pub fn apply_with(&self, value: impl Fn(usize) -> f64) -> f64 {
-        self.weights().fold(0.0, |v, (i, w)| v + w * value(i))
     }
 
     /// `sum_c w_c values[face_c]`, in corner order.

@@ -7,7 +7,6 @@
 use crate::draw::{LayerView, Log, Panel};
 use crate::grid::{MacField, Vector};
 use crate::metrics::InvariantViolation;
-use crate::sim::advect::GridVelocity;
 use crate::sim::markings::Markings;
 use crate::sim::solids::ObstacleMode;
 use crate::sim::transfer::{self, Known};
@@ -243,8 +242,8 @@ pub trait FluidMethod<const D: usize>: MethodRecording<D> + Send {
     fn before_advection(&mut self, _s: &State<D>) {}
 
     /// The grid velocity the next step starts from, given this step's projected one.
-    fn next_grid_velocity(&mut self, _s: &State<D>, u: MacField<D>, _dt: f64) -> GridVelocity<D> {
-        GridVelocity::still(u)
+    fn next_grid_velocity(&mut self, _s: &State<D>, u: MacField<D>, _dt: f64) -> MacField<D> {
+        u
     }
 
     /// Alg. flip line 6: corrects the advected positions. `penalty` is the per-cell cost of

@@ -7,7 +7,7 @@
 //! `n_deep`; narrow-band FLIP keeps the deep as a level set.
 
 use crate::grid::{Cell, Grid, MacField, NearCells, Vector};
-use crate::sim::advect::GridVelocity;
+use crate::sim::advect;
 use crate::sim::markings::{DepthLevel, Markings};
 use crate::sim::transfer::Known;
 use rayon::prelude::*;
@@ -88,7 +88,7 @@ impl Band {
         grid: &Grid<D>,
         u: &mut MacField<D>,
         known: &mut Known<D>,
-        grid_u: &GridVelocity<D>,
+        grid_u: &MacField<D>,
         m: &Markings,
     ) {
         let near = NearCells::new(grid, self.at_or_below_interface(m));
@@ -100,11 +100,11 @@ impl Band {
     /// fluid cells are advected, the others keep `u`.
     pub fn advect_grid_velocity<const D: usize>(
         grid: &Grid<D>,
-        u: MacField<D>,
+        u: &MacField<D>,
         dt: f64,
         m: &Markings,
-    ) -> GridVelocity<D> {
-        GridVelocity::advected(grid, u, dt, NearCells::new(grid, m.fluid()))
+    ) -> MacField<D> {
+        advect::advect_velocity(grid, u, dt, &NearCells::new(grid, m.fluid()))
     }
 }
 
@@ -132,14 +132,14 @@ pub fn combine_velocities<const D: usize>(
     grid: &Grid<D>,
     u: &mut MacField<D>,
     known: &mut Known<D>,
-    grid_u: &GridVelocity<D>,
+    grid_u: &MacField<D>,
     near: &NearCells,
     take_grid: impl Fn(usize, Cell<D>, bool) -> bool + Sync,
 ) {
     for (a, (u, known)) in u.comp.iter_mut().zip(known.iter_mut()).enumerate() {
         grid.par_for_each_face_pair_near(a, u, known, near, |i, f, v, k| {
             if take_grid(a, f, *k) {
-                *v = grid_u.at_face(grid, a, i, f);
+                *v = grid_u.comp[a][i];
                 *k = true;
             }
         });
@@ -169,7 +169,6 @@ mod tests {
         let (mut u, mut known) = particles_to_grid(&g, &pos, &vel);
         let mut grid_u = MacField::zeros(&g);
         grid_u.comp[2].iter_mut().for_each(|v| *v = -7.0);
-        let grid_u = GridVelocity::still(grid_u);
         Band { r: 1 }.combine_with_grid(&g, &mut u, &mut known, &grid_u, &m);
         for i in 0..g.num_faces(2) {
             let f = g.face_coords(2, i);

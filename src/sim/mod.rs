@@ -18,7 +18,6 @@ use crate::grid::{Grid, MacField, Vector};
 use crate::metrics;
 use crate::particles::{self, Particles, Region};
 use crate::solvers::pcg::Preconditioner;
-use advect::GridVelocity;
 use emit::Emitter;
 use markings::Markings;
 use rand::rngs::StdRng;
@@ -69,7 +68,7 @@ pub struct State<const D: usize> {
     pub grid: Grid<D>,
     pub particles: Particles<D>,
     /// Grid velocity the next step starts from, cells per second.
-    pub velocity: GridVelocity<D>,
+    pub velocity: MacField<D>,
     /// Static solids and obstacles.
     pub solids: Solids<D>,
     pub markings: Markings,
@@ -111,7 +110,7 @@ impl<const D: usize> State<D> {
         let total = particles.len();
         State {
             target_volume: total as f64 / config.mu() as f64,
-            velocity: GridVelocity::still(MacField::zeros(&grid)),
+            velocity: MacField::zeros(&grid),
             markings,
             time_secs: 0.0,
             steps: 0,

@@ -13,7 +13,6 @@ use cellflip::methods::nbflip::{combine, NbflipReport, Resampling};
 use cellflip::methods::MethodKind;
 use cellflip::particles::Particles;
 use cellflip::scene::{Overrides, Scene};
-use cellflip::sim::advect::GridVelocity;
 use cellflip::sim::markings::Markings;
 use cellflip::sim::transfer::particles_to_grid;
 use cellflip::simulation::{Simulation, StepReport};
@@ -203,7 +202,6 @@ fn resampling_deletes_and_seeds_by_the_level_set_2d() {
     }
     let mut u = MacField::zeros(&g);
     u.comp[0].iter_mut().for_each(|v| *v = 0.7);
-    let u = GridVelocity::still(u);
     let rep = rs.run(&mut p, &u, &mut StdRng::seed_from_u64(1));
     assert_eq!((rep.outside, rep.below, rep.crowded), (1, 1, 2));
     // Rows 3 (phi = -2.5) and 4 (phi = -1.5) are seedable; all their cells but (2, 4) get 4.
@@ -239,7 +237,6 @@ fn the_combination_takes_particles_in_the_band_and_the_grid_below_3d() {
     let (mut u, mut known) = particles_to_grid(&g, &pos, &vel);
     let mut grid_u = MacField::zeros(&g);
     grid_u.comp[2].iter_mut().for_each(|v| *v = -7.0);
-    let grid_u = GridVelocity::still(grid_u);
     combine(&g, &m, &phi, 3.0, &mut u, &mut known, &grid_u);
     for (i, (&k, &v)) in known[2].iter().zip(&u.comp[2]).enumerate() {
         let z = g.face_coords(2, i)[2];

@@ -13,9 +13,9 @@
 //! and open a hole in the fluid. Such cells, former interface or deep cells that the new
 //! markings put above the interface, are filled from the excess along with the interface.
 
-use crate::grid::{Grid, Vector};
+use crate::grid::{Grid, MacField, Vector};
 use crate::particles::Particles;
-use crate::sim::advect::{GridVelocity, CELL_MARGIN};
+use crate::sim::advect::CELL_MARGIN;
 use crate::sim::band::Band;
 use crate::sim::markings::{DepthLevel, Markings};
 use rand::seq::SliceRandom;
@@ -64,7 +64,7 @@ pub fn exchange_with_deep<const D: usize>(
     band: Band,
     mu: u32,
     n_deep: &mut usize,
-    velocity: &GridVelocity<D>,
+    velocity: &MacField<D>,
     rng: &mut impl Rng,
 ) -> DeepExchange {
     let level = |m: &Markings, c: usize| band.level(m, c);
@@ -123,7 +123,6 @@ pub fn exchange_with_deep<const D: usize>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::grid::MacField;
     use rand::rngs::StdRng;
     use rand::SeedableRng;
 
@@ -147,7 +146,7 @@ mod tests {
         let mut m = Markings::compute(&g, &p.pos, &solid);
         let mut n_deep = 0;
         let mut rng = StdRng::seed_from_u64(1);
-        let u = GridVelocity::still(MacField::zeros(&g));
+        let u = MacField::zeros(&g);
         let x = exchange_with_deep(
             &g,
             &mut p,
@@ -190,7 +189,6 @@ mod tests {
         let mut rng = StdRng::seed_from_u64(7);
         let mut u = MacField::zeros(&g);
         u.comp[2].iter_mut().for_each(|v| *v = -3.0);
-        let u = GridVelocity::still(u);
         let mut n_deep = 0;
         // The exchange at mu = 1, R = 1, with nothing risen from below the interface.
         let mut exchange = |p: &mut Particles<3>, m: &mut Markings, n_deep: &mut usize| {

@@ -9,7 +9,6 @@ use crate::draw::{depth_level_classes, Log};
 use crate::grid::{MacField, Vector};
 use crate::methods::seam::{FluidMethod, MethodRecording, MethodReport};
 use crate::metrics::InvariantViolation;
-use crate::sim::advect::GridVelocity;
 use crate::sim::band::Band;
 use crate::sim::markings::{DepthLevel, Markings};
 use crate::sim::transfer::{self, Known};
@@ -98,10 +97,10 @@ impl<const D: usize> FluidMethod<D> for CcpSim<D> {
         self.x_bar.clone_from(&s.particles.pos);
     }
 
-    fn next_grid_velocity(&mut self, s: &State<D>, u: MacField<D>, dt: f64) -> GridVelocity<D> {
+    fn next_grid_velocity(&mut self, s: &State<D>, u: MacField<D>, dt: f64) -> MacField<D> {
         match self.band() {
-            Some(_) => Band::advect_grid_velocity(&s.grid, u, dt, &s.markings),
-            None => GridVelocity::still(u),
+            Some(_) => Band::advect_grid_velocity(&s.grid, &u, dt, &s.markings),
+            None => u,
         }
     }
 

@@ -3,7 +3,7 @@
 use crate::draw::Log;
 use crate::grid::{for_each_cell_weight, Grid, MacField, Vector};
 use crate::methods::seam::{FluidMethod, MethodRecording, MethodReport};
-use crate::sim::advect::{displace, GridVelocity, CELL_MARGIN};
+use crate::sim::advect::{displace, CELL_MARGIN};
 use crate::sim::pressure::Poisson;
 use crate::sim::solids::clearing_distance;
 use crate::sim::State;
@@ -96,7 +96,7 @@ pub struct Inputs<'a, const D: usize> {
 
 /// What resampling needs: the grid velocity for the new particles, and randomness.
 pub struct Resample<'a, const D: usize, R: Rng> {
-    pub velocity: &'a GridVelocity<D>,
+    pub velocity: &'a MacField<D>,
     pub rng: &'a mut R,
 }
 

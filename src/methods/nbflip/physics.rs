@@ -7,7 +7,6 @@ use crate::grid::{Cell, Grid, MacField, NearCells, Vector};
 use crate::methods::seam::{FluidMethod, MethodRecording, MethodReport};
 use crate::metrics::InvariantViolation;
 use crate::particles::Particles;
-use crate::sim::advect::GridVelocity;
 use crate::sim::band::{combine_velocities, counts_with_full_deep, Band};
 use crate::sim::markings::{DepthLevel, Markings};
 use crate::sim::transfer::{self, Known};
@@ -206,7 +205,7 @@ pub fn combine<const D: usize>(
     r: f64,
     u: &mut MacField<D>,
     known: &mut Known<D>,
-    grid_u: &GridVelocity<D>,
+    grid_u: &MacField<D>,
 ) {
     let fluid = NearCells::new(g, m.fluid());
     combine_velocities(g, u, known, grid_u, &fluid, |a, f, weighted| {
@@ -261,12 +260,12 @@ impl<const D: usize> FluidMethod<D> for NbflipSim<D> {
 
     /// Step 3: the level set moves with the projected velocity (near the surface), and so does
     /// the grid velocity.
-    fn next_grid_velocity(&mut self, s: &State<D>, u: MacField<D>, dt: f64) -> GridVelocity<D> {
+    fn next_grid_velocity(&mut self, s: &State<D>, u: MacField<D>, dt: f64) -> MacField<D> {
         self.advected_over = std::mem::take(&mut self.next);
         let advected = self.advected.get_or_insert_with(|| (*self.phi).clone());
         let cells = &self.advected_over.cells;
         self.phi.advect_into(&s.grid, &u, dt, cells, advected);
-        Band::advect_grid_velocity(&s.grid, u, dt, &s.markings)
+        Band::advect_grid_velocity(&s.grid, &u, dt, &s.markings)
     }
 
     /// Steps 4 and 5; the level set's inside stays fluid.
@@ -373,12 +372,7 @@ impl<const D: usize> Resampling<'_, D> {
     /// cell away from the surface; then tops up every seedable cell to `mu` with particles
     /// uniformly at random in it, moving with the grid velocity `u`. The seeds go after the
     /// particles kept.
-    pub fn run(
-        &self,
-        p: &mut Particles<D>,
-        u: &GridVelocity<D>,
-        rng: &mut impl Rng,
-    ) -> NbflipReport {
+    pub fn run(&self, p: &mut Particles<D>, u: &MacField<D>, rng: &mut impl Rng) -> NbflipReport {
         let (g, mu) = (self.grid, self.mu);
         let mut rep = NbflipReport::default();
         let mut count = vec![0u32; g.num_cells()];
