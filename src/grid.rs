@@ -623,24 +623,33 @@ pub fn for_each_cell_weight<const D: usize>(
     x: &Vector<D>,
     mut f: impl FnMut(usize, f64),
 ) {
-    let mut base = [0i64; D];
+    // Per axis, the lower cell's fraction and whether the lower and the upper cell are inside;
+    // the corners' indices from the lower corner's by one stride per upper axis (wrapping: a
+    // corner outside is never read).
+    let mut base = 0usize;
     let mut frac = [0.0f64; D];
+    let mut inside = [[false; 2]; D];
     for k in 0..D {
         let s = x[k] - 0.5;
-        base[k] = s.floor() as i64;
-        frac[k] = s - base[k] as f64;
+        let lower = s.floor() as i64;
+        frac[k] = s - lower as f64;
+        let n = grid.dims[k] as i64;
+        inside[k] = [(0..n).contains(&lower), (0..n).contains(&(lower + 1))];
+        base = base.wrapping_add((lower as usize).wrapping_mul(grid.cell_stride(k)));
     }
     'corners: for corner in 0..1usize << D {
-        let mut w = 1.0;
-        let mut idx = 0;
+        let (mut w, mut idx) = (1.0, base);
         for k in 0..D {
-            let up = ((corner >> k) & 1) as i64;
-            let i = base[k] + up;
-            if i < 0 || i >= grid.dims[k] as i64 {
+            let up = (corner >> k) & 1;
+            if !inside[k][up] {
                 continue 'corners;
             }
-            w *= if up == 1 { frac[k] } else { 1.0 - frac[k] };
-            idx += i as usize * grid.cell_stride(k);
+            if up == 1 {
+                w *= frac[k];
+                idx = idx.wrapping_add(grid.cell_stride(k));
+            } else {
+                w *= 1.0 - frac[k];
+            }
         }
         if w != 0.0 {
             f(idx, w);
@@ -688,6 +697,62 @@ mod tests {
         check([5, 4]);
         check([6, 3, 5]);
         check([2, 6, 4]);
+    }
+
+    /// The cells and weights, in order, of the tent kernel at points inside, on cell centres
+    /// and on the walls, and beyond them (whose share outside is dropped), 2D and 3D (one cell
+    /// wide included): the same, bit for bit, as testing every corner's cell against the grid;
+    /// and at points at least half a cell inside, weights summing to 1.
+    #[test]
+    fn cell_weights_are_the_tent_kernel_inside_the_grid_2d_and_3d() {
+        fn reference<const D: usize>(g: &Grid<D>, x: &Vector<D>) -> Vec<(usize, u64)> {
+            let mut out = vec![];
+            'corners: for corner in 0..1usize << D {
+                let (mut w, mut idx) = (1.0f64, 0);
+                for k in 0..D {
+                    let s = x[k] - 0.5;
+                    let i = s.floor() as i64 + ((corner >> k) & 1) as i64;
+                    if i < 0 || i >= g.dims[k] as i64 {
+                        continue 'corners;
+                    }
+                    let frac = s - s.floor();
+                    w *= if (corner >> k) & 1 == 1 {
+                        frac
+                    } else {
+                        1.0 - frac
+                    };
+                    idx += i as usize * g.cell_stride(k);
+                }
+                if w != 0.0 {
+                    out.push((idx, w.to_bits()));
+                }
+            }
+            out
+        }
+        fn check<const D: usize>(dims: [usize; D]) {
+            let g = Grid::new(dims);
+            let ends = |k: usize| {
+                let n = g.dims[k] as f64;
+                [-0.7, -0.3, 0.0, 0.5, 1.0, n - 0.5, n, n + 0.4]
+            };
+            for i in 0..400 {
+                let x = Vector::<D>::from_fn(|k, _| match i % 3 {
+                    0 => ends(k)[(i / 3 + k) % 8],
+                    _ => ((i * 13 + k * 7) as f64 * 0.37).sin() * 0.6 * g.dims[k] as f64 + 0.5,
+                });
+                let mut got = vec![];
+                for_each_cell_weight(&g, &x, |c, w| got.push((c, w.to_bits())));
+                assert_eq!(got, reference(&g, &x), "at {x}");
+                if (0..D).all(|k| (0.5..=g.dims[k] as f64 - 0.5).contains(&x[k])) {
+                    let sum: f64 = got.iter().map(|&(_, w)| f64::from_bits(w)).sum();
+                    assert!((sum - 1.0).abs() < 1e-12, "weights sum to {sum} at {x}");
+                }
+            }
+        }
+        check([5, 7]);
+        check([1, 6]);
+        check([4, 3, 6]);
+        check([6, 1, 5]);
     }
 
     #[test]
