@@ -300,13 +300,12 @@ fn the_memory_estimate_is_not_below_a_runs_peak() {
 }
 
 /// The estimate counts the particles a band method holds from the seeded liquid's first
-/// markings, before anything is seeded: ccp's band (the cells at most `R` deep) up to the cells
-/// a region covers only in part, which it counts full or empty by their centre (5 % of the
-/// dam's band at 32 cells; a layer of cells more or less would be 25 %), narrow-band FLIP's
-/// from above (its level set's band
-/// is thinner than `R + 1` layers of cells, and it seeds no particle in the surface layer).
-/// Methods without a band hold all they seed (counted as `mu` per cell whose centre a region
-/// the same 5 % on the dam at 32 cells).
+/// markings, before anything is seeded. ccp's band (the cells at most `R` deep) within 6 %:
+/// the estimate counts a cell a region covers only in part as full or empty by its centre (5 %
+/// of the dam's band at 32 cells; a layer of cells more or less would be 25 %). Narrow-band
+/// FLIP's from above: its level set's band is thinner than `R + 1` layers of cells, and it
+/// seeds no particle in the surface layer. A method without a band holds all it seeds, counted
+/// as `mu` per cell whose centre a region covers (within the same 6 %).
 #[test]
 fn the_memory_estimate_counts_the_particles_a_band_holds() {
     use crate::common::{load, simulation, with};
