@@ -178,9 +178,19 @@ impl Half {
         let mut bin_of = vec![NONE; p.bins()];
         bins.clone()
             .for_each(|b| bin_of[b] = (b - bins.start) as u32);
-        // Room for every item and candidate of the whole problem, so that nothing is copied as
-        // the lists grow; the pages a half does not fill are never touched.
-        let (n_items, n_cands) = (p.items(), p.cand_bin.len());
+        // The half's items and kept candidates, counted first so that its lists are allocated
+        // once at their size: room for the whole problem's would be resident wherever the
+        // allocator hands out memory a step before touched.
+        let kept = |b: usize| bins.contains(&b) || whole.free[b];
+        let in_half = |&k0: &u32| bins.contains(&(p.cand_bin[k0 as usize] as usize));
+        let (mut n_items, mut n_cands) = (0, 0);
+        for i in (0..start.len()).filter(|&i| in_half(&start[i])) {
+            n_items += 1;
+            n_cands += p
+                .candidates(i)
+                .filter(|&k| kept(p.cand_bin[k] as usize))
+                .count();
+        }
         let mut q = BoundedAssignment {
             item_start: Vec::with_capacity(n_items + 1),
             cand_bin: Vec::with_capacity(n_cands),
@@ -193,7 +203,7 @@ impl Half {
         let mut original = Vec::with_capacity(n_cands);
         let (mut items, mut q_start) = (Vec::with_capacity(n_items), Vec::with_capacity(n_items));
         for (i, &k0) in start.iter().enumerate() {
-            if !bins.contains(&(p.cand_bin[k0 as usize] as usize)) {
+            if !in_half(&k0) {
                 continue;
             }
             items.push(i as u32);
