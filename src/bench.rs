@@ -7,19 +7,11 @@ use crate::methods::ccp::BandMode;
 use crate::methods::MethodOption;
 use crate::metrics::{median, Stage};
 use crate::runner::{Limit, Runner};
-use crate::scene::{Overrides, Scene};
+use crate::scene::{peak_memory_mib, Overrides, Scene};
 use crate::simulation::Simulation;
 use crate::solvers::pcg::Preconditioner;
 use anyhow::{bail, Result};
 use std::time::Duration;
-
-/// Peak resident memory of this process so far (Linux `VmHWM`), in MiB.
-pub fn peak_memory_mib() -> Option<f64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kib: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kib / 1024.0)
-}
 
 pub fn bench(args: &BenchArgs) -> Result<()> {
     if args.steps == 0 {
@@ -145,7 +137,7 @@ fn bench_dim<const D: usize>(scene: &Scene, args: &BenchArgs) -> Result<Measured
             "  peak memory (process so far): {m:.0} MiB ({started:.0} after seeding and the \
              method's start); estimated up front {:.0} MiB (from {} cells, {} seeded fluid \
              cells, {:.0} particles seeded, {:.0} held)",
-            e.bytes() / (1u64 << 20) as f64,
+            e.mib(),
             e.cells,
             e.fluid_cells,
             e.particles,

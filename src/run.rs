@@ -9,7 +9,7 @@ use crate::interrupt::{self, Watchdog};
 use crate::methods::MethodOption;
 use crate::record::{Drawing, Recorder, Sink};
 use crate::runner::{Limit, Runner};
-use crate::scene::{Overrides, Scene};
+use crate::scene::{peak_memory_mib, Overrides, Scene};
 use crate::simulation::Simulation;
 use anyhow::{anyhow, bail, Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -203,6 +203,12 @@ fn finish<const D: usize>(
         }
         title += ")";
         runner.summary.print(&title);
+        if let Some(peak) = peak_memory_mib() {
+            let estimate = scene.memory_estimate(!args.sink.no_record).mib();
+            crate::outln!(
+                "memory: peak {peak:.0} MiB resident (the process's); estimated up front {estimate:.0} MiB"
+            );
+        }
         let cadence = Cadence::of(args.record_every, D).describe();
         if let Some(s @ (Sink::Spawn | Sink::Connect(_) | Sink::Stdout)) = sink {
             crate::outln!(

@@ -1,9 +1,9 @@
 #!/bin/bash
 # Whole runs' peak memory against the up-front estimate (docs/benchmarks.md, "Memory"): the band
 # methods' footprints are fitted to these. Each run is one `cellflip run` process under
-# /usr/bin/time (its maximum RSS is the run's peak); the estimate comes from a one-step
-# `cellflip bench` of the same scene. One CSV line per run, with the particles the run held
-# after a step (least and most), which is what a band method's estimate has to foresee.
+# /usr/bin/time (its maximum RSS is the run's peak); the estimate is the one its summary prints.
+# One CSV line per run, with the particles the run held after a step (least and most), which
+# is what a band method's estimate has to foresee.
 # Usage: tools/memory-whole.sh [-b path/to/cellflip] [-d seconds] method,scene,res ...
 #   e.g. tools/memory-whole.sh ccp,drop-3d,64 nbflip,dam-3d,96
 set -euo pipefail
@@ -27,8 +27,7 @@ for spec in "$@"; do
   peak=$(($(grep -oP 'MAXRSS \K[0-9]+' "$log.time") / 1024))
   wall=$(grep -oP 'WALL \K[0-9.]+' "$log.time")
   held=$(grep -oP '\(\K[0-9]+ \.\. [0-9]+(?= after a step)' -m1 "$log" | tr -s ' .' ',')
-  est=$("$B" bench --scene "$s" --res "$r" --steps 1 --warmup 1 --method "$m" |
-    grep -oP 'estimated up front \K[0-9]+')
+  est=$(grep -oP 'estimated up front \K[0-9]+' "$log")
   echo "$m,$s,$r,$DURATION,$peak,$wall,$held,$est"
   rm -f "$log" "$log.time"
 done

@@ -3,12 +3,11 @@
 //! (section "The figures").
 
 use super::RunSpec;
-use crate::bench::peak_memory_mib;
 use crate::methods::MethodKind;
 use crate::metrics::{median, Stage};
 use crate::record::ComparisonSeries;
 use crate::runner::{Limit, Runner};
-use crate::scene::Scene;
+use crate::scene::{peak_memory_mib, Scene};
 use crate::simulation::{Simulation, StepReport};
 use crate::validation::{MartinMoyceProbe, COLUMN_WIDTH_M};
 use std::collections::BTreeMap;

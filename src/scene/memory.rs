@@ -58,6 +58,11 @@ impl MemoryEstimate {
         process_bytes(self.recorded) + self.run_bytes()
     }
 
+    /// [`MemoryEstimate::bytes`] in MiB.
+    pub fn mib(&self) -> f64 {
+        self.bytes() / MIB
+    }
+
     /// This run's own share: what one more run side by side adds.
     fn run_bytes(&self) -> f64 {
         (self.cell_bytes + self.particle_bytes).max(self.start_bytes) + self.recording_bytes
@@ -164,10 +169,19 @@ pub fn ensure_fit(scenes: &[&Scene], recorded: bool) -> Result<()> {
 
 /// `MemAvailable` from `/proc/meminfo`, bytes.
 fn available_bytes() -> Option<f64> {
-    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
-    let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
-    let kib: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kib * 1024.0)
+    proc_kib("/proc/meminfo", "MemAvailable:").map(|kib| kib * 1024.0)
+}
+
+/// Peak resident memory of this process so far (Linux `VmHWM`), in MiB.
+pub fn peak_memory_mib() -> Option<f64> {
+    proc_kib("/proc/self/status", "VmHWM:").map(|kib| kib * 1024.0 / MIB)
+}
+
+/// The figure in KiB on the line starting with `key` of the `/proc` file `path`.
+fn proc_kib(path: &str, key: &str) -> Option<f64> {
+    let text = std::fs::read_to_string(path).ok()?;
+    let line = text.lines().find(|l| l.starts_with(key))?;
+    line.split_whitespace().nth(1)?.parse().ok()
 }
 
 /// The liquid a scene seeds, counted in cells: all of them, and those whose particles the

@@ -36,6 +36,31 @@ fn list_names_every_built_in_scene() {
     }
 }
 
+/// The summary's memory line: the process's peak, and the estimate the run was admitted on,
+/// which is never below it.
+#[test]
+fn a_run_s_summary_gives_its_peak_memory_beside_the_estimate() {
+    let o = cellflip(&[
+        "run",
+        "dam-3d",
+        "--res",
+        "24",
+        "--steps",
+        "3",
+        "--no-record",
+    ]);
+    assert!(o.status.success());
+    let text = String::from_utf8_lossy(&o.stdout);
+    let line = text.lines().find(|l| l.starts_with("memory: peak "));
+    let line = line.unwrap_or_else(|| panic!("no memory line in:\n{text}"));
+    let mib = |after: &str| -> f64 {
+        let rest = &line[line.find(after).expect(after) + after.len()..];
+        rest.split_whitespace().next().unwrap().parse().unwrap()
+    };
+    let (peak, estimate) = (mib("memory: peak "), mib("estimated up front "));
+    assert!(peak > 0.0 && estimate >= peak, "{line}");
+}
+
 /// Runs `cellflip run <scene> --steps <steps> <extra>` into `dir` and returns the entities
 /// its recording holds.
 fn record(dir: &Path, scene: &str, steps: &str, extra: &[&str]) -> BTreeSet<String> {
