@@ -136,12 +136,13 @@ fn bench_dim<const D: usize>(scene: &Scene, args: &BenchArgs) -> Result<Measured
         crate::outln!(
             "  peak memory (process so far): {m:.0} MiB ({started:.0} after seeding and the \
              method's start); estimated up front {:.0} MiB (from {} cells, {} seeded fluid \
-             cells, {:.0} particles seeded, {:.0} held)",
+             cells, {:.0} particles seeded, {:.0} held, up to {:.0} once the liquid settles)",
             e.mib(),
             e.cells,
             e.fluid_cells,
             e.particles,
-            e.held
+            e.held,
+            e.held_most
         );
     }
     Ok(Measured {

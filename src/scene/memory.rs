@@ -4,9 +4,11 @@
 //!
 //! The estimate is `BASE + per_cell * cells + per_fluid_cell * fluid cells + per_particle *
 //! particles held (+ the recording's)`, where the fluid cells are the seeded liquid's and the
-//! particles held are those seeded plus what emitters may add; a band method holds only the
-//! band's, counted on the seeded liquid's first markings, but holds every particle seeded while
-//! it starts, which is a second peak the estimate takes the larger of. The footprints are fits
+//! particles held are those seeded plus what emitters may add. A band method holds only the
+//! band's, which moves with the water: the estimate takes the larger of the band of the seeded
+//! liquid's first markings and the band of that liquid settled at rest over the tank's floor
+//! (a column that spreads into a sheet is all band). It holds every particle seeded while it
+//! starts, which is a second peak the estimate takes the larger of. The footprints are fits
 //! to the peak resident memory of whole runs (docs/benchmarks.md, "Memory", gives the
 //! measurements, the ratio of estimate to peak per method and the command that repeats them).
 
@@ -38,8 +40,12 @@ pub struct MemoryEstimate {
     pub fluid_cells: usize,
     /// Particles seeded, plus what the emitters may add (up to their fill, or a full tank).
     pub particles: f64,
-    /// Of those, the particles the method holds (a band method drops the deeper ones).
+    /// Of those, the particles the method holds after its start (a band method drops the
+    /// deeper ones).
     pub held: f64,
+    /// The most it is taken to hold during the run: with a band, the larger of `held` and the
+    /// band of the liquid at rest ([`SeededLiquid::new`]).
+    pub held_most: f64,
     /// The simulation's share once it runs: the cells' and the particles' bytes.
     pub cell_bytes: f64,
     pub particle_bytes: f64,
@@ -97,6 +103,7 @@ impl Scene {
         let emitted = mu * emitted * cells as f64;
         let particles = mu * seeded.cells as f64 + emitted;
         let held = mu * seeded.held_cells as f64 + emitted;
+        let held_most = mu * seeded.held_cells.max(seeded.rest_cells) as f64 + emitted;
         let start_bytes = match footprint.holds {
             Holds::All => 0.0,
             Holds::Band { start, .. } => {
@@ -108,12 +115,13 @@ impl Scene {
             fluid_cells: seeded.cells,
             particles,
             held,
+            held_most,
             cell_bytes: footprint.per_cell * cells as f64
                 + footprint.per_fluid_cell * seeded.cells as f64,
-            particle_bytes: footprint.per_particle * held,
+            particle_bytes: footprint.per_particle * held_most,
             start_bytes,
             recording_bytes: match recorded {
-                true => RECORDING_PER_PARTICLE[D - 2] * held,
+                true => RECORDING_PER_PARTICLE[D - 2] * held_most,
                 false => 0.0,
             },
             recorded,
@@ -184,16 +192,20 @@ fn proc_kib(path: &str, key: &str) -> Option<f64> {
     line.split_whitespace().nth(1)?.parse().ok()
 }
 
-/// The liquid a scene seeds, counted in cells: all of them, and those whose particles the
-/// method holds.
+/// The liquid a scene seeds, counted in cells: all of them, those whose particles the method
+/// holds, and those it would hold were the liquid at rest.
 struct SeededLiquid {
     cells: usize,
     held_cells: usize,
+    rest_cells: usize,
 }
 
 impl SeededLiquid {
     /// With a band, the cells at most `R` below the surface of the seeded liquid's first
-    /// markings (the markings a run starts from, from the cells instead of the particles).
+    /// markings (the markings a run starts from, from the cells instead of the particles), and
+    /// the band of that liquid settled over the floor: a layer `R` cells deep across the
+    /// tank's section normal to gravity (along its largest component), at most the liquid's
+    /// cells (none without gravity).
     fn new<const D: usize>(config: &SimConfig<D>, grid: &Grid<D>, holds: Holds) -> Self {
         let solids = Solids::new(
             grid,
@@ -226,6 +238,24 @@ impl SeededLiquid {
                     .count()
             }
         };
-        Self { cells, held_cells }
+        let rest_cells = match holds {
+            Holds::All => cells,
+            Holds::Band { r, .. } => cells.min(r as usize * floor_cells(config, grid)),
+        };
+        Self {
+            cells,
+            held_cells,
+            rest_cells,
+        }
+    }
+}
+
+/// The cells of one layer of the grid across gravity's largest component (0 without gravity):
+/// the floor a liquid at rest covers.
+fn floor_cells<const D: usize>(config: &SimConfig<D>, grid: &Grid<D>) -> usize {
+    let g = config.gravity.map(f64::abs);
+    match g.argmax() {
+        (axis, v) if v > 0.0 => grid.num_cells() / grid.dims[axis],
+        _ => 0,
     }
 }

@@ -69,17 +69,17 @@ impl MethodType for Ccp {
     }
 
     /// Measured peak memory over a run ([`Footprint`]; docs/benchmarks.md, "Memory"). With the
-    /// band in 3D: a fit to whole runs of its held particles, the liquid's cells and the grid's
-    /// (5% above each run's peak, the spread of repeated runs), and the peak while it starts
-    /// holding every particle seeded; in 2D the band was not
-    /// measured apart, and takes the figures without it.
+    /// band in 3D: a fit to whole runs of the particles it may hold (the band seeded or
+    /// settled), the liquid's cells and the grid's (5% above each run's peak, the spread of
+    /// repeated runs), and the peak while it starts holding every particle seeded; in 2D the
+    /// band was not measured apart, and takes the figures without it.
     fn footprint(s: &CcpSettings, dim: usize) -> Footprint {
         match (s.band, dim) {
             (BandMode::None, _) | (_, 2) => Footprint::of(dim, [(362.0, 470.0), (226.0, 560.0)]),
             _ => Footprint {
-                per_cell: 255.0,
-                per_fluid_cell: 70.0,
-                per_particle: 374.0,
+                per_cell: 125.0,
+                per_fluid_cell: 91.0,
+                per_particle: 614.0,
                 holds: Holds::Band {
                     r: s.band_r,
                     start: StartPeak {

@@ -93,17 +93,18 @@ impl MethodType for Nbflip {
     }
 
     /// Measured peak memory over a run ([`Footprint`]; docs/benchmarks.md, "Memory"): in 2D as
-    /// a method holding every particle (its band was not measured apart there); in 3D a
-    /// fit to whole runs of its held particles, the liquid's cells and the grid's (5% above each
-    /// run's peak, the spread of repeated runs), and the peak while it starts, holding every
-    /// particle seeded and resampling them all (a chunk at a time).
+    /// a method holding every particle (its band was not measured apart there); in 3D a fit to
+    /// whole runs of the particles it may hold (the band seeded or settled), the liquid's cells
+    /// and the grid's (5% above each run's peak, the spread of repeated runs), and the peak
+    /// while it starts, holding every particle seeded and resampling them all (a chunk at a
+    /// time).
     fn footprint(s: &NbflipSettings, dim: usize) -> Footprint {
         match dim {
             2 => Footprint::all(128.0, 90.0),
             _ => Footprint {
-                per_cell: 273.0,
-                per_fluid_cell: 137.0,
-                per_particle: 205.0,
+                per_cell: 248.0,
+                per_fluid_cell: 184.0,
+                per_particle: 191.0,
                 holds: Holds::Band {
                     r: s.band_r,
                     start: StartPeak {
