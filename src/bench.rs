@@ -7,7 +7,7 @@ use crate::methods::ccp::BandMode;
 use crate::methods::MethodOption;
 use crate::metrics::{median, Stage};
 use crate::runner::{Limit, Runner};
-use crate::scene::{peak_memory_mib, Overrides, Scene};
+use crate::scene::{peak_memory_mib, MemoryEstimate, Overrides, Scene};
 use crate::simulation::Simulation;
 use crate::solvers::pcg::Preconditioner;
 use anyhow::{bail, Result};
@@ -42,7 +42,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
                 ..Default::default()
             };
             let scene = Scene::load(&args.scene, &overrides)?;
-            scene.ensure_fits_in_memory(false)?;
+            let estimate = scene.ensure_fits_in_memory(false)?;
             let given = [
                 (MethodOption::Band, band.is_some()),
                 (MethodOption::CrossCheck, args.cross_check),
@@ -54,8 +54,8 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
                 .check_given(&given)
                 .map_err(anyhow::Error::msg)?;
             let m = match scene.dim() {
-                2 => bench_dim::<2>(&scene, args)?,
-                _ => bench_dim::<3>(&scene, args)?,
+                2 => bench_dim::<2>(&scene, &estimate, args)?,
+                _ => bench_dim::<3>(&scene, &estimate, args)?,
             };
             results.push((scene.method.band().name(), m));
         }
@@ -77,7 +77,11 @@ struct Measured {
     fluid_cells: usize,
 }
 
-fn bench_dim<const D: usize>(scene: &Scene, args: &BenchArgs) -> Result<Measured> {
+fn bench_dim<const D: usize>(
+    scene: &Scene,
+    e: &MemoryEstimate,
+    args: &BenchArgs,
+) -> Result<Measured> {
     let mut method = scene.method.clone();
     method.ccp.cross_check = args.cross_check;
     let mut runner = Runner::new(Simulation::<D>::new(scene.config::<D>(), &method));
@@ -132,7 +136,6 @@ fn bench_dim<const D: usize>(scene: &Scene, args: &BenchArgs) -> Result<Measured
     }
     s.method_lines.iter().for_each(|l| crate::outln!("  {l}"));
     if let (Some(m), Some(started)) = (peak_memory_mib(), started) {
-        let e = scene.memory_estimate(false);
         crate::outln!(
             "  peak memory (process so far): {m:.0} MiB ({started:.0} after seeding and the \
              method's start); estimated up front {:.0} MiB (from {} cells, {} seeded fluid \

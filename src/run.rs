@@ -9,7 +9,7 @@ use crate::interrupt::{self, Watchdog};
 use crate::methods::MethodOption;
 use crate::record::{Drawing, Recorder, Sink};
 use crate::runner::{Limit, Runner};
-use crate::scene::{peak_memory_mib, Overrides, Scene};
+use crate::scene::{peak_memory_mib, MemoryEstimate, Overrides, Scene};
 use crate::simulation::Simulation;
 use anyhow::{anyhow, bail, Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -50,7 +50,7 @@ impl RunArgs {
 /// `cellflip run`.
 pub fn run(args: &RunArgs) -> Result<()> {
     let scene = Scene::load(&args.scene, &args.overrides())?;
-    scene.ensure_fits_in_memory(!args.sink.no_record)?;
+    let estimate = scene.ensure_fits_in_memory(!args.sink.no_record)?;
     scene
         .method
         .check_given(&args.method_options())
@@ -65,14 +65,15 @@ pub fn run(args: &RunArgs) -> Result<()> {
     let sink = args.sink.choice(scene.name())?;
     interrupt::install()?;
     match scene.dim() {
-        2 => run_dim::<2>(&scene, limit, sink.as_ref(), args),
-        3 => run_dim::<3>(&scene, limit, sink.as_ref(), args),
+        2 => run_dim::<2>(&scene, &estimate, limit, sink.as_ref(), args),
+        3 => run_dim::<3>(&scene, &estimate, limit, sink.as_ref(), args),
         d => unreachable!("scene checks the dimension, got {d}"),
     }
 }
 
 fn run_dim<const D: usize>(
     scene: &Scene,
+    estimate: &MemoryEstimate,
     limit: Limit,
     sink: Option<&Sink>,
     args: &RunArgs,
@@ -90,7 +91,7 @@ fn run_dim<const D: usize>(
         .map(|s| Recorder::create(s, scene, args.ccp.cross_check, drawing))
         .transpose()?;
     match simulate::<D>(scene, limit, recorder.as_ref(), out, args) {
-        Ok((runner, result)) => finish(scene, runner, result, recorder, sink, args),
+        Ok((runner, result)) => finish(scene, estimate, runner, result, recorder, sink, args),
         Err(e) => {
             if let Some(r) = recorder {
                 r.abandon();
@@ -173,6 +174,7 @@ fn simulate<const D: usize>(
 /// after an interrupted run).
 fn finish<const D: usize>(
     scene: &Scene,
+    estimate: &MemoryEstimate,
     runner: Runner<D>,
     result: Result<()>,
     recorder: Option<Recorder>,
@@ -204,9 +206,9 @@ fn finish<const D: usize>(
         title += ")";
         runner.summary.print(&title);
         if let Some(peak) = peak_memory_mib() {
-            let estimate = scene.memory_estimate(!args.sink.no_record).mib();
             crate::outln!(
-                "memory: peak {peak:.0} MiB resident (the process's); estimated up front {estimate:.0} MiB"
+                "memory: peak {peak:.0} MiB resident (the process's); estimated up front {:.0} MiB",
+                estimate.mib()
             );
         }
         let cadence = Cadence::of(args.record_every, D).describe();

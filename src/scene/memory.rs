@@ -129,28 +129,27 @@ impl Scene {
     }
 
     /// Fails, naming the key that makes the run large, when the estimate exceeds the memory
-    /// available now; passes where that is unknown (no `/proc/meminfo`).
-    pub fn ensure_fits_in_memory(&self, recorded: bool) -> Result<()> {
-        ensure_fit(&[self], recorded)
+    /// available now; passes where that is unknown (no `/proc/meminfo`). Gives the estimate.
+    pub fn ensure_fits_in_memory(&self, recorded: bool) -> Result<MemoryEstimate> {
+        let mut estimates = ensure_fit(&[self], recorded)?;
+        Ok(estimates.remove(0))
     }
 }
 
 /// Fails when runs of `scenes` side by side in one process (`cellflip compare`) would not fit,
-/// naming the first scene's file and the key that makes the runs large.
-pub fn ensure_fit(scenes: &[&Scene], recorded: bool) -> Result<()> {
+/// naming the first scene's file and the key that makes the runs large; gives each scene's
+/// estimate.
+pub fn ensure_fit(scenes: &[&Scene], recorded: bool) -> Result<Vec<MemoryEstimate>> {
     let Some((first, _)) = scenes.split_first() else {
-        return Ok(());
+        return Ok(vec![]);
     };
     let estimates: Vec<MemoryEstimate> =
         scenes.iter().map(|s| s.memory_estimate(recorded)).collect();
     let sum = |f: fn(&MemoryEstimate) -> f64| estimates.iter().map(f).sum::<f64>();
     let bytes = process_bytes(recorded) + sum(MemoryEstimate::run_bytes);
-    let Some(available) = available_bytes() else {
-        return Ok(());
+    let Some(available) = available_bytes().filter(|&a| bytes > a) else {
+        return Ok(estimates);
     };
-    if bytes <= available {
-        return Ok(());
-    }
     let key = match sum(|e| e.particle_bytes + e.recording_bytes) > sum(|e| e.cell_bytes) {
         true => "simulation.ppc",
         false => "domain.cells",

@@ -8,7 +8,7 @@ mod check;
 mod memory;
 
 pub use check::{ErrorKind, SceneError};
-pub use memory::{ensure_fit, peak_memory_mib};
+pub use memory::{ensure_fit, peak_memory_mib, MemoryEstimate};
 
 use crate::grid::Vector;
 use crate::methods::ccp::{BandMode, CcpSettings, Directions, Solver};

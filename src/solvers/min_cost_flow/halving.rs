@@ -182,9 +182,9 @@ impl Half {
         // once at their size: room for the whole problem's would be resident wherever the
         // allocator hands out memory a step before touched.
         let kept = |b: usize| bins.contains(&b) || whole.free[b];
-        let in_half = |&k0: &u32| bins.contains(&(p.cand_bin[k0 as usize] as usize));
+        let in_half = |k0: u32| bins.contains(&(p.cand_bin[k0 as usize] as usize));
         let (mut n_items, mut n_cands) = (0, 0);
-        for i in (0..start.len()).filter(|&i| in_half(&start[i])) {
+        for i in (0..start.len()).filter(|&i| in_half(start[i])) {
             n_items += 1;
             n_cands += p
                 .candidates(i)
@@ -203,7 +203,7 @@ impl Half {
         let mut original = Vec::with_capacity(n_cands);
         let (mut items, mut q_start) = (Vec::with_capacity(n_items), Vec::with_capacity(n_items));
         for (i, &k0) in start.iter().enumerate() {
-            if !in_half(&k0) {
+            if !in_half(k0) {
                 continue;
             }
             items.push(i as u32);
@@ -212,10 +212,10 @@ impl Half {
                     q_start.push(q.cand_bin.len() as u32);
                 }
                 let b = p.cand_bin[k] as usize;
+                if !kept(b) {
+                    continue;
+                }
                 if bin_of[b] == NONE {
-                    if !whole.free[b] {
-                        continue;
-                    }
                     bin_of[b] = q.lower.len() as u32;
                     q.lower.push(p.lower[b]);
                     q.upper.push(p.upper[b]);
