@@ -118,11 +118,11 @@ pub struct Footprint {
 pub enum Holds {
     /// Every particle seeded (and emitted).
     All,
-    /// Those of the cells at most `R` below the seeded liquid's surface, or, if more, below the
-    /// surface of that liquid at rest over the floor (and every particle emitted): the band of
-    /// ccp and of narrow-band FLIP, which drop the deeper ones after holding them all at the
-    /// start.
-    Band { r: u32, start: StartPeak },
+    /// Those of the cells in the top `layers` of the seeded liquid (by depth below its
+    /// surface), or, if more, of that liquid at rest over the floor (and every particle
+    /// emitted): the band of ccp and of narrow-band FLIP, which drop the deeper ones after
+    /// holding them all at the start.
+    Band { layers: u32, start: StartPeak },
 }
 
 /// The peak while a band method starts, before it drops the deep particles: bytes per

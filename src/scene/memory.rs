@@ -15,8 +15,7 @@
 use super::Scene;
 use crate::grid::Grid;
 use crate::methods::Holds;
-use crate::sim::band::Band;
-use crate::sim::markings::{DepthLevel, Markings};
+use crate::sim::markings::Markings;
 use crate::sim::solids::Solids;
 use crate::sim::SimConfig;
 use anyhow::{bail, Result};
@@ -200,11 +199,11 @@ struct SeededLiquid {
 }
 
 impl SeededLiquid {
-    /// With a band, the cells at most `R` below the surface of the seeded liquid's first
-    /// markings (the markings a run starts from, from the cells instead of the particles), and
-    /// the band of that liquid settled over the floor: a layer `R` cells deep across the
-    /// tank's section normal to gravity (along its largest component), at most the liquid's
-    /// cells (none without gravity).
+    /// With a band of `layers`, the cells of the seeded liquid's first markings (the markings a
+    /// run starts from, from the cells instead of the particles) less than `layers` deep, and
+    /// the band of that liquid settled over the floor: `layers` cells deep across the tank's
+    /// section normal to gravity (along its largest component), at most the liquid's cells
+    /// (none without gravity).
     fn new<const D: usize>(config: &SimConfig<D>, grid: &Grid<D>, holds: Holds) -> Self {
         let solids = Solids::new(
             grid,
@@ -221,7 +220,7 @@ impl SeededLiquid {
         let cells = liquid.iter().filter(|&&l| l).count();
         let held_cells = match holds {
             Holds::All => cells,
-            Holds::Band { r, .. } => {
+            Holds::Band { layers, .. } => {
                 let m = Markings::compute_keeping(
                     grid,
                     &[],
@@ -229,17 +228,14 @@ impl SeededLiquid {
                     Some(&liquid),
                     solids.moving_mask(),
                 );
-                let band = Band { r };
                 (0..m.kind.len())
-                    .filter(|&c| {
-                        !matches!(band.level(&m, c), DepthLevel::NotFluid | DepthLevel::Deep)
-                    })
+                    .filter(|&c| m.is_fluid(c) && m.depth[c] > -(layers as i32))
                     .count()
             }
         };
         let rest_cells = match holds {
             Holds::All => cells,
-            Holds::Band { r, .. } => cells.min(r as usize * floor_cells(config, grid)),
+            Holds::Band { layers, .. } => cells.min(layers as usize * floor_cells(config, grid)),
         };
         Self {
             cells,

@@ -303,9 +303,11 @@ fn the_memory_estimate_is_not_below_a_runs_peak() {
 /// markings, before anything is seeded. ccp's band (the cells at most `R` deep) within 6 %:
 /// the estimate counts a cell a region covers only in part as full or empty by its centre (5 %
 /// of the dam's band at 32 cells; a layer of cells more or less would be 25 %). Narrow-band
-/// FLIP's from above: its level set's band is thinner than `R + 1` layers of cells, and it
-/// seeds no particle in the surface layer. A method without a band holds all it seeds, counted
-/// as `mu` per cell whose centre a region covers (within the same 6 %).
+/// FLIP's, `R` layers (one fewer than ccp's), from above but within 40 %: its level set's
+/// surface lies above the particles, so those it keeps (`phi >= -R`) reach a little less than
+/// `R` cells deep (ccp's `R + 1` layers would be over 1.5x at `R = 3`). A method without a
+/// band holds all it seeds, counted as `mu` per cell whose centre a region covers (within the
+/// same 6 %).
 #[test]
 fn the_memory_estimate_counts_the_particles_a_band_holds() {
     use crate::common::{load, simulation, with};
@@ -335,7 +337,7 @@ fn the_memory_estimate_counts_the_particles_a_band_holds() {
         assert_eq!(e.held_most, e.held, "{scene}: the most ccp may hold");
         let (estimate, nbflip) = held(&load(scene, &o(MethodKind::Nbflip, None)));
         assert!(
-            nbflip <= estimate && estimate < 1.7 * nbflip,
+            nbflip <= estimate && estimate < 1.4 * nbflip,
             "{scene}: nbflip holds {nbflip} particles, estimated {estimate}"
         );
         let flip = load(scene, &o(MethodKind::Flip, None));

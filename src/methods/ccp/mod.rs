@@ -80,8 +80,10 @@ impl MethodType for Ccp {
                 per_cell: 125.0,
                 per_fluid_cell: 91.0,
                 per_particle: 614.0,
+                // The surface, the band and its interface (`beta` from 0 to `-R`): the
+                // interface's particles are the band's boundary (sec. 5).
                 holds: Holds::Band {
-                    r: s.band_r,
+                    layers: s.band_r + 1,
                     start: StartPeak {
                         per_particle: 55.0,
                         per_cell: 33.0,

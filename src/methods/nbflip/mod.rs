@@ -102,11 +102,13 @@ impl MethodType for Nbflip {
         match dim {
             2 => Footprint::all(128.0, 90.0),
             _ => Footprint {
-                per_cell: 248.0,
-                per_fluid_cell: 184.0,
-                per_particle: 191.0,
+                per_cell: 225.0,
+                per_fluid_cell: 161.0,
+                per_particle: 284.0,
+                // It deletes the particles below `phi = -R` (`Resampling`): about the top `R`
+                // layers of cells keep theirs, one fewer than ccp's band.
                 holds: Holds::Band {
-                    r: s.band_r,
+                    layers: s.band_r,
                     start: StartPeak {
                         per_particle: 59.0,
                         per_cell: 57.0,
