@@ -141,6 +141,18 @@ impl Footprint {
         Self::all(per_cell, per_particle)
     }
 
+    /// The footprint of a band method keeping the top `layers` of the liquid: `[per cell, per
+    /// seeded fluid cell, per particle it may hold]` and its peak while it starts.
+    pub fn band(layers: u32, measured: [f64; 3], start: StartPeak) -> Self {
+        let [per_cell, per_fluid_cell, per_particle] = measured;
+        Self {
+            per_cell,
+            per_fluid_cell,
+            per_particle,
+            holds: Holds::Band { layers, start },
+        }
+    }
+
     /// The footprint of a method holding every particle, in the dimension it was measured in.
     pub fn all(per_cell: f64, per_particle: f64) -> Self {
         Self {

@@ -300,7 +300,7 @@ fn the_memory_estimate_is_not_below_a_runs_peak() {
 }
 
 /// The estimate counts the particles a band method holds from the seeded liquid's first
-/// markings, before anything is seeded. ccp's band (the cells at most `R` deep) within 6 %:
+/// markings, before anything is seeded, in 3D and 2D. ccp's band (the cells at most `R` deep) within 6 %:
 /// the estimate counts a cell a region covers only in part as full or empty by its centre (5 %
 /// of the dam's band at 32 cells; a layer of cells more or less would be 25 %). Narrow-band
 /// FLIP's, `R` layers (one fewer than ccp's), from above but within 40 %: its level set's
@@ -313,17 +313,24 @@ fn the_memory_estimate_counts_the_particles_a_band_holds() {
     use crate::common::{load, simulation, with};
     use cellflip::methods::ccp::BandMode;
     use cellflip::methods::MethodKind;
-    for (scene, res) in [("drop-3d", 40), ("falling-obstacle-3d", 32), ("dam-3d", 32)] {
+    let scenes = [
+        ("drop-3d", 40),
+        ("falling-obstacle-3d", 32),
+        ("dam-3d", 32),
+        ("drop-2d", 128),
+        ("falling-obstacle-2d", 128),
+    ];
+    for (scene, res) in scenes {
         let o = |m, band| Overrides {
             cells: Some(res),
             ..with(m, band)
         };
         let held = |scene: &Scene| {
-            let sim = simulation::<3>(scene, false);
-            (
-                scene.memory_estimate(false).held,
-                sim.state.particles.len() as f64,
-            )
+            let particles = match scene.dim() {
+                2 => simulation::<2>(scene, false).state.particles.len(),
+                _ => simulation::<3>(scene, false).state.particles.len(),
+            };
+            (scene.memory_estimate(false).held, particles as f64)
         };
         let ccp_scene = load(scene, &o(MethodKind::Ccp, Some(BandMode::Paths)));
         let (estimate, ccp) = held(&ccp_scene);

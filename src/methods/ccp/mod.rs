@@ -19,8 +19,8 @@ pub use record::CcpReport;
 pub use settings::{BandMode, CcpArgs, CcpSettings, Directions, Solver};
 
 use super::seam::{
-    FluidMethod, Footprint, Holds, MethodInfo, MethodOption, MethodSummary, MethodType,
-    SettingContext, SettingError, StartPeak,
+    FluidMethod, Footprint, MethodInfo, MethodOption, MethodSummary, MethodType, SettingContext,
+    SettingError, StartPeak,
 };
 use crate::draw::{LayerView, Needs};
 use crate::sim::solids::ObstacleMode;
@@ -69,27 +69,34 @@ impl MethodType for Ccp {
     }
 
     /// Measured peak memory over a run ([`Footprint`]; docs/benchmarks.md, "Memory"). With the
-    /// band in 3D: a fit to whole runs of the particles it may hold (the band seeded or
-    /// settled), the liquid's cells and the grid's (5% above each run's peak, the spread of
-    /// repeated runs), and the peak while it starts holding every particle seeded; in 2D the
-    /// band was not measured apart, and takes the figures without it.
+    /// band: a fit to whole runs of the particles it may hold (the band seeded or settled), the
+    /// liquid's cells and the grid's (5% above each run's peak, the spread of repeated runs),
+    /// and the peak while it starts holding every particle seeded (in 2D the band holds so few
+    /// particles beside the cells that the fit gives them no more than their own 32 bytes).
+    /// Without: a fit to whole runs of the grid's cells and the particles (5% above each peak),
+    /// which spreads wider, as the correction's size follows the conflicts the water makes.
     fn footprint(s: &CcpSettings, dim: usize) -> Footprint {
+        // The surface, the band and its interface (`beta` from 0 to `-R`): the interface's
+        // particles are the band's boundary (sec. 5).
+        let layers = s.band_r + 1;
         match (s.band, dim) {
-            (BandMode::None, _) | (_, 2) => Footprint::of(dim, [(362.0, 470.0), (226.0, 560.0)]),
-            _ => Footprint {
-                per_cell: 125.0,
-                per_fluid_cell: 91.0,
-                per_particle: 614.0,
-                // The surface, the band and its interface (`beta` from 0 to `-R`): the
-                // interface's particles are the band's boundary (sec. 5).
-                holds: Holds::Band {
-                    layers: s.band_r + 1,
-                    start: StartPeak {
-                        per_particle: 55.0,
-                        per_cell: 33.0,
-                    },
+            (BandMode::None, _) => Footprint::of(dim, [(155.0, 474.0), (152.0, 568.0)]),
+            (_, 2) => Footprint::band(
+                layers,
+                [139.0, 221.0, 32.0],
+                StartPeak {
+                    per_particle: 35.0,
+                    per_cell: 26.0,
                 },
-            },
+            ),
+            _ => Footprint::band(
+                layers,
+                [125.0, 91.0, 614.0],
+                StartPeak {
+                    per_particle: 55.0,
+                    per_cell: 33.0,
+                },
+            ),
         }
     }
 }

@@ -34,8 +34,8 @@ pub mod region;
 pub use physics::{combine, level, NbflipReport, Resampling};
 
 use super::seam::{
-    FluidMethod, Footprint, Holds, MethodInfo, MethodOption, MethodSummary, MethodType,
-    SettingContext, SettingError, StartPeak,
+    FluidMethod, Footprint, MethodInfo, MethodOption, MethodSummary, MethodType, SettingContext,
+    SettingError, StartPeak,
 };
 use crate::sim::band::{check_band_r, DEFAULT_BAND_R};
 use crate::sim::solids::ObstacleMode;
@@ -92,29 +92,32 @@ impl MethodType for Nbflip {
         Box::new(Totals::new(s.band_r))
     }
 
-    /// Measured peak memory over a run ([`Footprint`]; docs/benchmarks.md, "Memory"): in 2D as
-    /// a method holding every particle (its band was not measured apart there); in 3D a fit to
+    /// Measured peak memory over a run ([`Footprint`]; docs/benchmarks.md, "Memory"): a fit to
     /// whole runs of the particles it may hold (the band seeded or settled), the liquid's cells
     /// and the grid's (5% above each run's peak, the spread of repeated runs), and the peak
     /// while it starts, holding every particle seeded and resampling them all (a chunk at a
-    /// time).
+    /// time). In 2D the band holds so few particles beside the cells that the fit gives them
+    /// no more than their own 32 bytes.
     fn footprint(s: &NbflipSettings, dim: usize) -> Footprint {
+        // It deletes the particles below `phi = -R` (`Resampling`): about the top `R` layers of
+        // cells keep theirs, one fewer than ccp's band.
         match dim {
-            2 => Footprint::all(128.0, 90.0),
-            _ => Footprint {
-                per_cell: 225.0,
-                per_fluid_cell: 161.0,
-                per_particle: 284.0,
-                // It deletes the particles below `phi = -R` (`Resampling`): about the top `R`
-                // layers of cells keep theirs, one fewer than ccp's band.
-                holds: Holds::Band {
-                    layers: s.band_r,
-                    start: StartPeak {
-                        per_particle: 59.0,
-                        per_cell: 57.0,
-                    },
+            2 => Footprint::band(
+                s.band_r,
+                [195.0, 219.0, 32.0],
+                StartPeak {
+                    per_particle: 38.0,
+                    per_cell: 53.0,
                 },
-            },
+            ),
+            _ => Footprint::band(
+                s.band_r,
+                [225.0, 161.0, 284.0],
+                StartPeak {
+                    per_particle: 59.0,
+                    per_cell: 57.0,
+                },
+            ),
         }
     }
 }
