@@ -35,7 +35,7 @@ impl MethodType for Flip {
 
     /// Measured peak memory over a run ([`Footprint`]; docs/benchmarks.md, "Memory").
     fn footprint(_settings: &(), dim: usize) -> Footprint {
-        Footprint::of(dim, [(105.0, 102.0), (140.0, 107.0)])
+        Footprint::of(dim, [(111.0, 115.0), (165.0, 100.0)])
     }
 }
 

@@ -107,6 +107,6 @@ impl MethodType for Idp {
 
     /// Measured peak memory over a run ([`Footprint`]; docs/benchmarks.md, "Memory").
     fn footprint(_settings: &IdpSettings, dim: usize) -> Footprint {
-        Footprint::of(dim, [(144.0, 100.0), (170.0, 150.0)])
+        Footprint::of(dim, [(145.0, 115.0), (195.0, 150.0)])
     }
 }
