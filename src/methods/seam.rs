@@ -141,10 +141,16 @@ impl Footprint {
         Self::all(per_cell, per_particle)
     }
 
-    /// The footprint of a band method keeping the top `layers` of the liquid: `[per cell, per
-    /// seeded fluid cell, per particle it may hold]` and its peak while it starts.
-    pub fn band(layers: u32, measured: [f64; 3], start: StartPeak) -> Self {
-        let [per_cell, per_fluid_cell, per_particle] = measured;
+    /// The footprint in `dim` dimensions of a band method keeping the top `layers` of the
+    /// liquid, from the measured `[2D, 3D]` pairs of `[bytes per cell, per seeded fluid cell,
+    /// per particle it may hold]` and the peak while it starts, `(per particle seeded, per
+    /// cell)`.
+    pub fn band(dim: usize, layers: u32, measured: [([f64; 3], (f64, f64)); 2]) -> Self {
+        let ([per_cell, per_fluid_cell, per_particle], start) = measured[dim.clamp(2, 3) - 2];
+        let start = StartPeak {
+            per_particle: start.0,
+            per_cell: start.1,
+        };
         Self {
             per_cell,
             per_fluid_cell,

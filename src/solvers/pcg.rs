@@ -85,8 +85,9 @@ impl<const D: usize> StencilMatrix<D> {
 #[serde(rename_all = "kebab-case")]
 pub enum Preconditioner {
     /// By the system's size: multigrid from 10,000 unknown rows in 2D and 100,000 in 3D
-    /// (`Preconditioner::AUTO_ROWS`), MIC(0) below, where the multigrid's set-up and heavier iterations do
-    /// not pay (the crossover measured in docs/benchmarks.md, "Pressure preconditioners").
+    /// (`Preconditioner::AUTO_ROWS`), MIC(0) below, where the multigrid's set-up and heavier
+    /// iterations do not pay (the crossover measured in docs/benchmarks.md, "Pressure
+    /// preconditioners").
     #[default]
     Auto,
     /// Modified incomplete Cholesky: cheap per iteration, but its triangular solves are

@@ -300,9 +300,9 @@ fn the_memory_estimate_is_not_below_a_runs_peak() {
 }
 
 /// The estimate counts the particles a band method holds from the seeded liquid's first
-/// markings, before anything is seeded, in 3D and 2D. ccp's band (the cells at most `R` deep) within 6 %:
-/// the estimate counts a cell a region covers only in part as full or empty by its centre (5 %
-/// of the dam's band at 32 cells; a layer of cells more or less would be 25 %). Narrow-band
+/// markings, before anything is seeded, in 3D and 2D. ccp's band (the cells at most `R` deep)
+/// within 6 %: the estimate counts a cell a region covers only in part as full or empty by its
+/// centre (5 % of the dam's band at 32 cells; a layer of cells more or less would be 25 %). Narrow-band
 /// FLIP's, `R` layers (one fewer than ccp's), from above but within 40 %: its level set's
 /// surface lies above the particles, so those it keeps (`phi >= -R`) reach a little less than
 /// `R` cells deep (ccp's `R + 1` layers would be over 1.5x at `R = 3`). A method without a

@@ -20,7 +20,7 @@ pub use settings::{BandMode, CcpArgs, CcpSettings, Directions, Solver};
 
 use super::seam::{
     FluidMethod, Footprint, MethodInfo, MethodOption, MethodSummary, MethodType, SettingContext,
-    SettingError, StartPeak,
+    SettingError,
 };
 use crate::draw::{LayerView, Needs};
 use crate::sim::solids::ObstacleMode;
@@ -81,21 +81,13 @@ impl MethodType for Ccp {
         let layers = s.band_r + 1;
         match (s.band, dim) {
             (BandMode::None, _) => Footprint::of(dim, [(155.0, 474.0), (152.0, 568.0)]),
-            (_, 2) => Footprint::band(
-                layers,
-                [139.0, 221.0, 32.0],
-                StartPeak {
-                    per_particle: 35.0,
-                    per_cell: 26.0,
-                },
-            ),
             _ => Footprint::band(
+                dim,
                 layers,
-                [125.0, 91.0, 614.0],
-                StartPeak {
-                    per_particle: 55.0,
-                    per_cell: 33.0,
-                },
+                [
+                    ([139.0, 221.0, 32.0], (35.0, 26.0)),
+                    ([125.0, 91.0, 614.0], (55.0, 33.0)),
+                ],
             ),
         }
     }

@@ -35,7 +35,7 @@ pub use physics::{combine, level, NbflipReport, Resampling};
 
 use super::seam::{
     FluidMethod, Footprint, MethodInfo, MethodOption, MethodSummary, MethodType, SettingContext,
-    SettingError, StartPeak,
+    SettingError,
 };
 use crate::sim::band::{check_band_r, DEFAULT_BAND_R};
 use crate::sim::solids::ObstacleMode;
@@ -101,23 +101,13 @@ impl MethodType for Nbflip {
     fn footprint(s: &NbflipSettings, dim: usize) -> Footprint {
         // It deletes the particles below `phi = -R` (`Resampling`): about the top `R` layers of
         // cells keep theirs, one fewer than ccp's band.
-        match dim {
-            2 => Footprint::band(
-                s.band_r,
-                [195.0, 219.0, 32.0],
-                StartPeak {
-                    per_particle: 38.0,
-                    per_cell: 53.0,
-                },
-            ),
-            _ => Footprint::band(
-                s.band_r,
-                [225.0, 161.0, 284.0],
-                StartPeak {
-                    per_particle: 59.0,
-                    per_cell: 57.0,
-                },
-            ),
-        }
+        Footprint::band(
+            dim,
+            s.band_r,
+            [
+                ([195.0, 219.0, 32.0], (38.0, 53.0)),
+                ([225.0, 161.0, 284.0], (59.0, 57.0)),
+            ],
+        )
     }
 }
