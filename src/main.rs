@@ -9,6 +9,7 @@ use std::io::Write;
 /// Exit status: 0, 1 on an error, 128 + the signal's number after a run stopped by a signal
 /// (its recording and summary finished first).
 fn main() {
+    one_malloc_arena();
     let cli = Cli::parse();
     // The main thread is one of rayon's workers: it runs its share of every parallel loop,
     // and rayon starts one thread fewer. Outside the pool it would wait on every loop and run
@@ -26,6 +27,24 @@ fn main() {
         (Some(sig), _) => std::process::exit(interrupt::exit_code(sig)),
         (None, Err(_)) => std::process::exit(1),
         (None, Ok(())) => {}
+    }
+}
+
+/// Serves every thread from one malloc arena (glibc's `M_ARENA_MAX`), before any thread starts.
+///
+/// By default glibc gives each thread its own arena, and an arena keeps the memory its thread
+/// freed for that thread's next allocations. The flow solver's halves are allocated by
+/// whichever thread runs them, a different one from step to step, so each arena came to hold
+/// the high-water mark of the other's, and the resident peak was that of the live memory plus
+/// an unpredictable share of it (ccp without the band on deep-pool-3d at 48^3, 0.3 s: 286-316
+/// MiB over five runs, 341 in a 1 s run, against 256-272 with one arena; wall time 1.01x,
+/// `farm-bench`, docs/benchmarks.md "One malloc arena"). The memory estimate is fitted to
+/// peaks measured this way.
+fn one_malloc_arena() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: `mallopt` only sets an allocator parameter; no other thread exists yet.
+    unsafe {
+        libc::mallopt(libc::M_ARENA_MAX, 1);
     }
 }
 
