@@ -109,8 +109,19 @@ pub struct Footprint {
     /// the band's bookkeeping).
     pub per_fluid_cell: f64,
     pub per_particle: f64,
+    /// What a problem large enough to be solved in copies adds (none for most methods).
+    pub large: Option<LargeProblem>,
     /// Which of the seeded particles the method holds.
     pub holds: Holds,
+}
+
+/// Bytes per particle held that count only from `min_particles` particles up: a solver that
+/// works on copies of problems from a size on (ccp's flow solver halves a problem of 100,000
+/// items or more, and without the band every particle is an item).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LargeProblem {
+    pub min_particles: usize,
+    pub per_particle: f64,
 }
 
 /// The particles a method holds after its start.
@@ -155,6 +166,7 @@ impl Footprint {
             per_cell,
             per_fluid_cell,
             per_particle,
+            large: None,
             holds: Holds::Band { layers, start },
         }
     }
@@ -165,8 +177,31 @@ impl Footprint {
             per_cell,
             per_fluid_cell: 0.0,
             per_particle,
+            large: None,
             holds: Holds::All,
         }
+    }
+
+    /// This footprint in `dim` dimensions, plus the measured `[2D, 3D]` bytes per particle of a
+    /// problem of at least `min_particles`.
+    pub fn with_large(self, dim: usize, min_particles: usize, measured: [f64; 2]) -> Self {
+        let per_particle = measured[dim.clamp(2, 3) - 2];
+        Self {
+            large: Some(LargeProblem {
+                min_particles,
+                per_particle,
+            }),
+            ..self
+        }
+    }
+
+    /// Its bytes for `particles` held: [`Footprint::per_particle`] each, plus
+    /// [`Footprint::large`]'s from its size on.
+    pub fn particle_bytes(&self, particles: f64) -> f64 {
+        let large = (self.large)
+            .filter(|l| particles >= l.min_particles as f64)
+            .map_or(0.0, |l| l.per_particle);
+        (self.per_particle + large) * particles
     }
 }
 
@@ -354,5 +389,18 @@ impl<const D: usize> MethodReport<D> for NoReport {
 
     fn as_any(&self) -> &dyn Any {
         self
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_large_problem_counts_from_its_size_on() {
+        let f = Footprint::all(0.0, 100.0).with_large(3, 1000, [0.0, 50.0]);
+        assert_eq!(f.particle_bytes(999.0), 99_900.0);
+        assert_eq!(f.particle_bytes(1000.0), 150_000.0);
+        assert_eq!(Footprint::all(0.0, 100.0).particle_bytes(1000.0), 100_000.0);
     }
 }

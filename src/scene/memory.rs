@@ -3,7 +3,7 @@
 //! has available (Linux `MemAvailable`).
 //!
 //! The estimate is `BASE + per_cell * cells + per_fluid_cell * fluid cells + per_particle *
-//! particles held (+ the recording's)`, where the fluid cells are the seeded liquid's and the
+//! particles held (+ a large problem's surcharge, + the recording's)`, where the fluid cells are the seeded liquid's and the
 //! particles held are those seeded plus what emitters may add. A band method holds only the
 //! band's, which moves with the water: the estimate takes the larger of the band of the seeded
 //! liquid's first markings and the band of that liquid settled at rest over the tank's floor
@@ -119,7 +119,7 @@ impl Scene {
             held_most,
             cell_bytes: footprint.per_cell * cells as f64
                 + footprint.per_fluid_cell * seeded.cells as f64,
-            particle_bytes: footprint.per_particle * held_most,
+            particle_bytes: footprint.particle_bytes(held_most),
             start_bytes,
             recording_bytes: match recorded {
                 true => RECORDING_PER_PARTICLE[D - 2] * held_most,

@@ -24,6 +24,7 @@ use super::seam::{
 };
 use crate::draw::{LayerView, Needs};
 use crate::sim::solids::ObstacleMode;
+use crate::solvers::min_cost_flow::HALVING;
 use physics::CcpSim;
 use record::{Totals, PANELS};
 
@@ -74,13 +75,19 @@ impl MethodType for Ccp {
     /// and the peak while it starts holding every particle seeded (in 2D the band holds so few
     /// particles beside the cells that the fit gives them no more than their own 32 bytes).
     /// Without: a fit to whole runs of the grid's cells and the particles (5% above each peak),
-    /// which spreads wider, as the correction's size follows the conflicts the water makes.
+    /// with the particles of a problem the flow solver halves counted again for its copies.
     fn footprint(s: &CcpSettings, dim: usize) -> Footprint {
         // The surface, the band and its interface (`beta` from 0 to `-R`): the interface's
         // particles are the band's boundary (sec. 5).
         let layers = s.band_r + 1;
         match (s.band, dim) {
-            (BandMode::None, _) => Footprint::of(dim, [(155.0, 474.0), (152.0, 568.0)]),
+            // Every particle is an item of the flow, and from `HALVING.min_items` up the solver
+            // copies them into its two halves.
+            (BandMode::None, _) => Footprint::of(dim, [(93.0, 296.0), (186.0, 306.0)]).with_large(
+                dim,
+                HALVING.min_items,
+                [150.0, 149.0],
+            ),
             _ => Footprint::band(
                 dim,
                 layers,
