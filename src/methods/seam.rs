@@ -133,7 +133,14 @@ pub enum Holds {
     /// surface), or, if more, of that liquid at rest over the floor (and every particle
     /// emitted): the band of ccp and of narrow-band FLIP, which drop the deeper ones after
     /// holding them all at the start.
-    Band { layers: u32, start: StartPeak },
+    Band {
+        layers: u32,
+        start: StartPeak,
+        /// Bytes per particle that the settled band counts beyond the seeded one, on top of
+        /// the footprint's per particle: a band that spreads as the liquid settles (a dam's
+        /// column into a sheet) can outgrow that count.
+        spreading: f64,
+    },
 }
 
 /// The peak while a band method starts, before it drops the deep particles: bytes per
@@ -154,10 +161,11 @@ impl Footprint {
 
     /// The footprint in `dim` dimensions of a band method keeping the top `layers` of the
     /// liquid, from the measured `[2D, 3D]` pairs of `[bytes per cell, per seeded fluid cell,
-    /// per particle it may hold]` and the peak while it starts, `(per particle seeded, per
-    /// cell)`.
-    pub fn band(dim: usize, layers: u32, measured: [([f64; 3], (f64, f64)); 2]) -> Self {
-        let ([per_cell, per_fluid_cell, per_particle], start) = measured[dim.clamp(2, 3) - 2];
+    /// per particle it may hold, per particle the settled band holds beyond the seeded one]`
+    /// and the peak while it starts, `(per particle seeded, per cell)`.
+    pub fn band(dim: usize, layers: u32, measured: [([f64; 4], (f64, f64)); 2]) -> Self {
+        let ([per_cell, per_fluid_cell, per_particle, spreading], start) =
+            measured[dim.clamp(2, 3) - 2];
         let start = StartPeak {
             per_particle: start.0,
             per_cell: start.1,
@@ -167,7 +175,11 @@ impl Footprint {
             per_fluid_cell,
             per_particle,
             large: None,
-            holds: Holds::Band { layers, start },
+            holds: Holds::Band {
+                layers,
+                start,
+                spreading,
+            },
         }
     }
 

@@ -3,7 +3,8 @@
 //! has available (Linux `MemAvailable`).
 //!
 //! The estimate is `BASE + per_cell * cells + per_fluid_cell * fluid cells + per_particle *
-//! particles held (+ a large problem's surcharge, + the recording's)`, where the fluid cells are the seeded liquid's and the
+//! particles held (+ a large problem's surcharge, + the spreading of a band beyond its seeded
+//! count, + the recording's)`, where the fluid cells are the seeded liquid's and the
 //! particles held are those seeded plus what emitters may add. A band method holds only the
 //! band's, which moves with the water: the estimate takes the larger of the band of the seeded
 //! liquid's first markings and the band of that liquid settled at rest over the tank's floor
@@ -105,11 +106,14 @@ impl Scene {
         let particles = mu * seeded.cells as f64 + emitted;
         let held = mu * seeded.held_cells as f64 + emitted;
         let held_most = mu * seeded.held_cells.max(seeded.rest_cells) as f64 + emitted;
-        let start_bytes = match footprint.holds {
-            Holds::All => 0.0,
-            Holds::Band { start, .. } => {
-                start.per_particle * mu * seeded.cells as f64 + start.per_cell * cells as f64
-            }
+        let (start_bytes, spreading) = match footprint.holds {
+            Holds::All => (0.0, 0.0),
+            Holds::Band {
+                start, spreading, ..
+            } => (
+                start.per_particle * mu * seeded.cells as f64 + start.per_cell * cells as f64,
+                spreading * (held_most - held),
+            ),
         };
         MemoryEstimate {
             cells,
@@ -119,7 +123,7 @@ impl Scene {
             held_most,
             cell_bytes: footprint.per_cell * cells as f64
                 + footprint.per_fluid_cell * seeded.cells as f64,
-            particle_bytes: footprint.particle_bytes(held_most),
+            particle_bytes: footprint.particle_bytes(held_most) + spreading,
             start_bytes,
             recording_bytes: match recorded {
                 true => RECORDING_PER_PARTICLE[D - 2] * held_most,

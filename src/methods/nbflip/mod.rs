@@ -96,8 +96,10 @@ impl MethodType for Nbflip {
     /// whole runs of the particles it may hold (the band seeded or settled), the liquid's cells
     /// and the grid's (5% above each run's peak, the spread of repeated runs), and the peak
     /// while it starts, holding every particle seeded and resampling them all (a chunk at a
-    /// time). In 2D the band holds so few particles beside the cells that the fit gives them
-    /// no more than their own 32 bytes.
+    /// time). In 3D the particles the settled band counts beyond the seeded one weigh more:
+    /// on the dam the band outgrows the settled count (the column spreads into a sheet, and
+    /// the resampling tops up FLIP's volume gain). In 2D the band holds so few particles
+    /// beside the cells that the fit gives them no more than their own 32 bytes.
     fn footprint(s: &NbflipSettings, dim: usize) -> Footprint {
         // It deletes the particles below `phi = -R` (`Resampling`): about the top `R` layers of
         // cells keep theirs, one fewer than ccp's band.
@@ -105,8 +107,8 @@ impl MethodType for Nbflip {
             dim,
             s.band_r,
             [
-                ([195.0, 219.0, 32.0], (38.0, 53.0)),
-                ([225.0, 161.0, 284.0], (59.0, 57.0)),
+                ([195.0, 219.0, 32.0, 0.0], (38.0, 53.0)),
+                ([179.0, 255.0, 217.0, 291.0], (59.0, 57.0)),
             ],
         )
     }
