@@ -155,7 +155,7 @@ impl Footprint {
     /// The footprint in `dim` dimensions of a method holding every particle, from the measured
     /// `[2D, 3D]` pairs of bytes per cell and bytes per particle.
     pub fn of(dim: usize, measured: [(f64, f64); 2]) -> Self {
-        let (per_cell, per_particle) = measured[dim.clamp(2, 3) - 2];
+        let (per_cell, per_particle) = in_dim(dim, measured);
         Self::all(per_cell, per_particle)
     }
 
@@ -164,8 +164,7 @@ impl Footprint {
     /// per particle it may hold, per particle the settled band holds beyond the seeded one]`
     /// and the peak while it starts, `(per particle seeded, per cell)`.
     pub fn band(dim: usize, layers: u32, measured: [([f64; 4], (f64, f64)); 2]) -> Self {
-        let ([per_cell, per_fluid_cell, per_particle, spreading], start) =
-            measured[dim.clamp(2, 3) - 2];
+        let ([per_cell, per_fluid_cell, per_particle, spreading], start) = in_dim(dim, measured);
         let start = StartPeak {
             per_particle: start.0,
             per_cell: start.1,
@@ -197,24 +196,42 @@ impl Footprint {
     /// This footprint in `dim` dimensions, plus the measured `[2D, 3D]` bytes per particle of a
     /// problem of at least `min_particles`.
     pub fn with_large(self, dim: usize, min_particles: usize, measured: [f64; 2]) -> Self {
-        let per_particle = measured[dim.clamp(2, 3) - 2];
         Self {
             large: Some(LargeProblem {
                 min_particles,
-                per_particle,
+                per_particle: in_dim(dim, measured),
             }),
             ..self
         }
     }
 
-    /// Its bytes for `particles` held: [`Footprint::per_particle`] each, plus
-    /// [`Footprint::large`]'s from its size on.
-    pub fn particle_bytes(&self, particles: f64) -> f64 {
+    /// Its bytes for the particles it may hold, `held` from the seeded liquid and `held_most`
+    /// at the most: [`Footprint::per_particle`] each of `held_most`, plus [`Footprint::large`]'s
+    /// from its size on, plus a band's spreading for those beyond `held`.
+    pub fn particle_bytes(&self, held: f64, held_most: f64) -> f64 {
         let large = (self.large)
-            .filter(|l| particles >= l.min_particles as f64)
+            .filter(|l| held_most >= l.min_particles as f64)
             .map_or(0.0, |l| l.per_particle);
-        (self.per_particle + large) * particles
+        let spreading = match self.holds {
+            Holds::All => 0.0,
+            Holds::Band { spreading, .. } => spreading * (held_most - held),
+        };
+        (self.per_particle + large) * held_most + spreading
     }
+
+    /// Its bytes while a band method starts, holding all `seeded` particles on a grid of
+    /// `cells` (0 for a method without a band, whose footprint only grows from its start).
+    pub fn start_bytes(&self, seeded: f64, cells: f64) -> f64 {
+        match self.holds {
+            Holds::All => 0.0,
+            Holds::Band { start, .. } => start.per_particle * seeded + start.per_cell * cells,
+        }
+    }
+}
+
+/// The figure for `dim` dimensions of measured `[2D, 3D]` ones.
+fn in_dim<T: Copy>(dim: usize, measured: [T; 2]) -> T {
+    measured[dim.clamp(2, 3) - 2]
 }
 
 /// What a method is, for lists, help and checks.
@@ -411,8 +428,24 @@ mod tests {
     #[test]
     fn a_large_problem_counts_from_its_size_on() {
         let f = Footprint::all(0.0, 100.0).with_large(3, 1000, [0.0, 50.0]);
-        assert_eq!(f.particle_bytes(999.0), 99_900.0);
-        assert_eq!(f.particle_bytes(1000.0), 150_000.0);
-        assert_eq!(Footprint::all(0.0, 100.0).particle_bytes(1000.0), 100_000.0);
+        assert_eq!(f.particle_bytes(999.0, 999.0), 99_900.0);
+        assert_eq!(f.particle_bytes(1000.0, 1000.0), 150_000.0);
+        assert_eq!(
+            Footprint::all(0.0, 100.0).particle_bytes(1000.0, 1000.0),
+            100_000.0
+        );
+    }
+
+    #[test]
+    fn a_band_prices_what_it_may_hold_beyond_the_seeded_band() {
+        let f = Footprint::band(
+            3,
+            3,
+            [([0.0; 4], (0.0, 0.0)), ([0.0, 0.0, 10.0, 5.0], (2.0, 1.0))],
+        );
+        // 100 held at most, 40 of them beyond the 60 of the seeded band.
+        assert_eq!(f.particle_bytes(60.0, 100.0), 10.0 * 100.0 + 5.0 * 40.0);
+        assert_eq!(f.start_bytes(500.0, 30.0), 2.0 * 500.0 + 30.0);
+        assert_eq!(Footprint::all(1.0, 1.0).start_bytes(500.0, 30.0), 0.0);
     }
 }

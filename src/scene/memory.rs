@@ -106,15 +106,7 @@ impl Scene {
         let particles = mu * seeded.cells as f64 + emitted;
         let held = mu * seeded.held_cells as f64 + emitted;
         let held_most = mu * seeded.held_cells.max(seeded.rest_cells) as f64 + emitted;
-        let (start_bytes, spreading) = match footprint.holds {
-            Holds::All => (0.0, 0.0),
-            Holds::Band {
-                start, spreading, ..
-            } => (
-                start.per_particle * mu * seeded.cells as f64 + start.per_cell * cells as f64,
-                spreading * (held_most - held),
-            ),
-        };
+        let start_bytes = footprint.start_bytes(mu * seeded.cells as f64, cells as f64);
         MemoryEstimate {
             cells,
             fluid_cells: seeded.cells,
@@ -123,7 +115,7 @@ impl Scene {
             held_most,
             cell_bytes: footprint.per_cell * cells as f64
                 + footprint.per_fluid_cell * seeded.cells as f64,
-            particle_bytes: footprint.particle_bytes(held_most) + spreading,
+            particle_bytes: footprint.particle_bytes(held, held_most),
             start_bytes,
             recording_bytes: match recorded {
                 true => RECORDING_PER_PARTICLE[D - 2] * held_most,

@@ -77,20 +77,19 @@ impl MethodType for Ccp {
     /// Without: a fit to whole runs of the grid's cells and the particles (5% above each peak),
     /// with the particles of a problem the flow solver halves counted again for its copies.
     fn footprint(s: &CcpSettings, dim: usize) -> Footprint {
-        // The surface, the band and its interface (`beta` from 0 to `-R`): the interface's
-        // particles are the band's boundary (sec. 5).
-        let layers = s.band_r + 1;
-        match (s.band, dim) {
+        match s.band {
             // Every particle is an item of the flow, and from `HALVING.min_items` up the solver
             // copies them into its two halves.
-            (BandMode::None, _) => Footprint::of(dim, [(93.0, 296.0), (186.0, 306.0)]).with_large(
+            BandMode::None => Footprint::of(dim, [(93.0, 296.0), (186.0, 306.0)]).with_large(
                 dim,
                 HALVING.min_items,
                 [150.0, 149.0],
             ),
+            // The surface, the band and its interface (`beta` from 0 to `-R`): the interface's
+            // particles are the band's boundary (sec. 5).
             _ => Footprint::band(
                 dim,
-                layers,
+                s.band_r + 1,
                 [
                     ([139.0, 221.0, 32.0, 0.0], (35.0, 26.0)),
                     ([147.0, 159.0, 439.0, 0.0], (55.0, 33.0)),
