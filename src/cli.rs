@@ -216,8 +216,10 @@ pub struct ValidateArgs {
 
 #[derive(Args, Debug, Clone)]
 pub struct RunArgs {
-    /// A built-in scene name (see `cellflip list`) or the path of a scene .toml file.
-    pub scene: String,
+    /// A built-in scene name (see `cellflip list`) or the path of a scene .toml file (with
+    /// --resume it may be left out; given, it must be the checkpoint's scene).
+    #[arg(required_unless_present = "resume")]
+    pub scene: Option<String>,
     /// The fluid method (overrides the scene's `simulation.method`).
     #[arg(long, value_enum)]
     pub method: Option<MethodKind>,
@@ -276,6 +278,29 @@ pub struct RunArgs {
     /// Method ccp's flags.
     #[command(flatten)]
     pub ccp: CcpArgs,
+    /// Checkpoints.
+    #[command(flatten)]
+    pub checkpoint: CheckpointArgs,
+}
+
+/// Checkpoints of `run`: writing them, and going on from one (docs/checkpoints.md).
+#[derive(Args, Debug, Clone, Default)]
+pub struct CheckpointArgs {
+    /// Write a checkpoint every SECS simulated seconds, at the end of the run, and when a signal
+    /// stops it (SIGINT, SIGTERM, SIGHUP) or asks for one (SIGUSR1, which does not stop it);
+    /// the last two are kept [default: none; a resumed run keeps its checkpoint's].
+    #[arg(long, value_name = "SECS", allow_hyphen_values = true)]
+    pub checkpoint_every: Option<f64>,
+    /// Where checkpoints go [default: beside the recording, <recording stem>.checkpoints/; with
+    /// --no-record, recordings/<scene>.checkpoints/; a resumed run: its checkpoint's folder].
+    #[arg(long, value_name = "DIR")]
+    pub checkpoint_dir: Option<PathBuf>,
+    /// Go on with the run a checkpoint holds: a checkpoint file, or a folder (its newest
+    /// complete checkpoint). The scene, method and options are the checkpoint's; --steps and
+    /// --duration count from the run's start; by default the recording goes on in the
+    /// checkpoint's file (with --save, in a new file of the same recording id).
+    #[arg(long, value_name = "PATH")]
+    pub resume: Option<PathBuf>,
 }
 
 #[derive(Args, Debug, Clone)]

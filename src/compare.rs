@@ -128,7 +128,7 @@ fn compare_dim<const D: usize>(
             recording.as_ref().and_then(|r| r.surface_sink(i)),
             export::requested(&args.export, &e.scene, &e.label)?,
         ];
-        let mut worker = FrameWorker::start(sinks.into_iter().flatten().collect())?;
+        let mut worker = FrameWorker::start(sinks.into_iter().flatten().collect(), 0)?;
         if let Some(w) = &mut worker {
             w.submit(&sim)?;
         }
@@ -136,7 +136,8 @@ fn compare_dim<const D: usize>(
         runners.push((Runner::new(sim), Status::Running));
     }
     let duration = entries[0].scene.duration_secs();
-    let watchdog = Watchdog::start(recording.as_ref().map(|r| Box::new(r.finisher()) as _));
+    let finisher = recording.as_ref().map(|r| Box::new(r.finisher()) as _);
+    let watchdog = Watchdog::start(finisher, interrupt::GRACE);
     let frames = Frames {
         dt: args.frame_dt,
         until: duration,

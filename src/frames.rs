@@ -55,17 +55,24 @@ struct Job {
     liquid: Option<Liquid>,
 }
 
+/// What the worker is handed: a frame, or a request to say when every frame before it is done.
+enum Work {
+    Frame(Box<Job>),
+    Done(SyncSender<()>),
+}
+
 /// The worker thread and its channel.
 pub struct FrameWorker {
-    tx: Option<SyncSender<Job>>,
+    tx: Option<SyncSender<Work>>,
     thread: Option<JoinHandle<Result<()>>>,
     needs: FrameNeeds,
     submitted: u64,
 }
 
 impl FrameWorker {
-    /// A worker feeding `sinks`, or `None` when there is none.
-    pub fn start(sinks: Vec<(FrameSink, FrameNeeds)>) -> Result<Option<Self>> {
+    /// A worker feeding `sinks`, or `None` when there is none; its first frame is numbered
+    /// `first` (a run resumed from a checkpoint numbers on).
+    pub fn start(sinks: Vec<(FrameSink, FrameNeeds)>, first: u64) -> Result<Option<Self>> {
         if sinks.is_empty() {
             return Ok(None);
         }
@@ -80,7 +87,7 @@ impl FrameWorker {
             .thread_name(|i| format!("cellflip-frames-{i}"))
             .build()
             .map_err(|e| anyhow!("cannot start the frame worker's threads: {e}"))?;
-        let (tx, rx) = sync_channel::<Job>(1);
+        let (tx, rx) = sync_channel::<Work>(1);
         let sinks = sinks.into_iter().map(|(s, _)| s).collect();
         let thread = std::thread::Builder::new()
             .name("cellflip-frames".into())
@@ -90,7 +97,7 @@ impl FrameWorker {
             tx: Some(tx),
             thread: Some(thread),
             needs,
-            submitted: 0,
+            submitted: first,
         }))
     }
 
@@ -119,7 +126,27 @@ impl FrameWorker {
             liquid: (self.needs.surface && D == 3).then(|| Liquid::of(sim)),
         };
         self.submitted += 1;
-        match self.tx.as_ref().is_some_and(|tx| tx.send(job).is_ok()) {
+        self.send(Work::Frame(Box::new(job)))
+    }
+
+    /// Frames handed over so far (with the `first` it started from).
+    pub fn submitted(&self) -> u64 {
+        self.submitted
+    }
+
+    /// Waits until every frame handed over is done (a checkpoint notes the recording's length
+    /// with them in it).
+    pub fn wait(&mut self) -> Result<()> {
+        let (done, finished) = sync_channel(1);
+        self.send(Work::Done(done))?;
+        match finished.recv() {
+            Ok(()) => Ok(()),
+            Err(_) => self.join(),
+        }
+    }
+
+    fn send(&mut self, work: Work) -> Result<()> {
+        match self.tx.as_ref().is_some_and(|tx| tx.send(work).is_ok()) {
             true => Ok(()),
             // The worker stopped on an error: say which.
             false => self.join(),
@@ -152,8 +179,15 @@ impl Drop for FrameWorker {
 
 /// The worker's loop: each frame's surface, then every sink, until the channel closes or a
 /// sink fails.
-fn work(rx: Receiver<Job>, mut sinks: Vec<FrameSink>, pool: &rayon::ThreadPool) -> Result<()> {
-    for mut job in rx {
+fn work(rx: Receiver<Work>, mut sinks: Vec<FrameSink>, pool: &rayon::ThreadPool) -> Result<()> {
+    for work in rx {
+        let mut job = match work {
+            Work::Frame(job) => job,
+            Work::Done(done) => {
+                let _ = done.send(());
+                continue;
+            }
+        };
         if let Some(liquid) = &job.liquid {
             job.frame.surface = Some(pool.install(|| liquid.surface()));
         }

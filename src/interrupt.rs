@@ -1,11 +1,15 @@
 //! Stopping a run cleanly on a signal. SIGINT (Ctrl-C), SIGTERM and SIGHUP set a flag that the
-//! step loop polls between steps; the run then finishes its recording and summary and exits
-//! with 128 + the signal's number, as a shell expects. A second signal ends the process at
-//! once. A step that outlasts [`GRACE`] after the signal (a long solve) is not waited for: the
+//! step loop polls between steps; the run then finishes its recording and summary (and, with
+//! checkpoints on, writes one of the last finished step) and exits with 128 + the signal's
+//! number, as a shell expects. A second signal ends the process at once. A step that
+//! outlasts the watchdog's grace after the signal (a long solve) is not waited for: the
 //! recording is finished from a watchdog thread with the steps completed so far.
+//!
+//! SIGUSR1, what a batch scheduler sends before a time limit (Slurm's `--signal=B:USR1@N`),
+//! asks for a checkpoint after the step under way; the run goes on.
 
 use anyhow::{Context, Result};
-use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
+use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM, SIGUSR1};
 use signal_hook::flag;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Arc, LazyLock};
@@ -13,6 +17,13 @@ use std::time::Duration;
 
 /// How long a step may go on after a signal before the watchdog ends the run.
 pub const GRACE: Duration = Duration::from_secs(1);
+
+/// The same with checkpoints on: the step under way is let finish so that its checkpoint can
+/// be written. 30 s is Slurm's default `KillWait` between its SIGTERM and its SIGKILL.
+pub const CHECKPOINT_GRACE: Duration = Duration::from_secs(30);
+
+/// A checkpoint was asked for (SIGUSR1) and not yet written.
+static CHECKPOINT: LazyLock<Arc<AtomicBool>> = LazyLock::new(|| Arc::new(AtomicBool::new(false)));
 
 /// The signal received (0: none).
 static SIGNAL: LazyLock<Arc<AtomicUsize>> = LazyLock::new(|| Arc::new(AtomicUsize::new(0)));
@@ -31,7 +42,14 @@ pub fn install() -> Result<()> {
             .and_then(|_| flag::register_usize(sig, Arc::clone(&SIGNAL), sig as usize))
             .with_context(|| format!("cannot install the handler of signal {sig}"))?;
     }
+    flag::register(SIGUSR1, Arc::clone(&CHECKPOINT))
+        .context("cannot install the handler of SIGUSR1")?;
     Ok(())
+}
+
+/// Whether a checkpoint was asked for since the last call (SIGUSR1).
+pub fn take_checkpoint_request() -> bool {
+    CHECKPOINT.swap(false, Ordering::SeqCst)
 }
 
 /// The signal that asked the run to stop, if any.
@@ -60,14 +78,14 @@ pub fn exit_code(sig: i32) -> i32 {
 /// What the watchdog runs before ending the process (finishing a recording).
 pub type Finisher = Box<dyn FnOnce() -> Result<()> + Send>;
 
-/// Ends the process when a step goes on for [`GRACE`] after a signal, after running its
-/// finisher; does nothing once [`done`](Self::done).
+/// Ends the process when a step goes on for `grace` ([`GRACE`], [`CHECKPOINT_GRACE`]) after
+/// a signal, after running its finisher; does nothing once [`done`](Self::done).
 pub struct Watchdog {
     over: Arc<std::sync::Mutex<bool>>,
 }
 
 impl Watchdog {
-    pub fn start(finish: Option<Finisher>) -> Self {
+    pub fn start(finish: Option<Finisher>, grace: Duration) -> Self {
         let over = Arc::new(std::sync::Mutex::new(false));
         let seen = Arc::clone(&over);
         std::thread::spawn(move || {
@@ -77,7 +95,7 @@ impl Watchdog {
                 std::thread::sleep(poll);
                 let Some(sig) = signal() else { continue };
                 let t = *since.get_or_insert_with(std::time::Instant::now);
-                if t.elapsed() < GRACE {
+                if t.elapsed() < grace {
                     continue;
                 }
                 let over = seen.lock().unwrap_or_else(|p| p.into_inner());
@@ -88,7 +106,7 @@ impl Watchdog {
                 eprintln!(
                     "\nstopped by {}: the step under way did not end within {} s; {}",
                     name(sig),
-                    GRACE.as_secs_f64(),
+                    grace.as_secs_f64(),
                     match finished {
                         Ok(()) => "the recording holds the steps completed before it".into(),
                         Err(e) => format!("the recording could not be finished: {e:#}"),

@@ -1,13 +1,15 @@
-//! `cellflip run`: a scene through the runner, with its progress bar, recording, signal
-//! handling and the summary at the end.
+//! `cellflip run`: a scene through the runner, with its progress bar, recording, checkpoints,
+//! signal handling and the summary at the end; or the run a checkpoint holds, going on.
 
+use crate::checkpoint::{self, Checkpoints, Opened, Origin, Saver};
 use crate::cli::RunArgs;
 use crate::cli::SinkArgs;
 use crate::export;
 use crate::frames::FrameWorker;
 use crate::interrupt::{self, Watchdog};
 use crate::methods::MethodOption;
-use crate::record::{Drawing, Recorder, Sink};
+use crate::record::{Drawing, Recorder, Resumed, Sink};
+use crate::resume;
 use crate::runner::{Limit, Runner};
 use crate::scene::{peak_memory_mib, MemoryEstimate, Overrides, Scene};
 use crate::simulation::Simulation;
@@ -34,6 +36,26 @@ impl RunArgs {
         }
     }
 
+    /// Each option given that sets the scene, named as typed, with the overrides it makes
+    /// alone (a resumed run refuses any that would change its checkpoint's scene).
+    fn given_overrides(&self) -> Vec<(String, Overrides)> {
+        let o = self.overrides();
+        let none = Overrides::default;
+        let mut given = vec![];
+        macro_rules! each {
+            ($($field:ident $flag:literal),*) => {$(
+                if o.$field.is_some() {
+                    let only = Overrides { $field: o.$field, ..none() };
+                    given.push(($flag.to_string(), only));
+                }
+            )*};
+        }
+        each!(method "--method", cells "--res", ppc "--ppc", seed "--seed", solver "--solver",
+            directions "--directions", band "--band", band_r "--band-r", obstacle "--obstacle",
+            pressure "--pressure", air "--air");
+        given
+    }
+
     /// The method-specific options given on the command line.
     fn method_options(&self) -> Vec<MethodOption> {
         let mut given = self.ccp.given();
@@ -49,7 +71,25 @@ impl RunArgs {
 
 /// `cellflip run`.
 pub fn run(args: &RunArgs) -> Result<()> {
-    let scene = Scene::load(&args.scene, &args.overrides())?;
+    let every = checkpoint_every(args.checkpoint.checkpoint_every)?;
+    let t = Instant::now();
+    let resumed = args
+        .checkpoint
+        .resume
+        .as_deref()
+        .map(checkpoint::open)
+        .transpose()?;
+    let read = t.elapsed();
+    let scene = match &resumed {
+        Some(c) => resumed_scene(args, c)?,
+        None => {
+            let name = args
+                .scene
+                .as_deref()
+                .expect("clap asks for a scene without --resume");
+            Scene::load(name, &args.overrides())?
+        }
+    };
     let estimate = scene.ensure_fits_in_memory(!args.sink.no_record)?;
     scene
         .method
@@ -62,13 +102,140 @@ pub fn run(args: &RunArgs) -> Result<()> {
     };
     check_export_step(args.ccp.export_lp, limit)?;
     parse_slice(args.slice.as_deref(), scene.dim())?;
-    let sink = args.sink.choice(scene.name())?;
+    let (sink, continued) = recording_of(args, &scene, resumed.as_ref())?;
+    let start = Start {
+        checkpoints: checkpoints_of(args, every, &scene, sink.as_ref(), resumed.as_ref())?,
+        continued,
+        resumed,
+        read,
+    };
     interrupt::install()?;
     match scene.dim() {
-        2 => run_dim::<2>(&scene, &estimate, limit, sink.as_ref(), args),
-        3 => run_dim::<3>(&scene, &estimate, limit, sink.as_ref(), args),
+        2 => run_dim::<2>(&scene, &estimate, limit, sink.as_ref(), args, start),
+        3 => run_dim::<3>(&scene, &estimate, limit, sink.as_ref(), args, start),
         d => unreachable!("scene checks the dimension, got {d}"),
     }
+}
+
+/// How a run starts: afresh or from a checkpoint, and its checkpointing.
+struct Start {
+    resumed: Option<Opened>,
+    /// How the recording goes on from the checkpoint's.
+    continued: Option<Resumed>,
+    checkpoints: Option<Saver>,
+    /// How long reading and checking the checkpoint took.
+    read: Duration,
+}
+
+/// `--checkpoint-every`, checked: a positive, finite number of simulated seconds.
+fn checkpoint_every(every: Option<f64>) -> Result<Option<f64>> {
+    match every {
+        Some(e) if !(e.is_finite() && e > 0.0) => {
+            bail!("--checkpoint-every {e}: must be a positive, finite number of simulated seconds")
+        }
+        e => Ok(e),
+    }
+}
+
+/// The scene of the checkpoint `--resume` names, the command line's other options checked
+/// against it.
+fn resumed_scene(args: &RunArgs, c: &Opened) -> Result<Scene> {
+    if args.ccp.cross_check && !c.origin.cross_check {
+        bail!(
+            "--cross-check: checkpoint '{}' was written without it; a resumed run keeps the \
+             options it started with",
+            c.path.display()
+        );
+    }
+    let given = args.given_overrides();
+    resume::scene(c, args.scene.as_deref(), args.scale.duration, &given)
+}
+
+/// Where the recording goes and, for a resumed run, how it goes on: by default in the
+/// checkpoint's file, cut back to the checkpoint's step (none if the run had no file); with
+/// a sink given, there, with the same recording id.
+fn recording_of(
+    args: &RunArgs,
+    scene: &Scene,
+    resumed: Option<&Opened>,
+) -> Result<(Option<Sink>, Option<Resumed>)> {
+    let Some(mark) = resumed.map(|c| c.origin.recording.as_ref()) else {
+        return Ok((args.sink.choice(scene.name())?, None));
+    };
+    let s = &args.sink;
+    let chosen = s.save.is_some() || s.spawn || s.connect.is_some() || s.stdout || s.no_record;
+    let same_file = |m: &checkpoint::RecordingMark| s.save.as_ref().is_none_or(|p| *p == m.path);
+    match mark {
+        Some(m) if same_file(m) && !(s.spawn || s.connect.is_some() || s.stdout || s.no_record) => {
+            let continued = Resumed {
+                id: m.id.clone(),
+                append_at: Some(m.bytes),
+            };
+            Ok((Some(Sink::File(m.path.clone())), Some(continued)))
+        }
+        _ if !chosen => Ok((None, None)),
+        _ => {
+            let id = mark.map(|m| m.id.clone());
+            let continued = id.map(|id| Resumed {
+                id,
+                append_at: None,
+            });
+            Ok((s.choice(scene.name())?, continued))
+        }
+    }
+}
+
+/// The run's checkpointing, if on: `--checkpoint-every` or the resumed checkpoint's, into
+/// `--checkpoint-dir` or the default folder (the resumed checkpoint's own), made and checked
+/// writable before the run starts.
+fn checkpoints_of(
+    args: &RunArgs,
+    every: Option<f64>,
+    scene: &Scene,
+    sink: Option<&Sink>,
+    resumed: Option<&Opened>,
+) -> Result<Option<Saver>> {
+    let Some(every) = every.or(resumed.and_then(|c| c.origin.every)) else {
+        if args.checkpoint.checkpoint_dir.is_some() {
+            bail!("--checkpoint-dir: checkpoints are written only with --checkpoint-every SECS");
+        }
+        return Ok(None);
+    };
+    let file = match sink {
+        Some(Sink::File(p)) => Some(p.as_path()),
+        _ => None,
+    };
+    let resumed_dir = resumed.and_then(|c| c.path.parent().map(Path::to_path_buf));
+    let dir = (args.checkpoint.checkpoint_dir.clone())
+        .or(resumed_dir)
+        .unwrap_or_else(|| checkpoint::default_dir(file, scene.name()));
+    let origin = match resumed {
+        Some(c) => Origin {
+            command: command_line(),
+            ..c.origin.clone()
+        },
+        None => Origin {
+            scene_arg: args.scene.clone().unwrap_or_default(),
+            scene_source: scene.source.clone(),
+            scene_toml: scene.resolved_toml(),
+            command: command_line(),
+            cross_check: args.ccp.cross_check,
+            frames: 0,
+            recording: None,
+            every: None,
+            trails: vec![],
+        },
+    };
+    Ok(Some(Saver::new(
+        Checkpoints::new(&dir, resumed)?,
+        every,
+        origin,
+    )))
+}
+
+/// The command line, for a checkpoint's reader.
+fn command_line() -> String {
+    std::env::args().collect::<Vec<_>>().join(" ")
 }
 
 fn run_dim<const D: usize>(
@@ -77,6 +244,7 @@ fn run_dim<const D: usize>(
     limit: Limit,
     sink: Option<&Sink>,
     args: &RunArgs,
+    start: Start,
 ) -> Result<()> {
     let out = match sink {
         Some(Sink::File(p)) => Some(p.as_path()),
@@ -87,11 +255,13 @@ fn run_dim<const D: usize>(
         moves: args.moves,
         slice: parse_slice(args.slice.as_deref(), D)?,
     };
+    let cross_check =
+        args.ccp.cross_check || start.resumed.as_ref().is_some_and(|c| c.origin.cross_check);
     let recorder = sink
-        .map(|s| Recorder::create(s, scene, args.ccp.cross_check, drawing))
+        .map(|s| Recorder::create(s, scene, cross_check, drawing, start.continued.as_ref()))
         .transpose()?;
-    match simulate::<D>(scene, limit, recorder.as_ref(), out, args) {
-        Ok((runner, result)) => finish(scene, estimate, runner, result, recorder, sink, args),
+    match simulate::<D>(scene, limit, recorder.as_ref(), out, args, start) {
+        Ok(ran) => finish(scene, estimate, ran, recorder, sink, args),
         Err(e) => {
             if let Some(r) = recorder {
                 r.abandon();
@@ -109,17 +279,37 @@ fn simulate<const D: usize>(
     recorder: Option<&Recorder>,
     out: Option<&Path>,
     args: &RunArgs,
-) -> Result<(Runner<D>, Result<()>)> {
+    start: Start,
+) -> Result<Ran<D>> {
     let mut method = scene.method.clone();
     method.ccp.export_lp = match args.ccp.export_lp {
         Some(n) => Some((n, mps_path(scene, out, n)?)),
         None => None,
     };
-    method.ccp.cross_check = args.ccp.cross_check;
-    let sim = Simulation::<D>::new(scene.config::<D>(), &method);
+    let resumed = start.resumed.as_ref();
+    method.ccp.cross_check = args.ccp.cross_check || resumed.is_some_and(|c| c.origin.cross_check);
+    let t0 = Instant::now();
+    let sim = match resumed {
+        Some(c) => Simulation::<D>::restore(scene.config::<D>(), &method, &c.reader)
+            .map_err(|e| anyhow!("checkpoint '{}': {e}", c.path.display()))?,
+        None => Simulation::<D>::new(scene.config::<D>(), &method),
+    };
+    if let (Some(c), false) = (resumed, args.quiet) {
+        let (read, restored) = (start.read.as_secs_f64(), t0.elapsed().as_secs_f64());
+        eprintln!(
+            "resuming from '{}': step {}, t = {:.3} s (read and checked in {read:.2} s, \
+             restored in {restored:.2} s)",
+            c.path.display(),
+            c.step,
+            sim.state.time_secs
+        );
+    }
     if let Some(r) = recorder {
         r.log_setup(&sim);
-        r.log_step(&sim, None, true)?;
+        match resumed {
+            Some(c) => r.set_trails(c.origin.trails.clone()),
+            None => r.log_step(&sim, None, true)?,
+        }
     }
     if sim.method.particles_not_held() > 0 && sim.state.particles.is_empty() {
         let msg = "the fluid has no free surface, so the band method put every particle in the \
@@ -133,17 +323,23 @@ fn simulate<const D: usize>(
         recorder.and_then(Recorder::surface_sink),
         export::requested(&args.export, scene, scene.method.kind.name())?,
     ];
-    let mut frames = FrameWorker::start(sinks.into_iter().flatten().collect())?;
-    if let Some(f) = &mut frames {
+    let first_frame = resumed.map_or(0, |c| c.origin.frames);
+    let mut frames = FrameWorker::start(sinks.into_iter().flatten().collect(), first_frame)?;
+    if let (Some(f), None) = (&mut frames, resumed) {
         f.submit(&sim)?;
     }
+    let mut saver = start.checkpoints;
     let mut runner = Runner::new(sim);
     let bar = progress_bar(limit);
     let t0 = Instant::now();
-    let watchdog = Watchdog::start(recorder.map(|r| Box::new(r.finisher()) as _));
+    let grace = match saver {
+        Some(_) => interrupt::CHECKPOINT_GRACE,
+        None => interrupt::GRACE,
+    };
+    let watchdog = Watchdog::start(recorder.map(|r| Box::new(r.finisher()) as _), grace);
     let interrupted = || interrupt::signal().is_some();
     let cadence = Cadence::of(args.record_every, D);
-    let mut last_time_secs = 0.0;
+    let mut last_time_secs = runner.sim.state.time_secs;
     let result = runner.run(limit, interrupted, |sim, rep| {
         let s = &sim.state;
         let full = cadence.records(s.steps, last_time_secs, s.time_secs);
@@ -152,6 +348,14 @@ fn simulate<const D: usize>(
         }
         if let (true, Some(f)) = (full, frames.as_mut()) {
             f.submit(sim)?;
+        }
+        let asked = interrupt::take_checkpoint_request();
+        if let Some(saver) = saver.as_mut().filter(|c| asked || c.due(last_time_secs, s.time_secs)) {
+            let t = Instant::now();
+            let path = saver.save(sim, recorder, frames.as_mut())?;
+            announce(&bar, args.quiet, &path, t.elapsed(), asked);
+        } else if asked {
+            bar.suspend(|| eprintln!("warning: SIGUSR1 asks for a checkpoint; this run writes none (--checkpoint-every SECS)"));
         }
         last_time_secs = s.time_secs;
         show_progress(
@@ -162,11 +366,48 @@ fn simulate<const D: usize>(
         );
         Ok(())
     });
+    // A run that ended well or was stopped by a signal leaves a checkpoint of its last step
+    // (a failed step may have left the state half-way).
+    let last = match (&result, saver.as_mut()) {
+        (Ok(()), Some(saver)) if !saver.is_current(&runner.sim) => {
+            let t = Instant::now();
+            let saved = saver.save(&runner.sim, recorder, frames.as_mut());
+            saved.map(|p| announce(&bar, args.quiet, &p, t.elapsed(), false))
+        }
+        _ => Ok(()),
+    };
     // The last frames are drawn and written before the recording is finished.
     let drawn = frames.map_or(Ok(()), FrameWorker::finish);
     watchdog.done();
     bar.finish_and_clear();
-    Ok((runner, result.and(drawn)))
+    Ok(Ran {
+        runner,
+        result: result.and(last).and(drawn),
+        saver,
+    })
+}
+
+/// A run that got going: the runner (with its summary), how it ended, and its checkpoints.
+struct Ran<const D: usize> {
+    runner: Runner<D>,
+    result: Result<()>,
+    saver: Option<Saver>,
+}
+
+/// Says where a checkpoint went, its size and how long it took (above the progress bar).
+fn announce(bar: &ProgressBar, quiet: bool, path: &Path, took: Duration, asked: bool) {
+    if quiet {
+        return;
+    }
+    let mb = std::fs::metadata(path).map_or(0.0, |m| m.len() as f64 / 1e6);
+    let why = if asked { ", asked for by SIGUSR1" } else { "" };
+    let secs = took.as_secs_f64();
+    bar.suspend(|| {
+        eprintln!(
+            "checkpoint: {} ({mb:.1} MB in {secs:.2} s{why})",
+            path.display()
+        )
+    });
 }
 
 /// Ends the recording (with the run's error or interruption in its log), prints the summary
@@ -175,12 +416,16 @@ fn simulate<const D: usize>(
 fn finish<const D: usize>(
     scene: &Scene,
     estimate: &MemoryEstimate,
-    runner: Runner<D>,
-    result: Result<()>,
+    ran: Ran<D>,
     recorder: Option<Recorder>,
     sink: Option<&Sink>,
     args: &RunArgs,
 ) -> Result<()> {
+    let Ran {
+        runner,
+        result,
+        saver,
+    } = ran;
     if let Some(r) = recorder {
         let sim = &runner.sim;
         match (&result, interrupt::signal()) {
@@ -225,6 +470,16 @@ fn finish<const D: usize>(
                 p.display(),
                 cadence,
                 p.display()
+            );
+        }
+        if let Some(c) = saver.as_ref().map(|s| &s.checkpoints) {
+            let last = c.last_step.map_or("none written".into(), |k| {
+                format!("the last after step {k}")
+            });
+            crate::outln!(
+                "checkpoints: {} ({last}; go on with: cellflip run --resume {})",
+                c.dir().display(),
+                c.dir().display()
             );
         }
     }

@@ -26,7 +26,9 @@ impl Limit {
 /// What a run did: the figures every method has. The method's own are its summary lines.
 #[derive(Clone, Debug, Default)]
 pub struct Summary {
+    /// Steps run (from `first_step`: a run resumed from a checkpoint counts on from it).
     pub steps: u64,
+    pub first_step: u64,
     pub sim_secs: f64,
     pub wall: Duration,
     /// Stage times of every step.
@@ -53,6 +55,7 @@ impl Summary {
         let v = s.volume_percent();
         let n = s.particles.len();
         Self {
+            first_step: s.steps,
             volume_min: v,
             volume_max: v,
             particles: n,
@@ -118,8 +121,12 @@ impl Summary {
         } else {
             ""
         };
+        let resumed = match self.first_step {
+            0 => String::new(),
+            k => format!(" after step {k} (resumed)"),
+        };
         crate::outln!(
-            "{title}: {} steps, {:.3} s simulated in {:.2} s wall ({:.2} ms/step){stopped}",
+            "{title}: {} steps{resumed}, {:.3} s simulated in {:.2} s wall ({:.2} ms/step){stopped}",
             self.steps,
             self.sim_secs,
             self.wall.as_secs_f64(),

@@ -10,6 +10,7 @@ use crate::grid::Vector;
 use crate::methods::{FluidMethod, MethodReport, MethodSettings, MethodSummary, NoReport};
 use crate::metrics::{self, InvariantViolation, Stage, StageTimes};
 use crate::sim::{advect, emit, forces, pressure, timestep, transfer, SimConfig, State};
+use crate::snapshot::{Reader, SnapshotError, Writer};
 use crate::solvers::pcg::PcgStats;
 
 /// What one step did.
@@ -78,6 +79,32 @@ impl<const D: usize> Simulation<D> {
             settings: settings.clone(),
             u_at_particles: vec![],
         }
+    }
+
+    /// The simulation a checkpoint holds ([`Simulation::save`]) for the scene's `config` and
+    /// method `settings` it was written with: the state restored, the method built and given
+    /// back its own state instead of started. The method's totals start afresh.
+    pub fn restore(
+        config: SimConfig<D>,
+        settings: &MethodSettings,
+        r: &Reader,
+    ) -> Result<Self, SnapshotError> {
+        let state = State::restore(config, r)?;
+        let mut method = settings.kind.build::<D>(settings);
+        method.restore_state(&state, r)?;
+        Ok(Self {
+            state,
+            method,
+            summary: settings.kind.summary::<D>(settings),
+            settings: settings.clone(),
+            u_at_particles: vec![],
+        })
+    }
+
+    /// Writes what the next step reads: the shared state and the method's own.
+    pub fn save<'a>(&'a self, w: &mut Writer<'a>) {
+        self.state.save(w);
+        self.method.save_state(w);
     }
 
     /// Forgets the method's totals so far (after a warm-up).

@@ -11,6 +11,7 @@ use crate::sim::markings::Markings;
 use crate::sim::solids::ObstacleMode;
 use crate::sim::transfer::{self, Known};
 use crate::sim::State;
+use crate::snapshot::{Reader, SnapshotError, Writer};
 use std::any::Any;
 use std::fmt::Debug;
 
@@ -353,6 +354,16 @@ pub trait FluidMethod<const D: usize>: MethodRecording<D> + Send {
 
     /// The invariants this method guarantees beyond those of every method.
     fn check_invariants(&self, _s: &State<D>) -> Result<(), InvariantViolation> {
+        Ok(())
+    }
+
+    /// What the method carries from one step to the next, written to a checkpoint after a
+    /// step (`crate::checkpoint`; arrays named `<method>.<what>`). FLIP carries nothing.
+    fn save_state<'a>(&'a self, _w: &mut Writer<'a>) {}
+
+    /// Takes back what [`save_state`](Self::save_state) wrote, on the state restored from the
+    /// same checkpoint; called instead of [`start`](Self::start).
+    fn restore_state(&mut self, _s: &State<D>, _r: &Reader) -> Result<(), SnapshotError> {
         Ok(())
     }
 

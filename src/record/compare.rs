@@ -42,7 +42,7 @@ impl Comparison {
     /// Opens the recording with its layout, legend and each run's line colours; fails (naming
     /// the file or the viewer) before anything is simulated.
     pub fn create(sink: &Sink, name: &str, runs: &[ComparedRun<'_>]) -> Result<Self> {
-        let output = Output::open(sink, name)?;
+        let output = Output::open(sink, name, None)?;
         let rec = &output.rec;
         let cannot = |e| anyhow!("cannot write the recording to {}: {e}", sink.describe());
         let compared: Vec<Compared<'_>> = runs.iter().map(compared).collect();

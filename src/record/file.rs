@@ -9,6 +9,11 @@
 //!   the run's first step is recorded ([`RrdFile::commit`]), so a run that fails before that
 //!   leaves an earlier recording of the same name alone. Special files (`/dev/null`, a pipe)
 //!   are written directly.
+//! - A run resumed from a checkpoint goes on with the file ([`RrdFile::continue_from`]): its
+//!   first bytes, up to the length the checkpoint noted (every step up to it, nothing after),
+//!   are decoded and written again into the new file, whose stream then goes on. So the file
+//!   stays one stream with one footer indexing all of it (`rerun rrd verify` passes), and
+//!   the earlier file is replaced only once the continuation records its first step.
 
 use anyhow::{anyhow, bail, Result};
 use rerun::external::re_log_encoding::{EncodeError, Encoder, EncodingOptions};
@@ -17,13 +22,21 @@ use rerun::sink::{LogSink, SinkFlushError};
 use std::fs::File;
 use std::io::{Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Duration;
 
 /// A file that takes each `write_all` whole or, failing, cuts itself back to where it was.
 struct WholeWrites {
     file: File,
-    len: u64,
+    /// Bytes in the file (shared with [`RrdFile::len`]).
+    len: Arc<AtomicU64>,
+}
+
+impl WholeWrites {
+    fn len(&self) -> u64 {
+        self.len.load(Ordering::SeqCst)
+    }
 }
 
 impl Write for WholeWrites {
@@ -34,13 +47,13 @@ impl Write for WholeWrites {
     fn write_all(&mut self, buf: &[u8]) -> std::io::Result<()> {
         match self.file.write_all(buf) {
             Ok(()) => {
-                self.len += buf.len() as u64;
+                self.len.fetch_add(buf.len() as u64, Ordering::SeqCst);
                 Ok(())
             }
             Err(e) => {
                 // Best effort: special files cannot be cut.
-                let _ = self.file.set_len(self.len);
-                let _ = self.file.seek(SeekFrom::Start(self.len));
+                let _ = self.file.set_len(self.len());
+                let _ = self.file.seek(SeekFrom::Start(self.len()));
                 Err(e)
             }
         }
@@ -64,6 +77,7 @@ struct State {
 pub struct RrdFile {
     path: PathBuf,
     state: Arc<Mutex<State>>,
+    len: Arc<AtomicU64>,
 }
 
 impl RrdFile {
@@ -75,12 +89,61 @@ impl RrdFile {
         let fail =
             |e: &dyn std::fmt::Display| anyhow!("cannot write recording '{}': {e}", path.display());
         let file = File::create(at).map_err(|e| fail(&e))?;
+        Self::encode(path, file, partial)
+    }
+
+    /// A new recording at `path` that starts with the messages in the first `at` bytes of the
+    /// recording there now (what a checkpoint noted: what lies after is left out); the run
+    /// logs on after them. The file there is replaced at [`RrdFile::commit`].
+    pub fn continue_from(path: &Path, at: u64) -> Result<Self> {
+        use rerun::external::re_log_encoding::DecoderApp;
+        use std::io::Read;
+        let fail = |e: &dyn std::fmt::Display| {
+            anyhow!("cannot go on with recording '{}': {e}", path.display())
+        };
+        let old = File::open(path).map_err(|e| fail(&e))?;
+        let len = old.metadata().map_err(|e| fail(&e))?.len();
+        if len < at {
+            bail!(
+                "cannot go on with recording '{}': it has {len} bytes, fewer than the {at} the \
+                 checkpoint recorded up to (record to a new file with --save PATH)",
+                path.display()
+            );
+        }
+        let f = Self::create(path)?;
+        let reader = std::io::BufReader::new(old.take(at));
+        for msg in DecoderApp::decode_lazy(reader) {
+            match msg {
+                Ok(msg) => f.send(msg),
+                Err(e) => {
+                    f.discard();
+                    return Err(fail(&e));
+                }
+            }
+        }
+        if let Err(e) = f.check() {
+            f.discard();
+            return Err(e);
+        }
+        Ok(f)
+    }
+
+    /// The stream's header written to `file`.
+    fn encode(path: &Path, file: File, partial: Option<PathBuf>) -> Result<Self> {
         let version = rerun::build_info().version;
-        let writer = WholeWrites { file, len: 0 };
+        let len = Arc::new(AtomicU64::new(0));
+        let writer = WholeWrites {
+            file,
+            len: Arc::clone(&len),
+        };
         let encoder = Encoder::new_eager(version, EncodingOptions::PROTOBUF_COMPRESSED, writer)
             .map_err(|e| {
                 let _ = partial.as_deref().map(std::fs::remove_file);
-                fail(&os_error(e))
+                anyhow!(
+                    "cannot write recording '{}': {}",
+                    path.display(),
+                    os_error(e)
+                )
             })?;
         Ok(Self {
             path: path.to_path_buf(),
@@ -89,7 +152,18 @@ impl RrdFile {
                 error: None,
                 partial,
             })),
+            len,
         })
+    }
+
+    /// Bytes written to the file so far (whole messages only).
+    pub fn bytes_written(&self) -> u64 {
+        self.len.load(Ordering::SeqCst)
+    }
+
+    /// The file, at its final name.
+    pub fn path(&self) -> &Path {
+        &self.path
     }
 
     fn lock(&self) -> MutexGuard<'_, State> {

@@ -18,7 +18,7 @@ mod stream;
 pub use canvas::{Canvas, Plane};
 pub use compare::{ComparedRun, Comparison};
 pub use file::RrdFile;
-pub use output::{Output, Sink};
+pub use output::{Output, Resumed, Sink};
 pub use run_log::RunLog;
 pub use stream::Stream;
 
@@ -60,9 +60,16 @@ pub struct Recorder {
 
 impl Recorder {
     /// Opens the recording with the run's identity, layout and scene; fails (naming the file
-    /// or the viewer) before anything is simulated. `cross_check` is `--cross-check`.
-    pub fn create(sink: &Sink, scene: &Scene, cross_check: bool, drawing: Drawing) -> Result<Self> {
-        let output = Output::open(sink, &recording_name(scene))?;
+    /// or the viewer) before anything is simulated. `cross_check` is `--cross-check`; a run
+    /// resumed from a checkpoint goes on with its recording as `resumed` says.
+    pub fn create(
+        sink: &Sink,
+        scene: &Scene,
+        cross_check: bool,
+        drawing: Drawing,
+        resumed: Option<&Resumed>,
+    ) -> Result<Self> {
+        let output = Output::open(sink, &recording_name(scene), resumed)?;
         let rec = &output.rec;
         let cannot = |e| anyhow!("cannot write the recording to {}: {e}", sink.describe());
         let facts = RunFacts::of(scene, cross_check, &drawing);
@@ -123,6 +130,26 @@ impl Recorder {
     /// After a run that failed; see [`Output::abandon`].
     pub fn abandon(self) {
         self.output.abandon();
+    }
+
+    /// See [`RunLog::trails`].
+    pub fn trails(&self) -> Vec<Vec<[f32; 3]>> {
+        self.run.trails()
+    }
+
+    /// See [`RunLog::set_trails`].
+    pub fn set_trails(&self, trails: Vec<Vec<[f32; 3]>>) {
+        self.run.set_trails(trails);
+    }
+
+    /// See [`Output::id`].
+    pub fn id(&self) -> String {
+        self.output.id()
+    }
+
+    /// See [`Output::written`].
+    pub fn written(&self) -> Option<(std::path::PathBuf, u64)> {
+        self.output.written()
     }
 
     /// See [`Output::finisher`].

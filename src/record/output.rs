@@ -43,6 +43,14 @@ impl Sink {
     }
 }
 
+/// How a run resumed from a checkpoint goes on with its recording: the same recording id,
+/// and, to go on with the same file, the length the checkpoint noted.
+#[derive(Clone, Debug)]
+pub struct Resumed {
+    pub id: String,
+    pub append_at: Option<u64>,
+}
+
 /// How long the end of a run waits for a live stream to drain before saying it was lost.
 pub const LIVE_FLUSH_TIMEOUT: Duration = Duration::from_secs(10);
 
@@ -56,15 +64,22 @@ pub struct Output {
 
 impl Output {
     /// Opens the stream with the recording's `name`; fails, naming the file or the viewer,
-    /// before anything is simulated.
-    pub fn open(sink: &Sink, name: &str) -> Result<Self> {
-        let builder = RecordingStreamBuilder::new("cellflip").recording_name(name);
+    /// before anything is simulated. A run resumed from a checkpoint goes on with its
+    /// recording's id and, when `resumed.append_at` says so, its file.
+    pub fn open(sink: &Sink, name: &str, resumed: Option<&Resumed>) -> Result<Self> {
+        let mut builder = RecordingStreamBuilder::new("cellflip").recording_name(name);
+        if let Some(r) = resumed {
+            builder = builder.recording_id(r.id.as_str());
+        }
         let cannot = |e: &dyn std::fmt::Display| {
             anyhow!("cannot write the recording to {}: {e}", sink.describe())
         };
         let (rec, file) = match sink {
             Sink::File(path) => {
-                let file = RrdFile::create(path)?;
+                let file = match resumed.and_then(|r| r.append_at) {
+                    Some(at) => RrdFile::continue_from(path, at)?,
+                    None => RrdFile::create(path)?,
+                };
                 let s: Box<dyn rerun::sink::LogSink> = Box::new(file.clone());
                 let rec = builder.set_sinks(vec![s]).map_err(|e| cannot(&e))?;
                 (rec, Some(file))
@@ -84,6 +99,18 @@ impl Output {
             sink: sink.clone(),
             last_flush: Cell::new(Instant::now()),
         })
+    }
+
+    /// The recording's id.
+    pub fn id(&self) -> String {
+        (self.rec.store_info()).map_or_else(String::new, |i| i.recording_id().to_string())
+    }
+
+    /// Everything logged so far written, the file's path and length (none for a live stream).
+    pub fn written(&self) -> Option<(PathBuf, u64)> {
+        let file = self.file.as_ref()?;
+        let _ = self.rec.flush_blocking();
+        Some((file.path().to_path_buf(), file.bytes_written()))
     }
 
     /// After a step was logged: everything logged more than two seconds ago is on its way;

@@ -40,6 +40,16 @@ impl RunLog {
         }
     }
 
+    /// Every obstacle's trail so far (a checkpoint keeps them).
+    pub fn trails(&self) -> Vec<Vec<[f32; 3]>> {
+        self.trails.borrow().clone()
+    }
+
+    /// The trails of a run resumed from a checkpoint.
+    pub fn set_trails(&self, trails: Vec<Vec<[f32; 3]>>) {
+        *self.trails.borrow_mut() = trails;
+    }
+
     pub(super) fn canvas<const D: usize>(&self, sim: &Simulation<D>) -> Canvas<'_, D> {
         stamp(
             &self.out,

@@ -10,6 +10,7 @@ pub mod emit;
 pub mod forces;
 pub mod markings;
 pub mod pressure;
+pub mod saved;
 pub mod solids;
 pub mod timestep;
 pub mod transfer;
@@ -20,7 +21,6 @@ use crate::particles::{self, Particles, Region};
 use crate::solvers::pcg::Preconditioner;
 use emit::Emitter;
 use markings::Markings;
-use rand::rngs::StdRng;
 use rand::SeedableRng;
 use solids::{Obstacle, ObstacleMode, Solids};
 
@@ -62,6 +62,10 @@ impl<const D: usize> SimConfig<D> {
     }
 }
 
+/// The simulation's random generator: ChaCha12, the algorithm of `rand`'s `StdRng` (and the
+/// same stream for the same seed), named so that a checkpoint can save its position.
+pub type SimRng = rand_chacha::ChaCha12Rng;
+
 /// The state every method reads and writes.
 pub struct State<const D: usize> {
     pub config: SimConfig<D>,
@@ -78,7 +82,7 @@ pub struct State<const D: usize> {
     pub total_particles: usize,
     /// `V*`: initial volume plus emitted volume, in cells.
     pub target_volume: f64,
-    pub rng: StdRng,
+    pub rng: SimRng,
 }
 
 impl<const D: usize> State<D> {
@@ -91,7 +95,7 @@ impl<const D: usize> State<D> {
             &config.obstacles,
             config.obstacle_mode,
         );
-        let mut rng = StdRng::seed_from_u64(config.seed);
+        let mut rng = SimRng::seed_from_u64(config.seed);
         let particles = particles::seed(
             &grid,
             &config.fluid,

@@ -279,6 +279,16 @@ impl<const D: usize> Solids<D> {
         }
     }
 
+    /// Puts the obstacles at `offsets` with `velocities` (one each, in order), as a step
+    /// leaves them: what a checkpoint restores.
+    pub fn place(&mut self, grid: &Grid<D>, offsets: &[Vector<D>], velocities: &[Vector<D>]) {
+        for ((o, x), v) in self.obstacles.iter_mut().zip(offsets).zip(velocities) {
+            o.offset = *x;
+            o.velocity = *v;
+        }
+        self.rasterise(grid);
+    }
+
     /// The moving obstacles' cells, when there are obstacles (without them nothing moves, and
     /// the markings need not look at every cell's neighbours).
     pub fn moving_mask(&self) -> Option<&[bool]> {

@@ -252,6 +252,30 @@ pub struct Transport<const D: usize> {
 }
 
 impl<const D: usize> Transport<D> {
+    /// What a warm start reads of a plan ([`Self::start_from`]): each slot's cell, the row
+    /// scalings `u_p` and the column scalings `v_j`.
+    pub fn warm_parts(&self) -> (&[u32], &[f64], &[f64]) {
+        (&self.active, &self.u, &self.v)
+    }
+
+    /// A plan holding only [`Self::warm_parts`] (from a checkpoint), to warm-start the next
+    /// solve exactly as the plan they came from would.
+    pub fn from_warm_parts(active: Vec<u32>, u: Vec<f64>, v: Vec<f64>) -> Self {
+        Self {
+            iterations: 0,
+            error: 0.0,
+            converged: false,
+            volume: 0.0,
+            u,
+            v,
+            rows: vec![],
+            active,
+            centre: vec![],
+            order: vec![],
+            chunks: vec![],
+        }
+    }
+
     /// Solves the transport of `points`, each of volume `volume`, to `tg`, starting from a
     /// previous plan `warm` on the same grid ([`Self::start_from`]; `u = v = 1` if none),
     /// whose storage it reuses.

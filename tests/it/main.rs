@@ -5,6 +5,7 @@
 mod common;
 
 mod band;
+mod checkpoint;
 mod cli_process;
 mod compare;
 mod correction;

@@ -13,6 +13,7 @@ use crate::sim::band::Band;
 use crate::sim::markings::{DepthLevel, Markings};
 use crate::sim::transfer::{self, Known};
 use crate::sim::State;
+use crate::snapshot::{Reader, SnapshotError, Writer};
 use anyhow::Context;
 use std::path::{Path, PathBuf};
 
@@ -82,6 +83,20 @@ impl<const D: usize> FluidMethod<D> for CcpSim<D> {
 
     fn particles_not_held(&self) -> isize {
         self.n_deep as isize
+    }
+
+    /// The deep's count and the last correction's prices (the next one's warm start, which
+    /// may pick another of several optimal assignments).
+    fn save_state<'a>(&'a self, w: &mut Writer<'a>) {
+        w.scalar("ccp.n_deep", self.n_deep as u64);
+        w.slice("ccp.cell_prices", self.prices.cell_prices());
+    }
+
+    fn restore_state(&mut self, _s: &State<D>, r: &Reader) -> Result<(), SnapshotError> {
+        self.n_deep = r.scalar::<u64>("ccp.n_deep")? as usize;
+        let prices = r.slice("ccp.cell_prices", None)?;
+        self.prices = correct::PriceMemory::from_cell_prices(prices);
+        Ok(())
     }
 
     fn particles_to_grid(&mut self, s: &State<D>) -> anyhow::Result<(MacField<D>, Known<D>)> {

@@ -11,6 +11,7 @@ use crate::sim::band::{combine_velocities, counts_with_full_deep, Band};
 use crate::sim::markings::{DepthLevel, Markings};
 use crate::sim::transfer::{self, Known};
 use crate::sim::State;
+use crate::snapshot::{Reader, SnapshotError, Writer};
 use rand::Rng;
 use rayon::prelude::*;
 use std::sync::Arc;
@@ -240,6 +241,35 @@ impl<const D: usize> FluidMethod<D> for NbflipSim<D> {
 
     fn particles_not_held(&self) -> isize {
         self.not_held
+    }
+
+    /// The level set, the cells the next advection works on, the count resampling deleted,
+    /// and whether a level set was advected yet. The advected level set's values are not
+    /// kept: the next step writes every cell of it that it reads (the cells it advects, and
+    /// the others of the rebuild's region from `phi`), so it only needs to exist.
+    fn save_state<'a>(&'a self, w: &mut Writer<'a>) {
+        w.slice("nbflip.phi", &self.phi.phi);
+        w.scalar("nbflip.advected", self.advected.is_some() as u8);
+        w.bools("nbflip.next_tiles", self.next.tiles());
+        w.scalar("nbflip.not_held", self.not_held as i64);
+    }
+
+    fn restore_state(&mut self, s: &State<D>, r: &Reader) -> Result<(), SnapshotError> {
+        let n = Some(s.grid.num_cells());
+        self.phi = Arc::new(LevelSet {
+            phi: r.slice("nbflip.phi", n)?,
+        });
+        self.advected = match r.scalar::<u8>("nbflip.advected")? {
+            0 => None,
+            _ => Some((*self.phi).clone()),
+        };
+        let tiles = r.bools("nbflip.next_tiles", None)?;
+        self.next = Region::of_tiles(&s.grid, tiles).ok_or_else(|| SnapshotError::Array {
+            name: "nbflip.next_tiles".into(),
+            reason: "not one flag per tile of the scene's grid".into(),
+        })?;
+        self.not_held = r.scalar::<i64>("nbflip.not_held")? as isize;
+        Ok(())
     }
 
     /// Step 1: particle velocities to the grid, combined with the grid's ([`combine`]).

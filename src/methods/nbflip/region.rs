@@ -39,6 +39,20 @@ impl Region {
         }
     }
 
+    /// The region of these tiles' cells (`tiles` as [`Region::tiles`] gave them).
+    pub fn of_tiles<const D: usize>(grid: &Grid<D>, tiles: Vec<bool>) -> Option<Self> {
+        let coarse = self::tiles(grid);
+        (tiles.len() == coarse.num_cells()).then(|| Self {
+            cells: cells_of_tiles(grid, &coarse, &tiles),
+            tiles,
+        })
+    }
+
+    /// Per tile, whether its cells are in (what a checkpoint keeps of a region).
+    pub fn tiles(&self) -> &[bool] {
+        &self.tiles
+    }
+
     /// The cells in either region.
     pub fn union<const D: usize>(&self, grid: &Grid<D>, other: &Region) -> Self {
         let active = self.tiles_with(other, |a, b| a || b);

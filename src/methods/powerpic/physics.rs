@@ -9,6 +9,7 @@ use crate::metrics::InvariantViolation;
 use crate::sim::advect::displace;
 use crate::sim::transfer::{self, Known};
 use crate::sim::State;
+use crate::snapshot::{Reader, SnapshotError, Writer};
 use crate::solvers::sinkhorn::{Air, SinkhornError, Transport, TransportGrid};
 use rayon::prelude::*;
 
@@ -48,6 +49,21 @@ impl<const D: usize> PowerPicSim<D> {
             air_volume: 0.0,
             row_error: 0.0,
         }
+    }
+
+    /// The particles' volume and the transport grid, fixed by the scene.
+    fn set_up_grids(&mut self, s: &State<D>) {
+        self.volume = (2.0 * self.settings.tau(s.config.per_axis)).powi(D as i32);
+        let refine = self.settings.refine;
+        let grid = Grid::new(std::array::from_fn(|k| s.grid.dims[k] * refine));
+        let n = grid.num_cells();
+        self.tg = TransportGrid {
+            grid,
+            h: 1.0 / refine as f64,
+            capacity: vec![0.0; n],
+            air: Air::Capacity,
+        };
+        self.cell_of = self.tg.cells_on(&s.grid);
     }
 
     /// Transport cells in solid cells have no capacity (the solids of this step); the air's
@@ -97,17 +113,28 @@ impl<const D: usize> PowerPicSim<D> {
 
 impl<const D: usize> FluidMethod<D> for PowerPicSim<D> {
     fn start(&mut self, s: &mut State<D>) {
-        self.volume = (2.0 * self.settings.tau(s.config.per_axis)).powi(D as i32);
-        let refine = self.settings.refine;
-        let grid = Grid::new(std::array::from_fn(|k| s.grid.dims[k] * refine));
-        let n = grid.num_cells();
-        self.tg = TransportGrid {
-            grid,
-            h: 1.0 / refine as f64,
-            capacity: vec![0.0; n],
-            air: Air::Capacity,
-        };
-        self.cell_of = self.tg.cells_on(&s.grid);
+        self.set_up_grids(s);
+    }
+
+    /// The last plan's scalings, the next solve's warm start.
+    fn save_state<'a>(&'a self, w: &mut Writer<'a>) {
+        if let Some(plan) = &self.plan {
+            let (active, u, v) = plan.warm_parts();
+            w.slice("powerpic.active", active);
+            w.slice("powerpic.u", u);
+            w.slice("powerpic.v", v);
+        }
+    }
+
+    fn restore_state(&mut self, s: &State<D>, r: &Reader) -> Result<(), SnapshotError> {
+        self.set_up_grids(s);
+        if r.has("powerpic.active") {
+            let active = r.slice("powerpic.active", None)?;
+            let v = r.slice("powerpic.v", Some(active.len()))?;
+            let u = r.slice("powerpic.u", None)?;
+            self.plan = Some(Transport::from_warm_parts(active, u, v));
+        }
+        Ok(())
     }
 
     /// Steps 1 and 2: the plan, then each transport cell's mass and momentum to the faces.

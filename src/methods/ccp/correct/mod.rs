@@ -122,6 +122,16 @@ pub struct PriceMemory {
 pub const WARM_PRICE_SCALE: f64 = 0.5;
 
 impl PriceMemory {
+    /// The prices remembered, per cell (empty: none), for a checkpoint.
+    pub fn cell_prices(&self) -> &[f64] {
+        &self.cell_price
+    }
+
+    /// The memory of a checkpoint's [`cell_prices`](Self::cell_prices).
+    pub fn from_cell_prices(cell_price: Vec<f64>) -> Self {
+        Self { cell_price }
+    }
+
     /// The warm prices of the bins `bin_cell` (0, the sink's price, for a cell that had none),
     /// or `None` before the first solve and after one without prices.
     fn prices_of(&self, bin_cell: &[usize]) -> Option<Vec<f64>> {

@@ -1,0 +1,113 @@
+//! What the state every method shares carries from one step to the next, written to and read
+//! from a checkpoint ([`crate::snapshot`]): the particles, the grid velocity the next step
+//! starts from, the markings, the obstacles, the clocks and counts, and the random generator.
+//! The rest (the grid, the static solids, the configuration) is rebuilt from the scene.
+
+use super::markings::{CellKind, Markings};
+use super::{SimConfig, SimRng, State};
+use crate::grid::{Grid, MacField};
+use crate::snapshot::{Reader, SnapshotError, Writer};
+use rand::SeedableRng;
+
+/// A cell kind as stored.
+fn kind_byte(k: CellKind) -> u8 {
+    match k {
+        CellKind::Empty => 0,
+        CellKind::Fluid => 1,
+        CellKind::Solid => 2,
+    }
+}
+
+const KINDS: [CellKind; 3] = [CellKind::Empty, CellKind::Fluid, CellKind::Solid];
+
+impl<const D: usize> State<D> {
+    /// Writes what the next step reads.
+    pub fn save<'a>(&'a self, w: &mut Writer<'a>) {
+        w.vectors("particles.pos", &self.particles.pos);
+        w.vectors("particles.vel", &self.particles.vel);
+        for (k, c) in self.velocity.comp.iter().enumerate() {
+            w.slice(&format!("velocity.{k}"), c);
+        }
+        let m = &self.markings;
+        let kinds = m.kind.iter().map(|&k| kind_byte(k)).collect();
+        w.owned("markings.kind", &[m.kind.len()], kinds);
+        w.slice("markings.count", &m.count);
+        w.bools("markings.surface", &m.surface);
+        w.slice("markings.depth", &m.depth);
+        let obstacles = &self.solids.obstacles;
+        let offsets: Vec<_> = obstacles.iter().map(|o| o.offset).collect();
+        let velocities: Vec<_> = obstacles.iter().map(|o| o.velocity).collect();
+        w.vectors("obstacles.offset", &offsets);
+        w.vectors("obstacles.velocity", &velocities);
+        w.scalar("time_secs", self.time_secs);
+        w.scalar("steps", self.steps);
+        w.scalar("total_particles", self.total_particles as u64);
+        w.scalar("target_volume", self.target_volume);
+        let word = self.rng.get_word_pos();
+        w.owned("rng.seed", &[32], self.rng.get_seed().to_vec());
+        w.scalar("rng.stream", self.rng.get_stream());
+        w.owned("rng.word_pos", &[2], vec![word as u64, (word >> 64) as u64]);
+    }
+
+    /// The state a checkpoint holds, for `config` (the scene it was written from).
+    pub fn restore(config: SimConfig<D>, r: &Reader) -> Result<Self, SnapshotError> {
+        let grid = Grid::new(config.dims);
+        let n = grid.num_cells();
+        let mut solids = super::solids::Solids::new(
+            &grid,
+            &config.solids,
+            &config.obstacles,
+            config.obstacle_mode,
+        );
+        let k = solids.obstacles.len();
+        let offsets = r.vectors::<D>("obstacles.offset", Some(k))?;
+        let velocities = r.vectors::<D>("obstacles.velocity", Some(k))?;
+        solids.place(&grid, &offsets, &velocities);
+        let pos = r.vectors::<D>("particles.pos", None)?;
+        let vel = r.vectors::<D>("particles.vel", Some(pos.len()))?;
+        let mut velocity = MacField::zeros(&grid);
+        for (a, c) in velocity.comp.iter_mut().enumerate() {
+            *c = r.slice(&format!("velocity.{a}"), Some(c.len()))?;
+        }
+        Ok(State {
+            markings: restore_markings(r, n)?,
+            time_secs: r.scalar("time_secs")?,
+            steps: r.scalar("steps")?,
+            total_particles: r.scalar::<u64>("total_particles")? as usize,
+            target_volume: r.scalar("target_volume")?,
+            rng: restore_rng(r)?,
+            particles: crate::particles::Particles { pos, vel },
+            velocity,
+            solids,
+            grid,
+            config,
+        })
+    }
+}
+
+fn restore_markings(r: &Reader, n: usize) -> Result<Markings, SnapshotError> {
+    let kind = (r.slice::<u8>("markings.kind", Some(n))?.into_iter())
+        .map(|b| KINDS.get(b as usize).copied())
+        .collect::<Option<Vec<_>>>()
+        .ok_or_else(|| SnapshotError::Array {
+            name: "markings.kind".into(),
+            reason: "a cell kind is not 0, 1 or 2".into(),
+        })?;
+    Ok(Markings {
+        kind,
+        count: r.slice("markings.count", Some(n))?,
+        surface: r.bools("markings.surface", Some(n))?,
+        depth: r.slice("markings.depth", Some(n))?,
+    })
+}
+
+/// The generator at the word of its stream where it was saved.
+fn restore_rng(r: &Reader) -> Result<SimRng, SnapshotError> {
+    let seed: [u8; 32] =
+        (r.slice::<u8>("rng.seed", Some(32))?.try_into()).expect("32 bytes, checked");
+    let word = r.slice::<u64>("rng.word_pos", Some(2))?;
+    let mut rng = SimRng::from_seed(seed);
+    rng.set_stream(r.scalar("rng.stream")?);
+    rng.set_word_pos(word[0] as u128 | (word[1] as u128) << 64);
+    Ok(rng)
+}
