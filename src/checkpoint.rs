@@ -384,6 +384,53 @@ mod tests {
         assert_eq!(file_name(7), "step-00000007.ckpt");
     }
 
+    /// A run keeps its newest two; its first write removes what other runs left (whole or
+    /// half-written), the checkpoint it resumed from is its own.
+    #[test]
+    fn a_run_keeps_its_last_two_checkpoints_and_clears_other_runs() {
+        let dir = std::env::temp_dir().join(format!("cellflip-ckpt-keep-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(dir.join(file_name(9999)), b"another run").unwrap();
+        std::fs::write(dir.join(".step-00000003.ckpt.partial"), b"half").unwrap();
+        let scene = crate::scene::Scene::load("dam-2d", &Default::default()).unwrap();
+        let mut sim = Simulation::<2>::new(scene.config::<2>(), &scene.method);
+        let origin = Origin {
+            scene_arg: "dam-2d".into(),
+            scene_source: scene.source.clone(),
+            scene_toml: scene.resolved_toml(),
+            command: "test".into(),
+            cross_check: false,
+            frames: 0,
+            recording: None,
+            every: None,
+            trails: vec![],
+        };
+        let mut c = Checkpoints::new(&dir, None).unwrap();
+        let names = |d: &Path| {
+            let mut v: Vec<String> = std::fs::read_dir(d)
+                .unwrap()
+                .flatten()
+                .map(|e| e.file_name().to_string_lossy().into_owned())
+                .collect();
+            v.sort();
+            v
+        };
+        for _ in 0..3 {
+            sim.step().unwrap();
+            c.write(&sim, &origin).unwrap();
+        }
+        assert_eq!(names(&dir), [file_name(2), file_name(3)]);
+        // Resumed from step 3: the run's own; a later write keeps it as the one before.
+        let opened = open(&dir).unwrap();
+        assert_eq!((opened.step, &opened.origin), (3, &origin));
+        let mut c = Checkpoints::new(&dir, Some(&opened)).unwrap();
+        sim.step().unwrap();
+        c.write(&sim, &origin).unwrap();
+        assert_eq!(names(&dir), [file_name(3), file_name(4)]);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
     #[test]
     fn the_default_folder_sits_beside_the_recording() {
         let p = default_dir(Some(Path::new("out/run.rrd")), "dam-2d");

@@ -271,29 +271,34 @@ fn run_dim<const D: usize>(
     }
 }
 
-/// Sets the scene up and runs it, recording as it goes; the runner (with its summary) and
-/// how the run ended.
-fn simulate<const D: usize>(
+/// The simulation at the run's start, new or restored from the checkpoint, with the
+/// recording's static data (and step 0 of a new run) logged.
+fn begin<const D: usize>(
     scene: &Scene,
-    limit: Limit,
     recorder: Option<&Recorder>,
     out: Option<&Path>,
     args: &RunArgs,
-    start: Start,
-) -> Result<Ran<D>> {
+    start: &mut Start,
+) -> Result<Simulation<D>> {
     let mut method = scene.method.clone();
     method.ccp.export_lp = match args.ccp.export_lp {
         Some(n) => Some((n, mps_path(scene, out, n)?)),
         None => None,
     };
-    let resumed = start.resumed.as_ref();
-    method.ccp.cross_check = args.ccp.cross_check || resumed.is_some_and(|c| c.origin.cross_check);
+    let cross_check = start.resumed.as_ref().is_some_and(|c| c.origin.cross_check);
+    method.ccp.cross_check = args.ccp.cross_check || cross_check;
     let t0 = Instant::now();
-    let sim = match resumed {
-        Some(c) => Simulation::<D>::restore(scene.config::<D>(), &method, &c.reader)
-            .map_err(|e| anyhow!("checkpoint '{}': {e}", c.path.display()))?,
+    let sim = match start.resumed.as_mut() {
+        Some(c) => {
+            let sim = Simulation::<D>::restore(scene.config::<D>(), &method, &c.reader)
+                .map_err(|e| anyhow!("checkpoint '{}': {e}", c.path.display()))?;
+            // The file's copy of the state is not kept for the whole run.
+            c.reader.release();
+            sim
+        }
         None => Simulation::<D>::new(scene.config::<D>(), &method),
     };
+    let resumed = start.resumed.as_ref();
     if let (Some(c), false) = (resumed, args.quiet) {
         let (read, restored) = (start.read.as_secs_f64(), t0.elapsed().as_secs_f64());
         eprintln!(
@@ -319,6 +324,21 @@ fn simulate<const D: usize>(
             r.warn(&sim, msg);
         }
     }
+    Ok(sim)
+}
+
+/// Sets the scene up and runs it, recording and checkpointing as it goes; the runner (with
+/// its summary), how the run ended and its checkpoints.
+fn simulate<const D: usize>(
+    scene: &Scene,
+    limit: Limit,
+    recorder: Option<&Recorder>,
+    out: Option<&Path>,
+    args: &RunArgs,
+    mut start: Start,
+) -> Result<Ran<D>> {
+    let sim = begin::<D>(scene, recorder, out, args, &mut start)?;
+    let resumed = start.resumed.as_ref();
     let sinks = [
         recorder.and_then(Recorder::surface_sink),
         export::requested(&args.export, scene, scene.method.kind.name())?,
@@ -330,7 +350,10 @@ fn simulate<const D: usize>(
     }
     let mut saver = start.checkpoints;
     let mut runner = Runner::new(sim);
-    let bar = progress_bar(limit);
+    let say = Announce {
+        bar: progress_bar(limit),
+        quiet: args.quiet,
+    };
     let t0 = Instant::now();
     let grace = match saver {
         Some(_) => interrupt::CHECKPOINT_GRACE,
@@ -350,42 +373,40 @@ fn simulate<const D: usize>(
             f.submit(sim)?;
         }
         let asked = interrupt::take_checkpoint_request();
-        if let Some(saver) = saver.as_mut().filter(|c| asked || c.due(last_time_secs, s.time_secs)) {
-            let t = Instant::now();
-            let path = saver.save(sim, recorder, frames.as_mut())?;
-            announce(&bar, args.quiet, &path, t.elapsed(), asked);
-        } else if asked {
-            bar.suspend(|| eprintln!("warning: SIGUSR1 asks for a checkpoint; this run writes none (--checkpoint-every SECS)"));
+        match saver.as_mut() {
+            Some(c) if asked || c.due(last_time_secs, s.time_secs) => {
+                say.checkpoint(c, sim, recorder, frames.as_mut(), asked)?
+            }
+            None if asked => say.warn(NO_CHECKPOINTS),
+            _ => {}
         }
         last_time_secs = s.time_secs;
-        show_progress(
-            &bar,
-            sim,
-            limit,
-            !args.quiet && t0.elapsed() > Duration::from_secs(1),
-        );
+        let visible = !args.quiet && t0.elapsed() > Duration::from_secs(1);
+        show_progress(&say.bar, sim, limit, visible);
         Ok(())
     });
     // A run that ended well or was stopped by a signal leaves a checkpoint of its last step
     // (a failed step may have left the state half-way).
     let last = match (&result, saver.as_mut()) {
-        (Ok(()), Some(saver)) if !saver.is_current(&runner.sim) => {
-            let t = Instant::now();
-            let saved = saver.save(&runner.sim, recorder, frames.as_mut());
-            saved.map(|p| announce(&bar, args.quiet, &p, t.elapsed(), false))
+        (Ok(()), Some(c)) if !c.is_current(&runner.sim) => {
+            say.checkpoint(c, &runner.sim, recorder, frames.as_mut(), false)
         }
         _ => Ok(()),
     };
     // The last frames are drawn and written before the recording is finished.
     let drawn = frames.map_or(Ok(()), FrameWorker::finish);
     watchdog.done();
-    bar.finish_and_clear();
+    say.bar.finish_and_clear();
     Ok(Ran {
         runner,
         result: result.and(last).and(drawn),
         saver,
     })
 }
+
+/// What SIGUSR1 gets from a run without checkpoints.
+const NO_CHECKPOINTS: &str =
+    "SIGUSR1 asks for a checkpoint; this run writes none (--checkpoint-every SECS)";
 
 /// A run that got going: the runner (with its summary), how it ended, and its checkpoints.
 struct Ran<const D: usize> {
@@ -394,20 +415,41 @@ struct Ran<const D: usize> {
     saver: Option<Saver>,
 }
 
-/// Says where a checkpoint went, its size and how long it took (above the progress bar).
-fn announce(bar: &ProgressBar, quiet: bool, path: &Path, took: Duration, asked: bool) {
-    if quiet {
-        return;
+/// What a run says while its progress bar is up: above the bar, and nothing when quiet.
+struct Announce {
+    bar: ProgressBar,
+    quiet: bool,
+}
+
+impl Announce {
+    /// Writes a checkpoint and says where it went, its size and how long it took.
+    fn checkpoint<const D: usize>(
+        &self,
+        saver: &mut Saver,
+        sim: &Simulation<D>,
+        recorder: Option<&Recorder>,
+        frames: Option<&mut FrameWorker>,
+        asked: bool,
+    ) -> Result<()> {
+        let t = Instant::now();
+        let path = saver.save(sim, recorder, frames)?;
+        if !self.quiet {
+            let mb = std::fs::metadata(&path).map_or(0.0, |m| m.len() as f64 / 1e6);
+            let why = if asked { ", asked for by SIGUSR1" } else { "" };
+            let secs = t.elapsed().as_secs_f64();
+            let line = format!(
+                "checkpoint: {} ({mb:.1} MB in {secs:.2} s{why})",
+                path.display()
+            );
+            self.bar.suspend(|| eprintln!("{line}"));
+        }
+        Ok(())
     }
-    let mb = std::fs::metadata(path).map_or(0.0, |m| m.len() as f64 / 1e6);
-    let why = if asked { ", asked for by SIGUSR1" } else { "" };
-    let secs = took.as_secs_f64();
-    bar.suspend(|| {
-        eprintln!(
-            "checkpoint: {} ({mb:.1} MB in {secs:.2} s{why})",
-            path.display()
-        )
-    });
+
+    /// A warning, which `--quiet` does not silence.
+    fn warn(&self, msg: &str) {
+        self.bar.suspend(|| eprintln!("warning: {msg}"));
+    }
 }
 
 /// Ends the recording (with the run's error or interruption in its log), prints the summary

@@ -310,6 +310,12 @@ impl Reader {
             .ok_or_else(|| SnapshotError::Missing(format!("meta.{key}")))
     }
 
+    /// Frees the arrays' data (once the state is restored from them); the metadata stays.
+    pub fn release(&mut self) {
+        self.bytes = Vec::new();
+        self.arrays.clear();
+    }
+
     /// Whether it holds an array of this name.
     pub fn has(&self, name: &str) -> bool {
         self.arrays.contains_key(name)

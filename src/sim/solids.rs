@@ -282,6 +282,9 @@ impl<const D: usize> Solids<D> {
     /// Puts the obstacles at `offsets` with `velocities` (one each, in order), as a step
     /// leaves them: what a checkpoint restores.
     pub fn place(&mut self, grid: &Grid<D>, offsets: &[Vector<D>], velocities: &[Vector<D>]) {
+        if self.obstacles.is_empty() {
+            return;
+        }
         for ((o, x), v) in self.obstacles.iter_mut().zip(offsets).zip(velocities) {
             o.offset = *x;
             o.velocity = *v;
