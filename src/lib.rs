@@ -27,7 +27,6 @@ pub mod out;
 pub mod particles;
 pub mod record;
 pub mod report;
-pub mod resume;
 pub mod run;
 pub mod runner;
 pub mod scene;

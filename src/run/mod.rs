@@ -1,15 +1,14 @@
 //! `cellflip run`: a scene through the runner, with its progress bar, recording, checkpoints,
 //! signal handling and the summary at the end; or the run a checkpoint holds, going on.
 
-use crate::checkpoint::{self, Checkpoints, Opened, Origin, Saver};
+use crate::checkpoint::{self, Saver};
 use crate::cli::RunArgs;
 use crate::cli::SinkArgs;
 use crate::export;
 use crate::frames::FrameWorker;
 use crate::interrupt::{self, Watchdog};
 use crate::methods::MethodOption;
-use crate::record::{Drawing, Recorder, Resumed, Sink};
-use crate::resume;
+use crate::record::{Drawing, Recorder, Sink};
 use crate::runner::{Limit, Runner};
 use crate::scene::{peak_memory_mib, MemoryEstimate, Overrides, Scene};
 use crate::simulation::Simulation;
@@ -17,6 +16,10 @@ use anyhow::{anyhow, bail, Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
+
+mod start;
+
+use start::{checkpoint_every, checkpoints_of, recording_of, resumed_scene, Start};
 
 impl RunArgs {
     fn overrides(&self) -> Overrides {
@@ -34,26 +37,6 @@ impl RunArgs {
             pressure: self.pressure,
             air: self.air,
         }
-    }
-
-    /// Each option given that sets the scene, named as typed, with the overrides it makes
-    /// alone (a resumed run refuses any that would change its checkpoint's scene).
-    fn given_overrides(&self) -> Vec<(String, Overrides)> {
-        let o = self.overrides();
-        let none = Overrides::default;
-        let mut given = vec![];
-        macro_rules! each {
-            ($($field:ident $flag:literal),*) => {$(
-                if o.$field.is_some() {
-                    let only = Overrides { $field: o.$field, ..none() };
-                    given.push(($flag.to_string(), only));
-                }
-            )*};
-        }
-        each!(method "--method", cells "--res", ppc "--ppc", seed "--seed", solver "--solver",
-            directions "--directions", band "--band", band_r "--band-r", obstacle "--obstacle",
-            pressure "--pressure", air "--air");
-        given
     }
 
     /// The method-specific options given on the command line.
@@ -115,127 +98,6 @@ pub fn run(args: &RunArgs) -> Result<()> {
         3 => run_dim::<3>(&scene, &estimate, limit, sink.as_ref(), args, start),
         d => unreachable!("scene checks the dimension, got {d}"),
     }
-}
-
-/// How a run starts: afresh or from a checkpoint, and its checkpointing.
-struct Start {
-    resumed: Option<Opened>,
-    /// How the recording goes on from the checkpoint's.
-    continued: Option<Resumed>,
-    checkpoints: Option<Saver>,
-    /// How long reading and checking the checkpoint took.
-    read: Duration,
-}
-
-/// `--checkpoint-every`, checked: a positive, finite number of simulated seconds.
-fn checkpoint_every(every: Option<f64>) -> Result<Option<f64>> {
-    match every {
-        Some(e) if !(e.is_finite() && e > 0.0) => {
-            bail!("--checkpoint-every {e}: must be a positive, finite number of simulated seconds")
-        }
-        e => Ok(e),
-    }
-}
-
-/// The scene of the checkpoint `--resume` names, the command line's other options checked
-/// against it.
-fn resumed_scene(args: &RunArgs, c: &Opened) -> Result<Scene> {
-    if args.ccp.cross_check && !c.origin.cross_check {
-        bail!(
-            "--cross-check: checkpoint '{}' was written without it; a resumed run keeps the \
-             options it started with",
-            c.path.display()
-        );
-    }
-    let given = args.given_overrides();
-    resume::scene(c, args.scene.as_deref(), args.scale.duration, &given)
-}
-
-/// Where the recording goes and, for a resumed run, how it goes on: by default in the
-/// checkpoint's file, cut back to the checkpoint's step (none if the run had no file); with
-/// a sink given, there, with the same recording id.
-fn recording_of(
-    args: &RunArgs,
-    scene: &Scene,
-    resumed: Option<&Opened>,
-) -> Result<(Option<Sink>, Option<Resumed>)> {
-    let Some(mark) = resumed.map(|c| c.origin.recording.as_ref()) else {
-        return Ok((args.sink.choice(scene.name())?, None));
-    };
-    let s = &args.sink;
-    let chosen = s.save.is_some() || s.spawn || s.connect.is_some() || s.stdout || s.no_record;
-    let same_file = |m: &checkpoint::RecordingMark| s.save.as_ref().is_none_or(|p| *p == m.path);
-    match mark {
-        Some(m) if same_file(m) && !(s.spawn || s.connect.is_some() || s.stdout || s.no_record) => {
-            let continued = Resumed {
-                id: m.id.clone(),
-                append_at: Some(m.bytes),
-            };
-            Ok((Some(Sink::File(m.path.clone())), Some(continued)))
-        }
-        _ if !chosen => Ok((None, None)),
-        _ => {
-            let id = mark.map(|m| m.id.clone());
-            let continued = id.map(|id| Resumed {
-                id,
-                append_at: None,
-            });
-            Ok((s.choice(scene.name())?, continued))
-        }
-    }
-}
-
-/// The run's checkpointing, if on: `--checkpoint-every` or the resumed checkpoint's, into
-/// `--checkpoint-dir` or the default folder (the resumed checkpoint's own), made and checked
-/// writable before the run starts.
-fn checkpoints_of(
-    args: &RunArgs,
-    every: Option<f64>,
-    scene: &Scene,
-    sink: Option<&Sink>,
-    resumed: Option<&Opened>,
-) -> Result<Option<Saver>> {
-    let Some(every) = every.or(resumed.and_then(|c| c.origin.every)) else {
-        if args.checkpoint.checkpoint_dir.is_some() {
-            bail!("--checkpoint-dir: checkpoints are written only with --checkpoint-every SECS");
-        }
-        return Ok(None);
-    };
-    let file = match sink {
-        Some(Sink::File(p)) => Some(p.as_path()),
-        _ => None,
-    };
-    let resumed_dir = resumed.and_then(|c| c.path.parent().map(Path::to_path_buf));
-    let dir = (args.checkpoint.checkpoint_dir.clone())
-        .or(resumed_dir)
-        .unwrap_or_else(|| checkpoint::default_dir(file, scene.name()));
-    let origin = match resumed {
-        Some(c) => Origin {
-            command: command_line(),
-            ..c.origin.clone()
-        },
-        None => Origin {
-            scene_arg: args.scene.clone().unwrap_or_default(),
-            scene_source: scene.source.clone(),
-            scene_toml: scene.resolved_toml(),
-            command: command_line(),
-            cross_check: args.ccp.cross_check,
-            frames: 0,
-            recording: None,
-            every: None,
-            trails: vec![],
-        },
-    };
-    Ok(Some(Saver::new(
-        Checkpoints::new(&dir, resumed)?,
-        every,
-        origin,
-    )))
-}
-
-/// The command line, for a checkpoint's reader.
-fn command_line() -> String {
-    std::env::args().collect::<Vec<_>>().join(" ")
 }
 
 fn run_dim<const D: usize>(
