@@ -164,9 +164,14 @@ fn checkpoint_scene(
 ) -> Result<Scene> {
     let o = &c.origin;
     let file = c.path.display();
-    let parse = |over: &Overrides| Scene::parse(&o.scene_source, &o.scene_toml, over);
-    let base = parse(&Overrides::default())
+    let base = Scene::parse_resolved(&o.scene_source, &o.scene_toml)
         .map_err(|e| anyhow!("checkpoint '{file}': its scene does not load: {e:#}"))?;
+    // The scene as run with `over` applied as the command line would.
+    let parse = |over: &Overrides| {
+        let mut file = base.file.clone();
+        over.apply(&mut file);
+        Scene::parse_resolved(&o.scene_source, &toml::to_string(&file)?)
+    };
     if let Some(a) = scene_arg.filter(|a| *a != o.scene_arg && *a != base.name()) {
         bail!(
             "{a}: checkpoint '{file}' is of scene '{}' (started as `{}`); leave the scene out \

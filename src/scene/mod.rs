@@ -371,7 +371,7 @@ pub struct Scene {
 
 impl Overrides {
     /// Writes the overrides into the scene file, and the default gravity where it has none.
-    fn apply(&self, file: &mut SceneFile) {
+    pub(crate) fn apply(&self, file: &mut SceneFile) {
         let sim = &mut file.simulation;
         macro_rules! set {
             ($($field:ident),*) => {
@@ -483,6 +483,16 @@ impl Scene {
             toml::from_str(text).map_err(|e| check::toml_error(source, text, &e))?;
         check::method_keys(source, &file.simulation)?;
         overrides.apply(&mut file);
+        Ok(check::check(source, file)?)
+    }
+
+    /// The scene as run, from its [`Scene::resolved_toml`] (a checkpoint's): checked as any
+    /// scene, but not for keys of methods other than its own, which a file run with another
+    /// method (`--method`) keeps beside the one it ran.
+    pub fn parse_resolved(source: &str, text: &str) -> Result<Scene> {
+        let mut file: SceneFile =
+            toml::from_str(text).map_err(|e| check::toml_error(source, text, &e))?;
+        Overrides::default().apply(&mut file);
         Ok(check::check(source, file)?)
     }
 

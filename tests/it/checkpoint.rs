@@ -601,18 +601,36 @@ fn bad_checkpoints_and_options_are_refused_naming_the_file_and_the_reason() {
     );
 }
 
-/// A checkpoint that cannot be written (the file size limit, as a full disk) stops the run
-/// with the file's name and the OS error, and leaves no half-written file.
+/// A checkpoint that cannot be written (a file size limit, as a full disk) stops the run with
+/// the file's name and the OS error, leaves no half-written file, and the checkpoints written
+/// before it survive whole: flip's checkpoints of the dam keep their size until its emitter
+/// pours (2.5 s), and the limit lets through exactly that size.
 #[test]
-fn a_checkpoint_that_cannot_be_written_stops_the_run_and_leaves_nothing_half_written() {
+fn a_checkpoint_that_cannot_be_written_stops_the_run_and_the_earlier_ones_survive() {
     let dir = scratch_dir("ckpt-full");
-    let ckdir = dir.join("ck");
-    let o = Command::new("sh")
+    let (first, full) = (dir.join("first"), dir.join("full"));
+    let dam = ["run", "dam-2d", "--method", "flip", "-q", "--no-record"];
+    let mut a = dam.to_vec();
+    a.extend([
+        "--steps",
+        "2",
+        "--checkpoint-every",
+        "1000",
+        "--checkpoint-dir",
+        first.to_str().unwrap(),
+    ]);
+    ok(&cellflip(&a));
+    let size = std::fs::metadata(first.join("step-00000002.ckpt"))
+        .unwrap()
+        .len();
+    let limit_kib = size.div_ceil(1024);
+    let o = Command::new("bash")
         .arg("-c")
         .arg(format!(
-            "trap '' XFSZ; ulimit -f 100; exec '{}' run dam-2d --steps 20 -q --no-record --checkpoint-every 0.001 --checkpoint-dir '{}'",
+            "trap '' XFSZ; ulimit -f {limit_kib}; exec '{}' {} --duration 3 --checkpoint-every 0.05 --checkpoint-dir '{}'",
             env!("CARGO_BIN_EXE_cellflip"),
-            ckdir.display()
+            dam.join(" "),
+            full.display()
         ))
         .output()
         .unwrap();
@@ -622,6 +640,56 @@ fn a_checkpoint_that_cannot_be_written_stops_the_run_and_leaves_nothing_half_wri
         err.contains("cannot write checkpoint") && err.contains("File too large"),
         "{err}"
     );
-    let left: Vec<_> = std::fs::read_dir(&ckdir).unwrap().flatten().collect();
-    assert!(left.is_empty(), "{left:?}");
+    let left: Vec<String> = std::fs::read_dir(&full)
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(checkpoints(&full).len(), 2, "{left:?}");
+    assert_eq!(left.len(), 2, "a half-written file was left: {left:?}");
+    let last = step_of(checkpoints(&full).last().unwrap());
+    let to = (last + 1).to_string();
+    ok(&cellflip(&[
+        "run",
+        "--resume",
+        full.to_str().unwrap(),
+        "--steps",
+        &to,
+        "--no-record",
+        "-q",
+    ]));
+}
+
+/// A checkpoint keeps the scene as run (its resolved TOML); read back, it is the same scene:
+/// the same configuration and method settings, for every built-in scene with every method, and
+/// with the overrides a command line gives.
+#[test]
+fn the_scene_as_run_reads_back_as_the_same_scene() {
+    use cellflip::scene::BUILT_IN;
+    let mut checked = 0;
+    for (name, _) in BUILT_IN {
+        for &m in MethodKind::ALL {
+            let o = Overrides {
+                method: Some(m),
+                seed: Some(7),
+                ppc: None,
+                duration: Some(0.5),
+                ..Default::default()
+            };
+            let Ok(s) = Scene::load(name, &o) else {
+                continue;
+            };
+            let back = Scene::parse_resolved(&s.source, &s.resolved_toml())
+                .unwrap_or_else(|e| panic!("{name} {}: {e:#}", m.name()));
+            assert_eq!(back.resolved_toml(), s.resolved_toml(), "{name} {}", m.name());
+            assert_eq!(back.method, s.method, "{name} {}", m.name());
+            assert_eq!(back.dims, s.dims, "{name} {}", m.name());
+            match s.dim() {
+                2 => assert!(back.config::<2>() == s.config::<2>(), "{name} {}", m.name()),
+                _ => assert!(back.config::<3>() == s.config::<3>(), "{name} {}", m.name()),
+            }
+            checked += 1;
+        }
+    }
+    assert!(checked >= BUILT_IN.len() * 4, "only {checked} scene and method pairs loaded");
 }
