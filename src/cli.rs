@@ -63,6 +63,10 @@ pub struct CompareArgs {
     /// Where the recording goes [default: recordings/<scene>-compare.rrd].
     #[command(flatten)]
     pub sink: SinkArgs,
+    /// With --connect: run even when no viewer answers at the URL at the start (by default
+    /// that stops the command at once, exit 1, nothing run).
+    #[arg(long, requires = "connect")]
+    pub no_viewer_check: bool,
     /// No progress bar and no summaries.
     #[arg(long, short)]
     pub quiet: bool,
@@ -252,6 +256,10 @@ pub struct RunArgs {
     /// Where the recording goes.
     #[command(flatten)]
     pub sink: SinkArgs,
+    /// With --connect: run even when no viewer answers at the URL at the start (by default
+    /// that stops the command at once, exit 1, nothing run).
+    #[arg(long, requires = "connect")]
+    pub no_viewer_check: bool,
     /// Frames for a renderer.
     #[command(flatten)]
     pub export: ExportArgs,

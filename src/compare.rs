@@ -44,6 +44,9 @@ pub fn compare(args: &CompareArgs) -> Result<()> {
     let sink = args
         .sink
         .choice(&format!("{}-compare", entries[0].scene.name()))?;
+    if let (Some(s), false) = (&sink, args.no_viewer_check) {
+        s.check_reachable()?;
+    }
     interrupt::install()?;
     match entries[0].scene.dim() {
         2 => compare_dim::<2>(&entries, sink.as_ref(), args),

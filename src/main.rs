@@ -10,7 +10,12 @@ use std::io::Write;
 /// (its recording and summary finished first).
 fn main() {
     one_malloc_arena();
-    let cli = Cli::parse();
+    // A usage error (an unknown flag or value) exits 1 as every other error; --help and
+    // --version print and exit 0.
+    let cli = Cli::try_parse().unwrap_or_else(|e| {
+        let _ = e.print();
+        std::process::exit(if e.use_stderr() { 1 } else { 0 });
+    });
     // The main thread is one of rayon's workers: it runs its share of every parallel loop,
     // and rayon starts one thread fewer. Outside the pool it would wait on every loop and run
     // the serial parts of a step beside the workers spinning for work, one thread more than

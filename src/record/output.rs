@@ -33,11 +33,9 @@ impl Sink {
         match self {
             Sink::File(p) => p.display().to_string(),
             Sink::Spawn => "a new viewer".into(),
-            Sink::Connect(url) => format!(
-                "the viewer at {}",
-                url.as_deref()
-                    .unwrap_or("rerun+http://127.0.0.1:9876/proxy")
-            ),
+            Sink::Connect(url) => {
+                format!("the viewer at {}", url.as_deref().unwrap_or(DEFAULT_URL))
+            }
             Sink::Stdout => "standard output".into(),
         }
     }
@@ -49,6 +47,42 @@ impl Sink {
 pub struct Resumed {
     pub id: String,
     pub append_at: Option<u64>,
+}
+
+/// rerun's default viewer URL, where `--connect` without one streams.
+pub const DEFAULT_URL: &str = "rerun+http://127.0.0.1:9876/proxy";
+
+/// How long the check that a viewer answers waits for it.
+pub const REACH_TIMEOUT: Duration = Duration::from_secs(3);
+
+impl Sink {
+    /// For a live stream to a viewer already running: fails, naming the URL, when nothing
+    /// accepts a connection at its host and port within [`REACH_TIMEOUT`] (rerun's gRPC client
+    /// would drop the whole stream silently and the run would end with a warning only).
+    pub fn check_reachable(&self) -> Result<()> {
+        let Sink::Connect(url) = self else {
+            return Ok(());
+        };
+        let url = url.as_deref().unwrap_or(DEFAULT_URL);
+        let cannot = |why: &dyn std::fmt::Display| {
+            anyhow!(
+                "--connect {url}: no viewer answers there ({why}); start one with `rerun` \
+                 (pip install rerun-sdk==0.36.3), or pass --no-viewer-check to run anyway"
+            )
+        };
+        let rest = url.split_once("://").map_or(url, |(_, r)| r);
+        let authority = rest.split('/').next().unwrap_or(rest);
+        let addrs = std::net::ToSocketAddrs::to_socket_addrs(authority)
+            .map_err(|e| cannot(&format!("cannot resolve '{authority}': {e}")))?;
+        let mut last = None;
+        for a in addrs {
+            match std::net::TcpStream::connect_timeout(&a, REACH_TIMEOUT) {
+                Ok(_) => return Ok(()),
+                Err(e) => last = Some(e),
+            }
+        }
+        Err(cannot(&last.map_or("no address".into(), |e| e.to_string())))
+    }
 }
 
 /// How long the end of a run waits for a live stream to drain before saying it was lost.

@@ -205,6 +205,7 @@ pub fn load(spec: &RunSpec) -> Result<Scene> {
 /// `cellflip report`.
 pub fn report(args: &ReportArgs) -> Result<()> {
     let specs = matrix(args)?;
+    check_loads(&specs)?;
     // When and at which commit the binary ran, read before the matrix: the checkout may move on
     // during a run of a quarter of an hour.
     let header = docs::provenance(&command());
@@ -253,6 +254,29 @@ pub fn report(args: &ReportArgs) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// Every run's scene loads: an unknown scene, an unreadable or malformed file and an impossible
+/// resolution stop the report before any run, with nothing written (each reason once).
+fn check_loads(specs: &[RunSpec]) -> Result<()> {
+    let mut reasons: Vec<String> = vec![];
+    for spec in specs {
+        if let Err(e) = load(spec) {
+            let reason = format!("{e:#}");
+            if !reasons.contains(&reason) {
+                reasons.push(reason);
+            }
+        }
+    }
+    match reasons.as_slice() {
+        [] => Ok(()),
+        [one] => anyhow::bail!("{one}"),
+        all => anyhow::bail!(
+            "{} of the report's scenes cannot run:\n  {}",
+            all.len(),
+            all.join("\n  ")
+        ),
+    }
 }
 
 /// Runs the matrix in order with a progress bar, until done or stopped.

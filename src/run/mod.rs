@@ -86,6 +86,9 @@ pub fn run(args: &RunArgs) -> Result<()> {
     check_export_step(args.ccp.export_lp, limit)?;
     parse_slice(args.slice.as_deref(), scene.dim())?;
     let (sink, continued) = recording_of(args, &scene, resumed.as_ref())?;
+    if let (Some(s), false) = (&sink, args.no_viewer_check) {
+        s.check_reachable()?;
+    }
     let start = Start {
         checkpoints: checkpoints_of(args, every, &scene, sink.as_ref(), resumed.as_ref())?,
         continued,

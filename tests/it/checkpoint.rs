@@ -681,7 +681,12 @@ fn the_scene_as_run_reads_back_as_the_same_scene() {
             };
             let back = Scene::parse_resolved(&s.source, &s.resolved_toml())
                 .unwrap_or_else(|e| panic!("{name} {}: {e:#}", m.name()));
-            assert_eq!(back.resolved_toml(), s.resolved_toml(), "{name} {}", m.name());
+            assert_eq!(
+                back.resolved_toml(),
+                s.resolved_toml(),
+                "{name} {}",
+                m.name()
+            );
             assert_eq!(back.method, s.method, "{name} {}", m.name());
             assert_eq!(back.dims, s.dims, "{name} {}", m.name());
             match s.dim() {
@@ -691,5 +696,8 @@ fn the_scene_as_run_reads_back_as_the_same_scene() {
             checked += 1;
         }
     }
-    assert!(checked >= BUILT_IN.len() * 4, "only {checked} scene and method pairs loaded");
+    assert!(
+        checked >= BUILT_IN.len() * 4,
+        "only {checked} scene and method pairs loaded"
+    );
 }

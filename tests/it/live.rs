@@ -192,8 +192,11 @@ fn a_viewer_that_hangs_up_mid_run_neither_hangs_nor_stops_the_run() {
     assert!(t0.elapsed().as_secs() < 60, "{:?}", t0.elapsed());
 }
 
+/// A viewer that is not there when the run starts: the command says so at once and exits 1
+/// with nothing run (a script can tell nothing was shown); with `--no-viewer-check` the run
+/// goes on, neither hangs nor fails, and says at the end that the stream was lost.
 #[test]
-fn a_viewer_that_is_not_there_neither_hangs_nor_stops_the_run() {
+fn a_viewer_that_is_not_there_stops_the_run_at_once_unless_asked_to_run_anyway() {
     let dir = scratch_dir("lost_viewer");
     // A port nothing listens on: bound, then released.
     let port = std::net::TcpListener::bind("127.0.0.1:0")
@@ -203,7 +206,17 @@ fn a_viewer_that_is_not_there_neither_hangs_nor_stops_the_run() {
         .port();
     let url = format!("rerun+http://127.0.0.1:{port}/proxy");
     let t0 = std::time::Instant::now();
-    let out = cellflip_in(&dir, &["run", "dam-2d", "--steps", "30", "--connect", &url]);
+    let run = ["run", "dam-2d", "--steps", "30", "--connect", &url];
+    let out = cellflip_in(&dir, &run);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains(&format!("--connect {url}: no viewer answers there")),
+        "{stderr}"
+    );
+    assert!(out.stdout.is_empty(), "something ran");
+    assert!(t0.elapsed().as_secs() < 5, "{:?}", t0.elapsed());
+    let out = cellflip_in(&dir, &[&run[..], &["--no-viewer-check"]].concat());
     ok(&out);
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(stdout.contains("dam-2d (2D, ccp): 30 steps"), "{stdout}");

@@ -56,15 +56,9 @@ fn tiny_report() -> PathBuf {
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
         std::fs::write(dir.join("overflow.toml"), OVERFLOW).unwrap();
-        std::fs::write(
-            dir.join("broken.toml"),
-            "name = \"broken\"\ndim = 2\n[domain\n",
-        )
-        .unwrap();
         let scenes = format!(
-            "hydrostatic-2d,dam-2d,{},{}",
+            "hydrostatic-2d,dam-2d,{}",
             dir.join("overflow.toml").display(),
-            dir.join("broken.toml").display()
         );
         let out = dir.join("out");
         let o = Command::new(env!("CARGO_BIN_EXE_cellflip"))
@@ -125,8 +119,8 @@ fn the_csv_has_every_documented_column_and_a_row_per_run() {
             "the figure {figure} is not documented in docs/report.md"
         );
     }
-    // 4 scenes x 2 resolutions x every method.
-    assert_eq!(rows(&dir).len(), 4 * 2 * MethodKind::ALL.len());
+    // 3 scenes x 2 resolutions x every method.
+    assert_eq!(rows(&dir).len(), 3 * 2 * MethodKind::ALL.len());
 }
 
 #[test]
@@ -156,14 +150,47 @@ fn failing_runs_are_rows_that_say_why() {
             ),
         }
     }
-    assert!(
-        status("broken")
-            .iter()
-            .all(|s| s.starts_with("not run: ") && s.contains("broken.toml")),
-        "{:?}",
-        status("broken")
-    );
     assert!(status("dam-2d").iter().all(|s| s == "ok"));
+}
+
+/// A scene that cannot run (unknown, unreadable, malformed, at an impossible resolution) or an
+/// unknown method stops the report before any run, naming each reason once, with exit 1 and
+/// nothing written. (It used to write a report of failed rows and exit 0.)
+#[test]
+fn a_matrix_that_cannot_run_is_refused_before_any_run() {
+    let dir = crate::common::scratch_dir("report-refused");
+    let broken = dir.join("broken.toml");
+    std::fs::write(&broken, "name = \"broken\"\ndim = 2\n[domain\n").unwrap();
+    let missing = dir.join("missing.toml");
+    let out = dir.join("out");
+    let cases: [(&[&str], &[&str]); 5] = [
+        (&["--scenes", "nowhere"], &["unknown scene 'nowhere'"]),
+        (&["--scenes", broken.to_str().unwrap()], &["broken.toml"]),
+        (
+            &["--scenes", missing.to_str().unwrap()],
+            &["cannot read scene file", "missing.toml"],
+        ),
+        (
+            &["--scenes", "dam-2d,nowhere", "--res", "0"],
+            &["2 of the report's scenes cannot run", "nowhere", "got 0"],
+        ),
+        (
+            &["--scenes", "dam-2d", "--methods", "nope"],
+            &["invalid value 'nope'"],
+        ),
+    ];
+    for (args, says) in cases {
+        let o = Command::new(env!("CARGO_BIN_EXE_cellflip"))
+            .arg("report")
+            .args(args)
+            .args(["-q", "--out", out.to_str().unwrap()])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{args:?}: {err}");
+        assert!(says.iter().all(|s| err.contains(s)), "{args:?}: {err}");
+        assert!(!out.exists(), "{args:?} wrote {}", out.display());
+    }
 }
 
 #[test]
