@@ -13,11 +13,24 @@ use crate::simulation::Simulation;
 use crate::snapshot::{Reader, Writer};
 use anyhow::{anyhow, bail, Context, Result};
 use std::fs::File;
-use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
 /// Complete checkpoints a run keeps in its folder: the newest and the one before it.
 pub const KEEP: usize = 2;
+
+/// This build of cellflip: its version and a CRC-32 of its executable. A checkpoint or a
+/// report's kept run from another build may not continue or equal what this one computes.
+pub fn build() -> &'static str {
+    static BUILD: std::sync::LazyLock<String> = std::sync::LazyLock::new(|| {
+        let exe = std::env::current_exe().and_then(std::fs::read);
+        let crc = exe.map_or_else(
+            |_| "unknown".into(),
+            |b| format!("{:08x}", crc32fast::hash(&b)),
+        );
+        format!("cellflip {} ({crc})", env!("CARGO_PKG_VERSION"))
+    });
+    &BUILD
+}
 
 /// Where a run's recording stood when a checkpoint was written, for the resumed run to go on
 /// with it: the file, its recording id, and its length in bytes with every step up to the
@@ -59,7 +72,7 @@ impl Origin {
             let flat = t.iter().flatten().map(|&x| x as f64).collect();
             w.owned(&format!("recording.trail.{k}"), &[t.len(), 3], flat);
         }
-        w.meta("program", format!("cellflip {}", env!("CARGO_PKG_VERSION")));
+        w.meta("program", build());
         w.meta("scene.arg", &*self.scene_arg);
         w.meta("scene.source", &*self.scene_source);
         w.meta("scene.toml", &*self.scene_toml);
@@ -247,14 +260,23 @@ impl Checkpoints {
         sim: &Simulation<D>,
         origin: &Origin,
     ) -> Result<PathBuf> {
+        self.write_with(sim, origin, |_| {})
+    }
+
+    /// [`Checkpoints::write`] with what `more` adds (a report's measurements so far).
+    pub fn write_with<const D: usize>(
+        &mut self,
+        sim: &Simulation<D>,
+        origin: &Origin,
+        more: impl FnOnce(&mut Writer<'_>),
+    ) -> Result<PathBuf> {
         let step = sim.state.steps;
         let path = self.dir.join(file_name(step));
-        let partial = self.dir.join(format!(".{}.partial", file_name(step)));
         let mut w = Writer::default();
         origin.write(&mut w);
         sim.save(&mut w);
-        if let Err(e) = write_synced(&w, &partial, &path, &self.dir) {
-            let _ = std::fs::remove_file(&partial);
+        more(&mut w);
+        if let Err(e) = w.write_file(&path) {
             bail!("cannot write checkpoint '{}': {e}", path.display());
         }
         self.written.retain(|p| p != &path);
@@ -344,17 +366,6 @@ impl Saver {
         });
         self.checkpoints.write(sim, &self.origin)
     }
-}
-
-/// Writes `w` to `partial`, syncs it, renames it to `path` and syncs the folder.
-fn write_synced(w: &Writer<'_>, partial: &Path, path: &Path, dir: &Path) -> std::io::Result<()> {
-    let mut out = BufWriter::with_capacity(8 << 20, File::create(partial)?);
-    w.write_to(&mut out)?;
-    let file = out.into_inner().map_err(|e| e.into_error())?;
-    file.sync_all()?;
-    drop(file);
-    std::fs::rename(partial, path)?;
-    File::open(dir)?.sync_all()
 }
 
 /// The default checkpoint folder: beside the recording, `<recording stem>.checkpoints/`, or

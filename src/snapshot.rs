@@ -24,7 +24,9 @@ use crate::grid::Vector;
 use bytemuck::{AnyBitPattern, NoUninit};
 use std::borrow::Cow;
 use std::collections::BTreeMap;
+use std::fs::File;
 use std::io::Write;
+use std::path::Path;
 
 #[cfg(target_endian = "big")]
 compile_error!("checkpoints store arrays little-endian straight from memory");
@@ -217,6 +219,31 @@ impl<'a> Writer<'a> {
         w.inner.write_all(END)?;
         w.inner.flush()?;
         Ok(w.len + 12)
+    }
+}
+
+impl Writer<'_> {
+    /// Writes the file at `path` so that no reader ever sees it half-written: to
+    /// `.NAME.partial` beside it, synced, renamed, and the folder synced. On failure the
+    /// partial file is removed and whatever was at `path` is untouched.
+    pub fn write_file(&self, path: &Path) -> std::io::Result<u64> {
+        let name = path
+            .file_name()
+            .map_or_else(Default::default, |n| n.to_string_lossy());
+        let partial = path.with_file_name(format!(".{name}.partial"));
+        let written = (|| {
+            let mut out = std::io::BufWriter::with_capacity(8 << 20, File::create(&partial)?);
+            let n = self.write_to(&mut out)?;
+            out.into_inner().map_err(|e| e.into_error())?.sync_all()?;
+            std::fs::rename(&partial, path)?;
+            let dir = path.parent().filter(|d| !d.as_os_str().is_empty());
+            File::open(dir.unwrap_or(Path::new(".")))?.sync_all()?;
+            Ok(n)
+        })();
+        if written.is_err() {
+            let _ = std::fs::remove_file(&partial);
+        }
+        written
     }
 }
 

@@ -2,15 +2,22 @@
 //! series the plots and the comparison recording show. Each error's formula is in docs/report.md
 //! (section "The figures").
 
+use super::saved::{
+    restore_progress, save_result, Progress, RunCheckpoints, RunFiles, CHECKPOINT_WALL,
+};
 use super::RunSpec;
+use crate::checkpoint::{self, Opened};
 use crate::methods::MethodKind;
 use crate::metrics::{median, Stage};
 use crate::record::ComparisonSeries;
 use crate::runner::{Limit, Runner};
 use crate::scene::{peak_memory_mib, Scene};
 use crate::simulation::{Simulation, StepReport};
+use crate::snapshot::SnapshotError;
 use crate::validation::{MartinMoyceProbe, COLUMN_WIDTH_M};
 use std::collections::BTreeMap;
+use std::path::Path;
+use std::time::Duration;
 
 /// The columns of `report.csv` that every run has, with what they hold. Each method adds
 /// `<figure>_median` for the figures it lists ([`crate::methods::MethodInfo::figures`]).
@@ -83,8 +90,15 @@ impl Measured {
     }
 }
 
-/// Runs and measures one spec; a scene that cannot load is a row that says why.
-pub fn run(spec: &RunSpec, stop: &dyn Fn() -> bool) -> Measured {
+/// Runs and measures one spec; a scene that cannot load is a row that says why. With `files`
+/// the run goes on from its checkpoint if it has one, checkpoints as it goes, and is kept
+/// once it ends ([`super::saved`]).
+pub fn run(
+    spec: &RunSpec,
+    stop: &dyn Fn() -> bool,
+    files: Option<&RunFiles>,
+    resumed: Option<Opened>,
+) -> Measured {
     let mut m = Measured {
         spec: spec.clone(),
         res: spec.res.unwrap_or(0),
@@ -103,8 +117,8 @@ pub fn run(spec: &RunSpec, stop: &dyn Fn() -> bool) -> Measured {
             m.seed = scene.file.simulation.seed;
             m.dim = scene.dim();
             match scene.dim() {
-                2 => measure::<2>(&scene, stop, &mut m),
-                _ => measure::<3>(&scene, stop, &mut m),
+                2 => measure::<2>(&scene, stop, &mut m, files, resumed),
+                _ => measure::<3>(&scene, stop, &mut m, files, resumed),
             }
         }
     }
@@ -119,36 +133,67 @@ fn one_line(s: &str) -> String {
 
 /// What the observer gathers after every step.
 #[derive(Default)]
-struct Gathered {
-    compression: f64,
-    figures: BTreeMap<&'static str, Vec<f64>>,
-    held: u64,
-    probe: Option<MartinMoyceProbe>,
+pub struct Gathered {
+    pub compression: f64,
+    pub figures: BTreeMap<&'static str, Vec<f64>>,
+    pub held: u64,
+    pub probe: Option<MartinMoyceProbe>,
 }
 
-fn measure<const D: usize>(scene: &Scene, stop: &dyn Fn() -> bool, m: &mut Measured) {
+fn measure<const D: usize>(
+    scene: &Scene,
+    stop: &dyn Fn() -> bool,
+    m: &mut Measured,
+    files: Option<&RunFiles>,
+    resumed: Option<Opened>,
+) {
     reset_peak_memory();
-    let sim = Simulation::<D>::new(scene.config::<D>(), &scene.method);
-    let h = sim.state.config.cell_size_m;
-    let mu = sim.state.config.mu() as f64;
     let mut g = Gathered {
         probe: (scene.name() == "martin-moyce-2d").then(MartinMoyceProbe::default),
         ..Default::default()
     };
-    let lowest = obstacle_lowest(&sim) * h;
-    let mut runner = Runner::new(sim);
+    let started =
+        begin::<D>(scene, resumed.as_ref(), m, &mut g).and_then(|(runner, lowest, spent)| {
+            let saves = files
+                .map(|f| RunCheckpoints::new(f, scene, resumed.as_ref()))
+                .transpose()?;
+            Ok((runner, lowest, spent, saves))
+        });
+    let (mut runner, lowest, spent, mut saves) = match started {
+        Ok(s) => s,
+        Err(e) => {
+            m.status = one_line(&format!("failed: {e:#}"));
+            return;
+        }
+    };
+    drop(resumed);
+    let h = runner.sim.state.config.cell_size_m;
+    let mu = runner.sim.state.config.mu() as f64;
     let limit = Limit::SimSeconds(scene.duration_secs());
     let t0 = std::time::Instant::now();
     let budget = m.spec.budget.unwrap_or(f64::INFINITY);
-    let over = || t0.elapsed().as_secs_f64() > budget;
-    let result = runner.run(
-        limit,
-        || stop() || over(),
-        |sim, rep| {
-            observe(sim, rep, mu, h, &mut g, m);
-            Ok(())
-        },
-    );
+    let over = || (spent + t0.elapsed()).as_secs_f64() > budget;
+    // Pauses every CHECKPOINT_WALL for a checkpoint (with `files`), then goes on.
+    let result = loop {
+        let pause = std::time::Instant::now() + CHECKPOINT_WALL;
+        let paused = || saves.is_some() && std::time::Instant::now() > pause;
+        let result = runner.run(
+            limit,
+            || stop() || over() || paused(),
+            |sim, rep| {
+                observe(sim, rep, mu, h, &mut g, m);
+                Ok(())
+            },
+        );
+        if result.is_err() || !runner.summary.interrupted || stop() || over() {
+            break result;
+        }
+        runner.summary.interrupted = false;
+        let p = progress(m, &g, &runner, lowest, spent + t0.elapsed());
+        if let Some(Err(e)) = saves.as_mut().map(|s| s.save(&runner.sim, &p)) {
+            break Err(e);
+        }
+    };
     m.status = match (&result, runner.summary.interrupted) {
         (Err(e), _) => one_line(&format!("failed: {e:#}")),
         (Ok(()), true) if !stop() => format!(
@@ -159,7 +204,71 @@ fn measure<const D: usize>(scene: &Scene, stop: &dyn Fn() -> bool, m: &mut Measu
         (Ok(()), true) => "interrupted".into(),
         (Ok(()), false) => "ok".into(),
     };
+    let stopped = m.status == "interrupted";
+    if let (true, Some(s)) = (stopped, saves.as_mut()) {
+        let p = progress(m, &g, &runner, lowest, spent + t0.elapsed());
+        if let Err(e) = s.save(&runner.sim, &p) {
+            eprintln!("warning: {e:#}: the run will start again from its beginning");
+        }
+    }
     finish(&runner, &g, lowest, m);
+    if let (false, Some(f), Some(s)) = (stopped, files, saves) {
+        match save_result(&f.result, m) {
+            Ok(()) => s.remove(),
+            Err(e) => eprintln!("warning: {e:#}: the run will be run again"),
+        }
+    }
+}
+
+/// The simulation at the run's start and what it measured so far: new, or restored from its
+/// checkpoint; the first obstacle's lowest possible point (from the run's start, m) and the
+/// wall time it took so far.
+fn begin<const D: usize>(
+    scene: &Scene,
+    resumed: Option<&Opened>,
+    m: &mut Measured,
+    g: &mut Gathered,
+) -> anyhow::Result<(Runner<D>, f64, Duration)> {
+    let Some(c) = resumed else {
+        let sim = Simulation::<D>::new(scene.config::<D>(), &scene.method);
+        let lowest = obstacle_lowest(&sim) * sim.state.config.cell_size_m;
+        return Ok((Runner::new(sim), lowest, Duration::ZERO));
+    };
+    let bad = |e: SnapshotError| anyhow::anyhow!("checkpoint '{}': {e}", c.path.display());
+    let sim = Simulation::<D>::restore(scene.config::<D>(), &scene.method, &c.reader);
+    let mut runner = Runner::new(sim.map_err(bad)?);
+    let (lowest, spent) = restore_progress(&c.reader, m, g, &mut runner.summary).map_err(bad)?;
+    Ok((runner, lowest, spent))
+}
+
+/// The newest complete checkpoint in `dir`, if the run has one.
+pub fn resumable(dir: &Path) -> Option<Opened> {
+    if !dir.is_dir() {
+        return None;
+    }
+    let opened = checkpoint::open(dir).and_then(|c| match c.reader.meta("program") {
+        Ok(p) if p == checkpoint::build() => Ok(c),
+        _ => anyhow::bail!("'{}' was written by another build", c.path.display()),
+    });
+    opened
+        .inspect_err(|e| eprintln!("warning: {e:#}; the run starts again from its beginning"))
+        .ok()
+}
+
+fn progress<'a, const D: usize>(
+    m: &'a Measured,
+    g: &'a Gathered,
+    runner: &'a Runner<D>,
+    lowest: f64,
+    spent: Duration,
+) -> Progress<'a> {
+    Progress {
+        measured: m,
+        gathered: g,
+        summary: &runner.summary,
+        lowest,
+        spent,
+    }
 }
 
 fn observe<const D: usize>(

@@ -12,6 +12,7 @@ pub mod docs;
 pub mod measure;
 mod output;
 pub mod plots;
+pub mod saved;
 
 use crate::cli::ReportArgs;
 use crate::methods::MethodKind;
@@ -217,7 +218,7 @@ pub fn report(args: &ReportArgs) -> Result<()> {
         .with_context(|| format!("cannot create the output folder '{}'", args.out.display()))?;
     crate::interrupt::install()?;
     let stop = || crate::interrupt::signal().is_some();
-    let results = run_all(&specs, args.quiet, &stop);
+    let results = run_all(&specs, args.quiet, &stop, &args.out);
     let interrupted = stop();
     match &docs {
         // An interrupted matrix would leave the manual with half its runs: keep the pages.
@@ -280,7 +281,12 @@ fn check_loads(specs: &[RunSpec]) -> Result<()> {
 }
 
 /// Runs the matrix in order with a progress bar, until done or stopped.
-pub fn run_all(specs: &[RunSpec], quiet: bool, stop: &dyn Fn() -> bool) -> Vec<Measured> {
+pub fn run_all(
+    specs: &[RunSpec],
+    quiet: bool,
+    stop: &dyn Fn() -> bool,
+    out: &Path,
+) -> Vec<Measured> {
     let bar = ProgressBar::with_draw_target(Some(specs.len() as u64), ProgressDrawTarget::stderr());
     if quiet {
         bar.set_draw_target(ProgressDrawTarget::hidden());
@@ -290,7 +296,7 @@ pub fn run_all(specs: &[RunSpec], quiet: bool, stop: &dyn Fn() -> bool) -> Vec<M
     )
     .expect("a valid progress template");
     bar.set_style(style);
-    let mut out = vec![];
+    let mut results = vec![];
     for spec in specs {
         if stop() {
             break;
@@ -301,11 +307,27 @@ pub fn run_all(specs: &[RunSpec], quiet: bool, stop: &dyn Fn() -> bool) -> Vec<M
             spec.method.name(),
             spec.res.map_or(String::new(), |r| r.to_string())
         ));
-        out.push(measure::run(spec, stop));
+        let files = saved::RunFiles::of(out, spec);
+        if let Some(kept) = saved::load_result(&files.result, spec) {
+            results.push(kept);
+            bar.inc(1);
+            continue;
+        }
+        let resumed = measure::resumable(&files.checkpoints);
+        if let (Some(c), false) = (&resumed, quiet) {
+            let (name, file) = (spec.method.name(), c.path.display());
+            bar.suspend(|| {
+                eprintln!(
+                    "resuming {} {name} from '{file}' (step {})",
+                    spec.label, c.step
+                )
+            });
+        }
+        results.push(measure::run(spec, stop, Some(&files), resumed));
         bar.inc(1);
     }
     bar.finish_and_clear();
-    out
+    results
 }
 
 /// Writes every output, naming the file that could not be written.

@@ -191,7 +191,7 @@ fn checkpoint_scene(
         }
     }
     let program = c.reader.meta("program").unwrap_or("an unknown program");
-    let ours = format!("cellflip {}", env!("CARGO_PKG_VERSION"));
+    let ours = checkpoint::build();
     if program != ours {
         eprintln!(
             "warning: checkpoint '{file}' was written by {program}, this is {ours}: the \

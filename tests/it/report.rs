@@ -349,3 +349,82 @@ fn docs_mode_refuses_a_folder_without_the_readme_markers_before_running() {
     );
     assert!(!dir.join("docs").exists(), "nothing written");
 }
+
+/// A report stopped by Ctrl-C while its second run goes on, then started again with the same
+/// arguments: the first run is read back (not run again), the second resumes from the
+/// checkpoint the signal left, and report.csv is the report never stopped but for its timings.
+#[test]
+fn a_report_stopped_and_started_again_goes_on_where_it_stopped() {
+    let dir = common::scratch_dir("report-resume");
+    let (straight, split) = (dir.join("straight"), dir.join("split"));
+    let args = |out: &Path| -> Vec<String> {
+        let a = [
+            "report",
+            "--scenes",
+            "dam-2d",
+            "--methods",
+            "flip,ccp",
+            "--res",
+            "100",
+        ];
+        let mut a: Vec<String> = a.iter().map(|s| s.to_string()).collect();
+        a.extend(["--duration", "2", "--no-stability", "-q", "--out"].map(String::from));
+        a.push(out.display().to_string());
+        a
+    };
+    let cellflip = || Command::new(env!("CARGO_BIN_EXE_cellflip"));
+    common::ok(&cellflip().args(args(&straight)).output().unwrap());
+    let child = cellflip()
+        .args(args(&split))
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let runs = split.join("runs");
+    let count = |ext: &str| {
+        std::fs::read_dir(&runs).map_or(0, |d| {
+            d.flatten()
+                .filter(|e| e.path().extension().is_some_and(|x| x == ext))
+                .count()
+        })
+    };
+    let t0 = std::time::Instant::now();
+    while count("result") == 0 {
+        assert!(t0.elapsed().as_secs() < 120, "the first run never ended");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    let kill = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status();
+    assert!(kill.unwrap().success());
+    let o = child.wait_with_output().unwrap();
+    assert_eq!(
+        o.status.code(),
+        Some(130),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert_eq!(
+        (count("result"), count("checkpoints")),
+        (1, 1),
+        "stopped mid-run"
+    );
+    let loud: Vec<String> = args(&split).into_iter().filter(|a| a != "-q").collect();
+    let again = cellflip().args(loud).output();
+    let again = again.unwrap();
+    common::ok(&again);
+    let said = String::from_utf8_lossy(&again.stderr);
+    assert!(said.contains("resuming dam-2d ccp from"), "{said}");
+    assert!(!said.contains("resuming dam-2d flip"), "{said}");
+    assert_eq!((count("result"), count("checkpoints")), (2, 0));
+    let timed = |c: &str| {
+        c.starts_with("ms_") || c.starts_with("share_") || c == "peak_mib" || c.contains("_ms")
+    };
+    let (a, b) = (rows(&straight), rows(&split));
+    assert_eq!(a.len(), 2);
+    for (x, y) in a.iter().zip(&b) {
+        for (col, v) in x.iter().filter(|(c, _)| !timed(c)) {
+            assert_eq!(v, &y[col], "{} {}: {col}", x["scene"], x["method"]);
+        }
+    }
+}
