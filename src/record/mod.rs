@@ -56,6 +56,8 @@ pub struct Drawing {
 pub struct Recorder {
     output: Output,
     run: RunLog,
+    /// It goes on with a recording file that has its static data already.
+    continued: bool,
 }
 
 impl Recorder {
@@ -73,6 +75,18 @@ impl Recorder {
         let rec = &output.rec;
         let cannot = |e| anyhow!("cannot write the recording to {}: {e}", sink.describe());
         let facts = RunFacts::of(scene, cross_check, &drawing);
+        let run = RunLog::new(Stream::new(rec.clone(), ""), scene, drawing, false);
+        // A recording that goes on in its own file has its layout and static data already: sent
+        // again (a second blueprint, new chunks of the same static data), the viewer drew the
+        // markings without their class colours.
+        let continued = resumed.is_some_and(|r| r.append_at.is_some());
+        if continued {
+            return Ok(Self {
+                output,
+                run,
+                continued,
+            });
+        }
         layout::send(rec, &layout::layout(&facts), "step").map_err(cannot)?;
         rec.send_property("run", &run_properties(scene))
             .map_err(cannot)?;
@@ -87,13 +101,18 @@ impl Recorder {
         );
         rec.log_static("legend", &rerun::TextDocument::from_markdown(legend))
             .map_err(cannot)?;
-        let run = RunLog::new(Stream::new(rec.clone(), ""), scene, drawing, false);
-        Ok(Self { output, run })
+        Ok(Self {
+            output,
+            run,
+            continued,
+        })
     }
 
     /// Static data: the class colours, the domain, the view coordinates, the method's layers.
     pub fn log_setup<const D: usize>(&self, sim: &Simulation<D>) {
-        self.run.log_setup(sim);
+        if !self.continued {
+            self.run.log_setup(sim);
+        }
     }
 
     /// The state after a step (or at the start, step 0, without `rep`; see
