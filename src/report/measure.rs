@@ -2,6 +2,7 @@
 //! series the plots and the comparison recording show. Each error's formula is in docs/report.md
 //! (section "The figures").
 
+pub use super::measured::{Gathered, Measured};
 use super::saved::{
     restore_progress, save_result, Progress, RunCheckpoints, RunFiles, CHECKPOINT_WALL,
 };
@@ -61,35 +62,6 @@ pub const COLUMNS: &[(&str, &str)] = &[
     ("share_markings", "share of the markings, %"),
 ];
 
-/// A run and what it measured. Figures a run does not have are NaN.
-#[derive(Clone, Debug)]
-pub struct Measured {
-    pub spec: RunSpec,
-    /// The resolution the run had (the scene's when the spec gives none).
-    pub res: usize,
-    pub seed: u64,
-    pub status: String,
-    pub dim: usize,
-    /// The values of [`COLUMNS`] from `particles` on, then the method figures.
-    pub values: BTreeMap<String, f64>,
-    /// `(t, V/V* %)` and `(t, kinetic energy per unit mass)` after every step.
-    pub volume: Vec<(f64, f64)>,
-    pub ke: Vec<(f64, f64)>,
-    /// martin-moyce-2d: `(T, Z)` of the surge front.
-    pub front: Vec<(f64, f64)>,
-}
-
-impl Measured {
-    pub fn ok(&self) -> bool {
-        self.status == "ok"
-    }
-
-    /// A figure by column name (NaN when the run has none).
-    pub fn get(&self, column: &str) -> f64 {
-        self.values.get(column).copied().unwrap_or(f64::NAN)
-    }
-}
-
 /// Runs and measures one spec; a scene that cannot load is a row that says why. With `files`
 /// the run goes on from its checkpoint if it has one, checkpoints as it goes, and is kept
 /// once it ends ([`super::saved`]).
@@ -129,15 +101,6 @@ pub fn run(
 /// included, become one space.
 fn one_line(s: &str) -> String {
     s.split_whitespace().collect::<Vec<_>>().join(" ")
-}
-
-/// What the observer gathers after every step.
-#[derive(Default)]
-pub struct Gathered {
-    pub compression: f64,
-    pub figures: BTreeMap<&'static str, Vec<f64>>,
-    pub held: u64,
-    pub probe: Option<MartinMoyceProbe>,
 }
 
 fn measure<const D: usize>(

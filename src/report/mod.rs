@@ -10,6 +10,7 @@
 
 pub mod docs;
 pub mod measure;
+mod measured;
 mod output;
 pub mod plots;
 pub mod saved;

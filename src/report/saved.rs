@@ -6,7 +6,7 @@
 //! measurements so far included: the same rows as a report never stopped, but for the
 //! timings.
 
-use super::measure::{Gathered, Measured};
+use super::measured::{Gathered, Measured};
 use super::RunSpec;
 use crate::checkpoint::{Checkpoints, Opened, Origin};
 use crate::metrics::{Stage, StageTimes};

@@ -1,0 +1,45 @@
+//! What a run of the report measured ([`Measured`], a row of report.csv and its series) and
+//! what its observer gathers step by step ([`Gathered`]): shared by the measurement
+//! ([`super::measure`]) and the runs kept under `--out` ([`super::saved`]).
+
+use super::RunSpec;
+use crate::validation::MartinMoyceProbe;
+use std::collections::BTreeMap;
+
+/// A run and what it measured. Figures a run does not have are NaN.
+#[derive(Clone, Debug)]
+pub struct Measured {
+    pub spec: RunSpec,
+    /// The resolution the run had (the scene's when the spec gives none).
+    pub res: usize,
+    pub seed: u64,
+    pub status: String,
+    pub dim: usize,
+    /// The values of [`super::measure::COLUMNS`] from `particles` on, then the method figures.
+    pub values: BTreeMap<String, f64>,
+    /// `(t, V/V* %)` and `(t, kinetic energy per unit mass)` after every step.
+    pub volume: Vec<(f64, f64)>,
+    pub ke: Vec<(f64, f64)>,
+    /// martin-moyce-2d: `(T, Z)` of the surge front.
+    pub front: Vec<(f64, f64)>,
+}
+
+impl Measured {
+    pub fn ok(&self) -> bool {
+        self.status == "ok"
+    }
+
+    /// A figure by column name (NaN when the run has none).
+    pub fn get(&self, column: &str) -> f64 {
+        self.values.get(column).copied().unwrap_or(f64::NAN)
+    }
+}
+
+/// What the observer gathers after every step.
+#[derive(Default)]
+pub struct Gathered {
+    pub compression: f64,
+    pub figures: BTreeMap<&'static str, Vec<f64>>,
+    pub held: u64,
+    pub probe: Option<MartinMoyceProbe>,
+}
