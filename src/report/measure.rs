@@ -3,9 +3,7 @@
 //! (section "The figures").
 
 pub use super::measured::{Gathered, Measured};
-use super::saved::{
-    restore_progress, save_result, Progress, RunCheckpoints, RunFiles, CHECKPOINT_WALL,
-};
+use super::saved::{restore_progress, save_result, Progress, RunCheckpoints, RunFiles};
 use super::RunSpec;
 use crate::checkpoint::{self, Opened};
 use crate::methods::MethodKind;
@@ -16,6 +14,7 @@ use crate::scene::{peak_memory_mib, Scene};
 use crate::simulation::{Simulation, StepReport};
 use crate::snapshot::SnapshotError;
 use crate::validation::{MartinMoyceProbe, COLUMN_WIDTH_M};
+use std::cell::Cell;
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::time::Duration;
@@ -136,19 +135,28 @@ fn measure<const D: usize>(
     let t0 = std::time::Instant::now();
     let budget = m.spec.budget.unwrap_or(f64::INFINITY);
     let over = || (spent + t0.elapsed()).as_secs_f64() > budget;
-    // Pauses every CHECKPOINT_WALL for a checkpoint (with `files`), then goes on.
+    // Pauses every `files.every` for a checkpoint, then goes on.
+    let every = files.map_or(Duration::MAX, |f| f.every);
     let result = loop {
-        let pause = std::time::Instant::now() + CHECKPOINT_WALL;
-        let paused = || saves.is_some() && std::time::Instant::now() > pause;
+        let pause = std::time::Instant::now().checked_add(every);
+        // At least one step between two checkpoints.
+        let (stepped, paused) = (Cell::new(false), Cell::new(false));
+        let pause_now = || {
+            let due = pause.is_some_and(|p| std::time::Instant::now() >= p);
+            paused.set(stepped.get() && due);
+            paused.get()
+        };
         let result = runner.run(
             limit,
-            || stop() || over() || paused(),
+            || stop() || over() || pause_now(),
             |sim, rep| {
                 observe(sim, rep, mu, h, &mut g, m);
+                stepped.set(true);
                 Ok(())
             },
         );
-        if result.is_err() || !runner.summary.interrupted || stop() || over() {
+        // Only a pause goes on; the run stopped by itself, a signal or its budget ends.
+        if result.is_err() || !paused.get() {
             break result;
         }
         runner.summary.interrupted = false;

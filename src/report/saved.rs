@@ -26,6 +26,8 @@ pub const CHECKPOINT_WALL: Duration = Duration::from_secs(120);
 pub struct RunFiles {
     pub result: PathBuf,
     pub checkpoints: PathBuf,
+    /// Wall time between checkpoints ([`CHECKPOINT_WALL`]).
+    pub every: Duration,
 }
 
 impl RunFiles {
@@ -36,6 +38,7 @@ impl RunFiles {
         Self {
             result: dir.join(format!("{id}.result")),
             checkpoints: dir.join(format!("{id}.checkpoints")),
+            every: CHECKPOINT_WALL,
         }
     }
 }

@@ -428,3 +428,69 @@ fn a_report_stopped_and_started_again_goes_on_where_it_stopped() {
         }
     }
 }
+
+/// A report run's pauses for its checkpoints change none of its figures: checkpointed after
+/// every step it measures what it measures without checkpoints, and stopped after a few steps
+/// and resumed from its newest checkpoint, the same again.
+#[test]
+fn checkpoints_during_a_report_run_change_none_of_its_figures() {
+    use cellflip::report::{matrix, measure, measure::Measured, saved::RunFiles};
+    use clap::Parser;
+    let cli = cellflip::cli::Cli::parse_from([
+        "cellflip",
+        "report",
+        "--scenes",
+        "falling-obstacle-2d",
+        "--methods",
+        "ccp",
+        "--duration",
+        "0.3",
+        "--no-stability",
+    ]);
+    let cellflip::cli::Command::Report(args) = cli.command else {
+        unreachable!("a report command")
+    };
+    let spec = &matrix(&args).unwrap()[0];
+    let dir = common::scratch_dir("report-pauses");
+    let every_step = |sub: &str| RunFiles {
+        every: std::time::Duration::ZERO,
+        ..RunFiles::of(&dir.join(sub), spec)
+    };
+    let timed = |c: &str| {
+        c.starts_with("ms_") || c.starts_with("share_") || c == "peak_mib" || c.contains("_ms")
+    };
+    let same = |a: &Measured, b: &Measured, what: &str| {
+        assert_eq!(
+            (&a.status, &a.volume, &a.ke),
+            (&b.status, &b.volume, &b.ke),
+            "{what}"
+        );
+        for (col, v) in a.values.iter().filter(|(c, _)| !timed(c)) {
+            assert_eq!(v.to_bits(), b.get(col).to_bits(), "{what}: {col}");
+        }
+    };
+    let plain = measure::run(spec, &|| false, None, None);
+    assert_eq!(plain.status, "ok");
+    let files = every_step("a");
+    same(
+        &plain,
+        &measure::run(spec, &|| false, Some(&files), None),
+        "paused every step",
+    );
+    assert!(files.result.exists() && !files.checkpoints.exists());
+    let files = every_step("b");
+    let calls = std::cell::Cell::new(0);
+    let stop = || {
+        calls.set(calls.get() + 1);
+        calls.get() > 8
+    };
+    let first = measure::run(spec, &stop, Some(&files), None);
+    assert_eq!(first.status, "interrupted");
+    let resumed = measure::resumable(&files.checkpoints).expect("a checkpoint");
+    assert!(resumed.step > 0);
+    same(
+        &plain,
+        &measure::run(spec, &|| false, Some(&files), Some(resumed)),
+        "resumed",
+    );
+}
