@@ -128,6 +128,7 @@ fn measure<const D: usize>(
             return;
         }
     };
+    // The checkpoint file's copy of the state is not kept for the whole run.
     drop(resumed);
     let h = runner.sim.state.config.cell_size_m;
     let mu = runner.sim.state.config.mu() as f64;
