@@ -65,24 +65,24 @@ pub trait Element: NoUninit + AnyBitPattern {
     const DTYPE: &'static str;
 }
 
-impl Element for f64 {
-    const DTYPE: &'static str = "<f8";
+/// Each element type with its numpy dtype, and [`dtype_size`] read from the same list.
+macro_rules! elements {
+    ($($t:ty => $dtype:literal),*) => {
+        $(impl Element for $t {
+            const DTYPE: &'static str = $dtype;
+        })*
+
+        /// Bytes per element of a dtype this format writes.
+        fn dtype_size(dtype: &str) -> Option<usize> {
+            match dtype {
+                $($dtype => Some(std::mem::size_of::<$t>()),)*
+                _ => None,
+            }
+        }
+    };
 }
-impl Element for u64 {
-    const DTYPE: &'static str = "<u8";
-}
-impl Element for i64 {
-    const DTYPE: &'static str = "<i8";
-}
-impl Element for u32 {
-    const DTYPE: &'static str = "<u4";
-}
-impl Element for i32 {
-    const DTYPE: &'static str = "<i4";
-}
-impl Element for u8 {
-    const DTYPE: &'static str = "|u1";
-}
+
+elements!(f64 => "<f8", u64 => "<u8", i64 => "<i8", u32 => "<u4", i32 => "<i4", u8 => "|u1");
 
 /// One array to write: borrowed from the state where its memory layout is the file's, owned
 /// where it had to be converted.
@@ -482,16 +482,6 @@ fn parse_array(a: &toml::Value) -> Result<(String, Located), String> {
         offset,
     };
     Ok((name.into(), located))
-}
-
-/// Bytes per element of a dtype this format writes.
-fn dtype_size(dtype: &str) -> Option<usize> {
-    Some(match dtype {
-        "<f8" | "<u8" | "<i8" => 8,
-        "<u4" | "<i4" => 4,
-        "|u1" => 1,
-        _ => return None,
-    })
 }
 
 #[cfg(test)]

@@ -29,7 +29,7 @@ use std::time::Duration;
 /// A file that takes each `write_all` whole or, failing, cuts itself back to where it was.
 struct WholeWrites {
     file: File,
-    /// Bytes in the file (shared with [`RrdFile::len`]).
+    /// Bytes in the file (shared with [`RrdFile::bytes_written`]).
     len: Arc<AtomicU64>,
 }
 

@@ -230,8 +230,9 @@ pub struct ComparisonSeries<'a> {
     pub ke: &'a [(f64, f64)],
 }
 
-/// Entity-path part of a scene label.
-fn path_part(s: &str) -> String {
+/// Entity-path (and file-name) part of a scene label: ASCII letters, digits, `-` and `_`,
+/// anything else as `_`.
+pub fn path_part(s: &str) -> String {
     s.chars()
         .map(|c| {
             if c.is_ascii_alphanumeric() || c == '-' || c == '_' {

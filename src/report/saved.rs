@@ -47,26 +47,15 @@ impl RunFiles {
 /// and a digest of all it is run with (scene text, duration, budget), so that another matrix
 /// in the same `--out` never takes its result.
 fn id(spec: &RunSpec) -> String {
-    let label: String = (spec.label.chars())
-        .map(|c| {
-            if c.is_ascii_alphanumeric() || c == '-' {
-                c
-            } else {
-                '_'
-            }
-        })
-        .collect();
+    let label = crate::record::path_part(&spec.label);
     let or_default = |x: Option<String>| x.unwrap_or_else(|| "default".into());
     let (res, seed) = (
         spec.res.map(|r| r.to_string()),
         spec.seed.map(|s| s.to_string()),
     );
-    let mut hash: u64 = 0xcbf2_9ce4_8422_2325;
-    for b in format!("{spec:?}").bytes() {
-        hash = (hash ^ b as u64).wrapping_mul(0x0000_0100_0000_01b3);
-    }
     let (method, res, seed) = (spec.method.name(), or_default(res), or_default(seed));
-    format!("{label}-{method}-r{res}-s{seed}-{:08x}", hash as u32)
+    let digest = crc32fast::hash(format!("{spec:?}").as_bytes());
+    format!("{label}-{method}-r{res}-s{seed}-{digest:08x}")
 }
 
 /// Keeps a run that ended (not one a signal stopped).

@@ -78,10 +78,11 @@ pub(super) fn recording_of(
         return Ok((args.sink.choice(scene.name())?, None));
     };
     let s = &args.sink;
-    let chosen = s.save.is_some() || s.spawn || s.connect.is_some() || s.stdout || s.no_record;
+    let not_a_file = s.spawn || s.connect.is_some() || s.stdout || s.no_record;
+    let chosen = s.save.is_some() || not_a_file;
     let same_file = |m: &checkpoint::RecordingMark| s.save.as_ref().is_none_or(|p| *p == m.path);
     match mark {
-        Some(m) if same_file(m) && !(s.spawn || s.connect.is_some() || s.stdout || s.no_record) => {
+        Some(m) if same_file(m) && !not_a_file => {
             let continued = Resumed {
                 id: m.id.clone(),
                 append_at: Some(m.bytes),

@@ -6,12 +6,13 @@ use crate::grid::{Cell, Grid, Vector};
 use rayon::prelude::*;
 use std::collections::VecDeque;
 
-/// What occupies a cell.
+/// What occupies a cell (its number is how a checkpoint stores it).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
 pub enum CellKind {
-    Empty,
-    Fluid,
-    Solid,
+    Empty = 0,
+    Fluid = 1,
+    Solid = 2,
 }
 
 /// Class ids used in recordings (one byte per cell).

@@ -9,15 +9,7 @@ use crate::grid::{Grid, MacField};
 use crate::snapshot::{Reader, SnapshotError, Writer};
 use rand::SeedableRng;
 
-/// A cell kind as stored.
-fn kind_byte(k: CellKind) -> u8 {
-    match k {
-        CellKind::Empty => 0,
-        CellKind::Fluid => 1,
-        CellKind::Solid => 2,
-    }
-}
-
+/// The cell kinds by the number a checkpoint stores ([`CellKind`] as `u8`).
 const KINDS: [CellKind; 3] = [CellKind::Empty, CellKind::Fluid, CellKind::Solid];
 
 impl<const D: usize> State<D> {
@@ -29,7 +21,7 @@ impl<const D: usize> State<D> {
             w.slice(&format!("velocity.{k}"), c);
         }
         let m = &self.markings;
-        let kinds = m.kind.iter().map(|&k| kind_byte(k)).collect();
+        let kinds = m.kind.iter().map(|&k| k as u8).collect();
         w.owned("markings.kind", &[m.kind.len()], kinds);
         w.slice("markings.count", &m.count);
         w.bools("markings.surface", &m.surface);

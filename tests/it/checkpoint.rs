@@ -418,6 +418,17 @@ fn step_of(checkpoint: &str) -> i64 {
     checkpoint[5..13].parse().unwrap()
 }
 
+/// Resumes from the newest checkpoint in `ckdir` up to step `to`: the recording `out` then
+/// holds every step from 0 to `to` once, in order.
+fn resume_records_every_step_once(ckdir: &Path, out: &Path, to: i64) {
+    let steps = to.to_string();
+    let dir = ckdir.to_str().unwrap();
+    ok(&cellflip(&[
+        "run", "--resume", dir, "--steps", &steps, "-q",
+    ]));
+    assert_eq!(volume_steps(out), (0..=to).collect::<Vec<_>>());
+}
+
 /// SIGTERM with checkpoints on: a checkpoint of the last finished step, the recording up to
 /// it, exit 143; the run resumed goes on from there and its recording has every step once.
 /// SIGUSR1 writes a checkpoint and the run goes on.
@@ -426,13 +437,13 @@ fn signals_write_a_checkpoint_and_the_run_goes_on_from_it() {
     let dir = scratch_dir("ckpt-signals");
     let out = dir.join("dam.rrd");
     let ckdir = dir.join("dam.checkpoints");
-    let child = start_long_run(&out, "1000");
+    let mut child = start_long_run(&out, "1000");
     std::thread::sleep(std::time::Duration::from_millis(1500));
     kill(&child, "USR1");
     wait_for_checkpoint(&ckdir);
     let first = checkpoints(&ckdir);
     std::thread::sleep(std::time::Duration::from_millis(500));
-    assert!(child.id() > 0);
+    assert!(child.try_wait().unwrap().is_none(), "SIGUSR1 ended the run");
     kill(&child, "TERM");
     let o = child.wait_with_output().unwrap();
     assert_eq!(o.status.code(), Some(143), "{}", stderr(&o));
@@ -452,16 +463,7 @@ fn signals_write_a_checkpoint_and_the_run_goes_on_from_it() {
         stopped,
         "the recording ends at the checkpoint"
     );
-    let to = (stopped + 3).to_string();
-    ok(&cellflip(&[
-        "run",
-        "--resume",
-        ckdir.to_str().unwrap(),
-        "--steps",
-        &to,
-        "-q",
-    ]));
-    assert_eq!(volume_steps(&out), (0..=stopped + 3).collect::<Vec<_>>());
+    resume_records_every_step_once(&ckdir, &out, stopped + 3);
 }
 
 /// A run killed outright (SIGKILL: no checkpoint at the end) recorded steps past its last
@@ -477,16 +479,7 @@ fn a_killed_run_resumes_from_its_last_checkpoint_with_no_step_recorded_twice() {
     child.kill().unwrap();
     child.wait().unwrap();
     let last = step_of(checkpoints(&ckdir).last().unwrap());
-    let to = (last + 4).to_string();
-    ok(&cellflip(&[
-        "run",
-        "--resume",
-        ckdir.to_str().unwrap(),
-        "--steps",
-        &to,
-        "-q",
-    ]));
-    assert_eq!(volume_steps(&out), (0..=last + 4).collect::<Vec<_>>());
+    resume_records_every_step_once(&ckdir, &out, last + 4);
     assert!(checkpoints(&ckdir).len() <= 2, "{:?}", checkpoints(&ckdir));
 }
 
