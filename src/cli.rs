@@ -3,10 +3,11 @@
 use crate::methods::ccp::{BandMode, CcpArgs, Solver};
 use crate::methods::powerpic::AirForm;
 use crate::methods::MethodKind;
-use crate::record::Moves;
+use crate::record::{parse_memory_limit, Moves};
 use crate::sim::solids::ObstacleMode;
 use crate::solvers::pcg::Preconditioner;
 use clap::{Args, Parser, Subcommand};
+use std::net::IpAddr;
 use std::path::PathBuf;
 
 /// cellflip: cell-constrained particles for incompressible fluids (Z. Levi), and the methods
@@ -34,6 +35,9 @@ pub enum Command {
     /// Speed against error: every method on a matrix of scenes, resolutions and seeds, with
     /// tables (report.md, report.csv), plots (PNG, SVG) and a comparison recording.
     Report(ReportArgs),
+    /// Open saved recordings (a run's, a comparison's, the report's): in a browser with
+    /// --serve-web, else in the native viewer if `rerun` is on the PATH.
+    View(ViewArgs),
     /// Time the correction's solvers on exported problems (`run --export-lp`), the same files
     /// a peer solver (HiGHS, LEMON) reads, and check their optimum.
     Solve(SolveArgs),
@@ -63,6 +67,9 @@ pub struct CompareArgs {
     /// Where the recording goes [default: recordings/<scene>-compare.rrd].
     #[command(flatten)]
     pub sink: SinkArgs,
+    /// Serving it to browsers.
+    #[command(flatten)]
+    pub serve: ServeArgs,
     /// With --connect: run even when no viewer answers at the URL at the start (by default
     /// that stops the command at once, exit 1, nothing run).
     #[arg(long, requires = "connect")]
@@ -137,19 +144,63 @@ pub struct SinkArgs {
     pub save: Option<PathBuf>,
     /// Start a Rerun viewer (`rerun` on the PATH: pip install rerun-sdk==0.36.3) and stream
     /// the run to it as it goes; no file is written.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "serve_web")]
     pub spawn: bool,
     /// Stream the run as it goes to a viewer already running [default URL:
     /// rerun+http://127.0.0.1:9876/proxy].
-    #[arg(long, value_name = "URL", num_args = 0..=1)]
+    #[arg(long, value_name = "URL", num_args = 0..=1, conflicts_with = "serve_web")]
     pub connect: Option<Option<String>>,
     /// Write the recording to standard output, for `| rerun -`; the summary goes to
     /// standard error.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "serve_web")]
     pub stdout: bool,
     /// Do not record.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "serve_web")]
     pub no_record: bool,
+}
+
+/// Serving a recording to browsers (Rerun's web viewer), for `run`, `compare` and `view`
+/// (docs/cli.md, "In a browser").
+#[derive(Args, Debug, Clone)]
+pub struct ServeArgs {
+    /// Serve Rerun's web viewer over HTTP on PORT and the recording to it, so that a browser
+    /// shows the run as it goes (print the URL to open); serving goes on after the run until
+    /// Ctrl-C. No file is written unless --save PATH is given too [default PORT: 9090].
+    #[arg(long, value_name = "PORT", num_args = 0..=1, default_missing_value = "9090")]
+    pub serve_web: Option<u16>,
+    /// With --serve-web: the port of the recording's gRPC server, which the page connects to.
+    #[arg(
+        long,
+        value_name = "PORT",
+        default_value_t = 9876,
+        requires = "serve_web"
+    )]
+    pub grpc_port: u16,
+    /// With --serve-web: the address both servers listen on. Any other than a loopback one
+    /// serves the run to other machines (a warning says so) and lets pages from that address
+    /// (from any, for 0.0.0.0) read the recording.
+    #[arg(
+        long,
+        value_name = "ADDR",
+        default_value = "127.0.0.1",
+        requires = "serve_web"
+    )]
+    pub bind: IpAddr,
+    /// With --serve-web: how much of the recording the gRPC server keeps for browsers that
+    /// open the page late, a size (1GiB, 500MB) or a share of the machine's memory (25%); past
+    /// it the oldest steps are dropped (static data never). 1 GiB holds a whole built-in run.
+    #[arg(long, value_name = "SIZE", default_value = "1GiB", value_parser = parse_memory_limit, requires = "serve_web")]
+    pub server_memory_limit: String,
+}
+
+#[derive(Args, Debug, Clone)]
+pub struct ViewArgs {
+    /// Recordings (.rrd) to open together.
+    #[arg(required = true, value_name = "REC.rrd")]
+    pub recordings: Vec<PathBuf>,
+    /// Serving them to browsers.
+    #[command(flatten)]
+    pub serve: ServeArgs,
 }
 
 #[derive(Args, Debug, Clone)]
@@ -256,6 +307,9 @@ pub struct RunArgs {
     /// Where the recording goes.
     #[command(flatten)]
     pub sink: SinkArgs,
+    /// Serving it to browsers.
+    #[command(flatten)]
+    pub serve: ServeArgs,
     /// With --connect: run even when no viewer answers at the URL at the start (by default
     /// that stops the command at once, exit 1, nothing run).
     #[arg(long, requires = "connect")]

@@ -43,7 +43,7 @@ pub fn compare(args: &CompareArgs) -> Result<()> {
     crate::scene::ensure_fit(&scenes, !args.sink.no_record)?;
     let sink = args
         .sink
-        .choice(&format!("{}-compare", entries[0].scene.name()))?;
+        .choice(&format!("{}-compare", entries[0].scene.name()), &args.serve)?;
     if let (Some(s), false) = (&sink, args.no_viewer_check) {
         s.check_reachable()?;
     }
@@ -160,13 +160,21 @@ fn compare_dim<const D: usize>(
         .try_for_each(FrameWorker::finish);
     let stepped = stepped.and(drawn);
     watchdog.done();
-    match (&stepped, recording) {
+    let served = match (&stepped, recording) {
         (Ok(()), Some(r)) => r.finish()?,
-        (Err(_), Some(r)) => r.abandon(),
-        (_, None) => {}
-    }
+        (Err(_), Some(r)) => {
+            r.abandon();
+            None
+        }
+        (_, None) => None,
+    };
     stepped?;
-    summarise(entries, &runners, args.quiet)
+    // Runs that stopped early are part of the comparison: it is served all the same.
+    let summary = summarise(entries, &runners, args.quiet);
+    if let Some(s) = served {
+        s.hold(|| interrupt::signal().is_some());
+    }
+    summary
 }
 
 /// How a comparison advances: a frame every `dt` simulated seconds until `until`.

@@ -37,3 +37,4 @@ pub mod solve;
 pub mod solvers;
 pub mod surface;
 pub mod validation;
+pub mod view;

@@ -2,7 +2,7 @@
 
 use anyhow::Result;
 use cellflip::cli::{Cli, Command, ValidateArgs};
-use cellflip::{bench, compare, interrupt, report, run, scene, solve, validation};
+use cellflip::{bench, compare, interrupt, report, run, scene, solve, validation, view};
 use clap::Parser;
 use std::io::Write;
 
@@ -77,6 +77,7 @@ fn dispatch(cli: Cli) -> Result<()> {
         Command::Validate(args) => validate(&args),
         Command::Report(args) => report::report(&args),
         Command::Solve(args) => solve::solve(&args),
+        Command::View(args) => view::view(&args),
     }
 }
 

@@ -135,7 +135,7 @@ impl Comparison {
     }
 
     /// See [`Output::finish`].
-    pub fn finish(self) -> Result<()> {
+    pub fn finish(self) -> Result<Option<super::Served>> {
         self.output.finish()
     }
 

@@ -13,6 +13,7 @@ mod file;
 pub mod layout;
 mod output;
 mod run_log;
+mod serve;
 mod stream;
 
 pub use canvas::{Canvas, Plane};
@@ -20,6 +21,7 @@ pub use compare::{ComparedRun, Comparison};
 pub use file::RrdFile;
 pub use output::{Output, Resumed, Sink};
 pub use run_log::RunLog;
+pub use serve::{parse_memory_limit, serve_files, Served, WebServe};
 pub use stream::Stream;
 
 use crate::draw::legend;
@@ -142,7 +144,7 @@ impl Recorder {
     }
 
     /// Flushes everything; see [`Output::finish`].
-    pub fn finish(self) -> Result<()> {
+    pub fn finish(self) -> Result<Option<Served>> {
         self.output.finish()
     }
 

@@ -1,16 +1,18 @@
 //! Where a recording goes: our crash-safe file (the default), or live to a viewer (`--spawn`,
 //! `--connect`) or to standard output (`--stdout`), the flags of Rerun's own examples
-//! (`rerun::clap::RerunArgs`).
+//! (`rerun::clap::RerunArgs`), or served to browsers (`--serve-web`, with or without a file).
 //!
 //! A live stream that breaks (the viewer closed mid-run) does not stop the simulation: rerun's
 //! gRPC sink drops what it cannot send, and the end of the run waits at most
 //! [`LIVE_FLUSH_TIMEOUT`] for the rest and then says the stream was lost (see [`end_live`]).
 
+use super::serve::{Served, WebServe};
 use super::RrdFile;
 use anyhow::{anyhow, Result};
+use rerun::sink::LogSink;
 use rerun::{RecordingStream, RecordingStreamBuilder};
 use std::cell::Cell;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 /// Where a recording goes.
@@ -25,6 +27,11 @@ pub enum Sink {
     Connect(Option<String>),
     /// Standard output, to pipe into `rerun -`.
     Stdout,
+    /// Rerun's web viewer and the recording served to browsers, and a file if `save` says.
+    Web {
+        serve: WebServe,
+        save: Option<PathBuf>,
+    },
 }
 
 impl Sink {
@@ -37,6 +44,19 @@ impl Sink {
                 format!("the viewer at {}", url.as_deref().unwrap_or(DEFAULT_URL))
             }
             Sink::Stdout => "standard output".into(),
+            Sink::Web { serve, save: None } => format!("browsers at {}", serve.url()),
+            Sink::Web {
+                serve,
+                save: Some(p),
+            } => format!("{} and browsers at {}", p.display(), serve.url()),
+        }
+    }
+
+    /// The file the recording is written to, if any.
+    pub fn file(&self) -> Option<&Path> {
+        match self {
+            Sink::File(p) | Sink::Web { save: Some(p), .. } => Some(p),
+            _ => None,
         }
     }
 }
@@ -108,24 +128,26 @@ impl Output {
         let cannot = |e: &dyn std::fmt::Display| {
             anyhow!("cannot write the recording to {}: {e}", sink.describe())
         };
-        let (rec, file) = match sink {
-            Sink::File(path) => {
-                let file = match resumed.and_then(|r| r.append_at) {
-                    Some(at) => RrdFile::continue_from(path, at)?,
-                    None => RrdFile::create(path)?,
-                };
-                let s: Box<dyn rerun::sink::LogSink> = Box::new(file.clone());
-                let rec = builder.set_sinks(vec![s]).map_err(|e| cannot(&e))?;
-                (rec, Some(file))
-            }
-            Sink::Spawn => (builder.spawn().map_err(|e| cannot(&e))?, None),
-            Sink::Connect(None) => (builder.connect_grpc().map_err(|e| cannot(&e))?, None),
-            Sink::Connect(Some(url)) => {
-                let rec = builder.connect_grpc_opts(url.clone());
-                (rec.map_err(|e| cannot(&e))?, None)
-            }
-            Sink::Stdout => (builder.stdout().map_err(|e| cannot(&e))?, None),
+        let file = match sink.file() {
+            Some(path) => Some(match resumed.and_then(|r| r.append_at) {
+                Some(at) => RrdFile::continue_from(path, at)?,
+                None => RrdFile::create(path)?,
+            }),
+            None => None,
         };
+        let to_file = || file.iter().map(|f| Box::new(f.clone()) as Box<dyn LogSink>);
+        let rec = match sink {
+            Sink::File(_) => builder.set_sinks(to_file().collect::<Vec<_>>()),
+            Sink::Web { serve, .. } => {
+                let web = serve.start()?;
+                builder.set_sinks(to_file().chain([web]).collect::<Vec<_>>())
+            }
+            Sink::Spawn => builder.spawn(),
+            Sink::Connect(None) => builder.connect_grpc(),
+            Sink::Connect(Some(url)) => builder.connect_grpc_opts(url.clone()),
+            Sink::Stdout => builder.stdout(),
+        }
+        .map_err(|e| cannot(&e))?;
         rec.set_log_time_enabled(false);
         Ok(Self {
             rec,
@@ -168,24 +190,31 @@ impl Output {
 
     /// Flushes everything; a file gets its footer and its name even if no step was recorded
     /// (an interrupted run). A live stream that cannot be drained is reported, not an error:
-    /// the run itself went well.
-    pub fn finish(self) -> Result<()> {
-        match &self.file {
-            Some(file) => {
+    /// the run itself went well. A served recording stays served as long as the [`Served`]
+    /// returned is held.
+    pub fn finish(self) -> Result<Option<Served>> {
+        if let Some(file) = &self.file {
+            let _ = self.rec.flush_blocking();
+            file.commit()?;
+            file.finish()?;
+        }
+        match &self.sink {
+            Sink::Web { serve, .. } => {
                 let _ = self.rec.flush_blocking();
-                file.commit()?;
-                file.finish()
+                let url = serve.url();
+                return Ok(Some(Served::new(self.rec, url)));
             }
-            None => {
+            Sink::Spawn | Sink::Connect(_) | Sink::Stdout => {
                 if let Err(e) = end_live(&self.rec) {
                     eprintln!(
                         "warning: the stream to {} was lost ({e}); the run finished",
                         self.sink.describe()
                     );
                 }
-                Ok(())
             }
+            Sink::File(_) => {}
         }
+        Ok(None)
     }
 
     /// After a run that failed: a file is finished as far as it goes, or removed if it never

@@ -2,13 +2,12 @@
 //! signal handling and the summary at the end; or the run a checkpoint holds, going on.
 
 use crate::checkpoint::{self, Saver};
-use crate::cli::RunArgs;
-use crate::cli::SinkArgs;
+use crate::cli::{RunArgs, ServeArgs, SinkArgs};
 use crate::export;
 use crate::frames::FrameWorker;
 use crate::interrupt::{self, Watchdog};
 use crate::methods::MethodOption;
-use crate::record::{Drawing, Recorder, Sink};
+use crate::record::{Drawing, Recorder, Sink, WebServe};
 use crate::runner::{Limit, Runner};
 use crate::scene::{peak_memory_mib, MemoryEstimate, Overrides, Scene};
 use crate::simulation::Simulation;
@@ -111,10 +110,7 @@ fn run_dim<const D: usize>(
     args: &RunArgs,
     start: Start,
 ) -> Result<()> {
-    let out = match sink {
-        Some(Sink::File(p)) => Some(p.as_path()),
-        _ => None,
-    };
+    let out = sink.and_then(Sink::file);
     let drawing = Drawing {
         surface: !args.no_surface,
         moves: args.moves,
@@ -333,6 +329,7 @@ fn finish<const D: usize>(
         result,
         saver,
     } = ran;
+    let mut served = None;
     if let Some(r) = recorder {
         let sim = &runner.sim;
         match (&result, interrupt::signal()) {
@@ -340,10 +337,13 @@ fn finish<const D: usize>(
             (Ok(()), Some(sig)) => r.warn(sim, &format!("run stopped by {}", interrupt::name(sig))),
             (Ok(()), None) => {}
         }
-        match &result {
+        served = match &result {
             Ok(()) => r.finish().context("cannot finish the recording")?,
-            Err(_) => r.abandon(),
-        }
+            Err(_) => {
+                r.abandon();
+                None
+            }
+        };
     }
     if !args.quiet {
         let mut title = format!(
@@ -364,18 +364,23 @@ fn finish<const D: usize>(
             );
         }
         let cadence = Cadence::of(args.record_every, D).describe();
-        if let Some(s @ (Sink::Spawn | Sink::Connect(_) | Sink::Stdout)) = sink {
-            crate::outln!(
-                "recording: streamed to {}, particles and cells {cadence}",
-                s.describe()
-            );
+        let live = match sink {
+            Some(s @ (Sink::Spawn | Sink::Connect(_) | Sink::Stdout)) => {
+                Some(format!("streamed to {}", s.describe()))
+            }
+            Some(Sink::Web { serve, .. }) => Some(format!("served at {}", serve.url())),
+            _ => None,
+        };
+        if let Some(live) = live {
+            crate::outln!("recording: {live}, particles and cells {cadence}");
         }
-        if let Some(Sink::File(p)) = sink.filter(|s| matches!(s, Sink::File(p) if p.exists())) {
+        if let Some(p) = sink.and_then(Sink::file).filter(|p| p.exists()) {
             let mb = std::fs::metadata(p).map_or(0.0, |m| m.len() as f64 / 1e6);
             crate::outln!(
-                "recording: {}, {mb:.1} MB, particles and cells {}  (open with: rerun {})",
+                "recording: {}, {mb:.1} MB, particles and cells {cadence}  (open with: rerun {}, \
+                 or in a browser: cellflip view --serve-web {})",
                 p.display(),
-                cadence,
+                p.display(),
                 p.display()
             );
         }
@@ -390,13 +395,18 @@ fn finish<const D: usize>(
             );
         }
     }
-    result.and_then(|()| check_export_written(args.ccp.export_lp, runner.sim.state.steps))
+    result.and_then(|()| check_export_written(args.ccp.export_lp, runner.sim.state.steps))?;
+    if let Some(s) = served {
+        s.hold(|| interrupt::signal().is_some());
+    }
+    Ok(())
 }
 
 impl SinkArgs {
     /// Where the recording goes: `None` without one; by default a file
-    /// `recordings/<name>.rrd` (the folder is made here, so that it fails before the run).
-    pub fn choice(&self, name: &str) -> Result<Option<Sink>> {
+    /// `recordings/<name>.rrd` (the folder is made here, so that it fails before the run);
+    /// served to browsers too when `serve` says.
+    pub fn choice(&self, name: &str, serve: &ServeArgs) -> Result<Option<Sink>> {
         if self.stdout {
             crate::out::to_stderr();
         }
@@ -407,6 +417,7 @@ impl SinkArgs {
             SinkArgs {
                 connect: Some(url), ..
             } => Some(Sink::Connect(url.clone())),
+            SinkArgs { save, .. } if serve.serve_web.is_some() => serve.sink(save.clone()),
             SinkArgs { save: Some(p), .. } => Some(Sink::File(p.clone())),
             _ => {
                 let dir = PathBuf::from("recordings");
@@ -415,6 +426,27 @@ impl SinkArgs {
                 Some(Sink::File(dir.join(format!("{name}.rrd"))))
             }
         })
+    }
+}
+
+impl ServeArgs {
+    /// How `--serve-web` serves, if given.
+    pub fn web(&self) -> Option<WebServe> {
+        Some(WebServe {
+            web_port: self.serve_web?,
+            grpc_port: self.grpc_port,
+            bind: self.bind,
+            memory_limit: self.server_memory_limit.clone(),
+        })
+    }
+
+    /// The recording written to `file` (if any) and, with `--serve-web`, served.
+    pub fn sink(&self, file: Option<PathBuf>) -> Option<Sink> {
+        match (self.web(), file) {
+            (Some(serve), save) => Some(Sink::Web { serve, save }),
+            (None, Some(p)) => Some(Sink::File(p)),
+            (None, None) => None,
+        }
     }
 }
 

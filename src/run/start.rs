@@ -75,11 +75,11 @@ pub(super) fn recording_of(
     resumed: Option<&Opened>,
 ) -> Result<(Option<Sink>, Option<Resumed>)> {
     let Some(mark) = resumed.map(|c| c.origin.recording.as_ref()) else {
-        return Ok((args.sink.choice(scene.name())?, None));
+        return Ok((args.sink.choice(scene.name(), &args.serve)?, None));
     };
     let s = &args.sink;
     let not_a_file = s.spawn || s.connect.is_some() || s.stdout || s.no_record;
-    let chosen = s.save.is_some() || not_a_file;
+    let chosen = s.save.is_some() || not_a_file || args.serve.serve_web.is_some();
     let same_file = |m: &checkpoint::RecordingMark| s.save.as_ref().is_none_or(|p| *p == m.path);
     match mark {
         Some(m) if same_file(m) && !not_a_file => {
@@ -87,7 +87,7 @@ pub(super) fn recording_of(
                 id: m.id.clone(),
                 append_at: Some(m.bytes),
             };
-            Ok((Some(Sink::File(m.path.clone())), Some(continued)))
+            Ok((args.serve.sink(Some(m.path.clone())), Some(continued)))
         }
         _ if !chosen => Ok((None, None)),
         _ => {
@@ -96,7 +96,7 @@ pub(super) fn recording_of(
                 id,
                 append_at: None,
             });
-            Ok((s.choice(scene.name())?, continued))
+            Ok((s.choice(scene.name(), &args.serve)?, continued))
         }
     }
 }
@@ -117,10 +117,7 @@ pub(super) fn checkpoints_of(
         }
         return Ok(None);
     };
-    let file = match sink {
-        Some(Sink::File(p)) => Some(p.as_path()),
-        _ => None,
-    };
+    let file = sink.and_then(Sink::file);
     let resumed_dir = resumed.and_then(|c| c.path.parent().map(Path::to_path_buf));
     let dir = (args.checkpoint.checkpoint_dir.clone())
         .or(resumed_dir)

@@ -105,15 +105,15 @@ fn serving<T>(endpoint: &Endpoint, client: impl FnOnce(u16) -> T) -> T {
 }
 
 /// Writes messages as a recording file, so that the file helpers read them.
-fn save(messages: &[LogMsg], path: &Path) {
+pub fn save(messages: &[LogMsg], path: &Path) {
     std::fs::write(path, Encoder::encode(messages.iter().map(Ok)).unwrap()).unwrap();
 }
 
 /// The run every stream test makes, with its sink's flags appended.
-const RUN: [&str; 6] = ["run", "dam-2d", "--method", "ccp", "--steps", "4"];
+pub const RUN: [&str; 6] = ["run", "dam-2d", "--method", "ccp", "--steps", "4"];
 
 /// [`RUN`] saved to a file in `dir`, the reference a stream is compared with.
-fn saved_run(dir: &Path) -> std::path::PathBuf {
+pub fn saved_run(dir: &Path) -> std::path::PathBuf {
     let file = dir.join("file.rrd");
     ok(&cellflip_in(
         dir,
@@ -124,7 +124,7 @@ fn saved_run(dir: &Path) -> std::path::PathBuf {
 
 /// A streamed recording holds what the file of the same run holds: its entities, a series
 /// step by step, and the blueprint's views.
-fn assert_same_recording(streamed: &Path, file: &Path) {
+pub fn assert_same_recording(streamed: &Path, file: &Path) {
     let entities = common::logged_entities(streamed);
     assert!(entities.contains("world/particles"), "{entities:?}");
     assert_eq!(entities, common::logged_entities(file));

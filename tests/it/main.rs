@@ -25,3 +25,4 @@ mod scenes;
 mod solids;
 mod surface;
 mod validation;
+mod web;

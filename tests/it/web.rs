@@ -1,0 +1,228 @@
+//! `--serve-web` and `cellflip view`: Rerun's web viewer served over HTTP and the recording
+//! over gRPC, read back by a gRPC client as a browser's viewer reads it (rerun's message-proxy
+//! `ReadMessages`); what arrives is what the file of the same run holds.
+
+use crate::common::{cellflip_in, ok, scratch_dir};
+use crate::live::{assert_same_recording, save, saved_run, RUN};
+use re_protos::sdk_comms::v1alpha1::message_proxy_service_client::MessageProxyServiceClient;
+use re_protos::sdk_comms::v1alpha1::ReadMessagesRequest;
+use rerun::external::re_log_encoding::{CachingApplicationIdInjector, ToApplication};
+use rerun::log::LogMsg;
+use std::io::{Read, Write};
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// A loopback port nothing listens on (bound, then released).
+fn free_port() -> u16 {
+    let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    l.local_addr().unwrap().port()
+}
+
+/// `cellflip args` started in `dir`, its standard error going to `dir/stderr.txt`.
+fn start(dir: &Path, args: &[&str]) -> Child {
+    let err = std::fs::File::create(dir.join("stderr.txt")).unwrap();
+    Command::new(env!("CARGO_BIN_EXE_cellflip"))
+        .args(args)
+        .current_dir(dir)
+        .stdout(Stdio::null())
+        .stderr(err)
+        .spawn()
+        .unwrap()
+}
+
+/// Waits until the process says it goes on serving after its work (at most a minute).
+fn wait_until_serving(child: &mut Child, dir: &Path) {
+    let t0 = Instant::now();
+    loop {
+        let said = std::fs::read_to_string(dir.join("stderr.txt")).unwrap();
+        if said.contains("still serving at") {
+            return;
+        }
+        let exited = child.try_wait().unwrap();
+        assert!(
+            exited.is_none() && t0.elapsed().as_secs() < 60,
+            "{exited:?}: {said}"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+/// An HTTP GET of `path` on the web port: the status line and the body.
+fn http_get(port: u16, path: &str) -> (String, Vec<u8>) {
+    let mut s = std::net::TcpStream::connect(("127.0.0.1", port)).unwrap();
+    write!(s, "GET {path} HTTP/1.0\r\nHost: 127.0.0.1\r\n\r\n").unwrap();
+    let mut all = vec![];
+    s.read_to_end(&mut all).unwrap();
+    let end = all.windows(4).position(|w| w == b"\r\n\r\n").unwrap();
+    let head = String::from_utf8_lossy(&all[..end]).to_string();
+    let status = head.lines().next().unwrap_or_default().to_string();
+    (status, all[end + 4..].to_vec())
+}
+
+/// Everything the gRPC server at `port` holds, read as the web viewer reads it: messages until
+/// none has come for two seconds.
+fn read_served(port: u16) -> Vec<LogMsg> {
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    runtime.block_on(async {
+        let url = format!("http://127.0.0.1:{port}");
+        let channel = tonic::transport::Endpoint::new(url)
+            .unwrap()
+            .connect()
+            .await
+            .unwrap();
+        let mut client = MessageProxyServiceClient::new(channel).max_decoding_message_size(1 << 30);
+        let mut stream = client
+            .read_messages(ReadMessagesRequest {})
+            .await
+            .unwrap()
+            .into_inner();
+        let mut app_ids = CachingApplicationIdInjector::default();
+        let mut got = vec![];
+        let quiet = Duration::from_secs(2);
+        while let Ok(next) = tokio::time::timeout(quiet, stream.message()).await {
+            let Some(m) = next.unwrap() else { break };
+            let proto = m.log_msg.expect("a message");
+            got.push(proto.to_application((&mut app_ids, None)).unwrap());
+        }
+        got
+    })
+}
+
+/// Ends a serving process with Ctrl-C: it exits 130 within a few seconds.
+fn interrupt(mut child: Child) {
+    let pid = child.id().to_string();
+    assert!(Command::new("kill")
+        .args(["-INT", &pid])
+        .status()
+        .unwrap()
+        .success());
+    let t0 = Instant::now();
+    loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            assert_eq!(status.code(), Some(130));
+            return;
+        }
+        assert!(
+            t0.elapsed().as_secs() < 10,
+            "Ctrl-C did not end the serving"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// A run served with `--serve-web` and saved with `--save`: the page and the viewer's wasm
+/// answer over HTTP, a late gRPC reader gets what the file holds, and Ctrl-C ends the serving
+/// (exit 130) with the file whole.
+#[test]
+fn a_served_run_answers_with_the_viewer_and_streams_what_its_file_holds() {
+    let dir = scratch_dir("serve_web_run");
+    let (web, grpc) = (free_port(), free_port());
+    let (web_s, grpc_s) = (web.to_string(), grpc.to_string());
+    let served = [
+        "--serve-web",
+        &web_s,
+        "--grpc-port",
+        &grpc_s,
+        "--save",
+        "served.rrd",
+    ];
+    let mut child = start(&dir, &[&RUN[..], &served].concat());
+    wait_until_serving(&mut child, &dir);
+    let (status, page) = http_get(web, "/");
+    assert!(status.contains("200"), "{status}");
+    assert!(
+        String::from_utf8_lossy(&page).contains("<html"),
+        "not the viewer's page"
+    );
+    let (status, wasm) = http_get(web, "/re_viewer_bg.wasm");
+    assert!(status.contains("200"), "{status}");
+    assert!(
+        wasm.starts_with(b"\0asm") && wasm.len() > 10_000_000,
+        "{}",
+        wasm.len()
+    );
+    let streamed = dir.join("streamed.rrd");
+    save(&read_served(grpc), &streamed);
+    interrupt(child);
+    let said = std::fs::read_to_string(dir.join("stderr.txt")).unwrap();
+    assert!(
+        said.contains(&format!(
+            "open http://127.0.0.1:{web}/?url=rerun%2Bhttp://127.0.0.1:{grpc}/proxy"
+        )),
+        "{said}"
+    );
+    assert_same_recording(&streamed, &dir.join("served.rrd"));
+    assert_same_recording(&dir.join("served.rrd"), &saved_run(&dir));
+}
+
+/// `cellflip view --serve-web` serves a saved recording: a gRPC reader gets what it holds.
+#[test]
+fn view_serves_a_saved_recording_to_browsers() {
+    let dir = scratch_dir("serve_web_view");
+    let file = saved_run(&dir);
+    let (web, grpc) = (free_port(), free_port());
+    let (web_s, grpc_s) = (web.to_string(), grpc.to_string());
+    let args = [
+        "view",
+        file.to_str().unwrap(),
+        "--serve-web",
+        &web_s,
+        "--grpc-port",
+        &grpc_s,
+    ];
+    let mut child = start(&dir, &args);
+    wait_until_serving(&mut child, &dir);
+    let streamed = dir.join("streamed.rrd");
+    save(&read_served(grpc), &streamed);
+    interrupt(child);
+    assert_same_recording(&streamed, &file);
+}
+
+/// A port already taken stops the command before anything runs, naming the option and the
+/// port; so does a file `view` cannot read, and `view` without a native viewer says how to
+/// get one.
+#[test]
+fn taken_ports_missing_files_and_a_missing_viewer_are_refused_before_anything_runs() {
+    let dir = scratch_dir("serve_web_refusals");
+    let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = taken.local_addr().unwrap().port().to_string();
+    let free = free_port().to_string();
+    for (option, args) in [
+        ("--serve-web", ["--serve-web", &port, "--grpc-port", &free]),
+        ("--grpc-port", ["--serve-web", &free, "--grpc-port", &port]),
+    ] {
+        let out = cellflip_in(&dir, &[&RUN[..], &args].concat());
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{stderr}");
+        assert!(
+            stderr.contains(&format!(
+                "{option} {port}: cannot listen on 127.0.0.1:{port}"
+            )),
+            "{stderr}"
+        );
+        assert!(out.stdout.is_empty(), "something ran");
+    }
+    let out = cellflip_in(&dir, &["view", "nowhere.rrd", "--serve-web", &free]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("cannot open recording 'nowhere.rrd'"));
+    let file = saved_run(&dir);
+    let out = Command::new(env!("CARGO_BIN_EXE_cellflip"))
+        .args(["view", file.to_str().unwrap()])
+        .env("PATH", "/nonexistent")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("cellflip view --serve-web"), "{stderr}");
+    let out = cellflip_in(&dir, &[&RUN[..], &["--serve-web", "--spawn"]].concat());
+    assert_eq!(
+        out.status.code(),
+        Some(1),
+        "--serve-web with --spawn is a usage error"
+    );
+    ok(&cellflip_in(&dir, &["view", "--help"]));
+}
