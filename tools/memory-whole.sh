@@ -1,5 +1,5 @@
 #!/bin/bash
-# Whole runs' peak memory against the up-front estimate (docs/benchmarks.md, "Memory"): the band
+# Whole runs' peak memory against the up-front estimate (docs/benchmarks/memory.md): the band
 # methods' footprints are fitted to these. Each run is one `cellflip run` process under
 # /usr/bin/time (its maximum RSS is the run's peak); the estimate is the one its summary prints.
 # One CSV line per run, with the particles the run held after a step (least and most), which

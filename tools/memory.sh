@@ -1,5 +1,5 @@
 #!/bin/bash
-# Peak memory of each method against the up-front estimate (docs/benchmarks.md, "Memory").
+# Peak memory of each method against the up-front estimate (docs/benchmarks/memory.md).
 # One `cellflip bench` process per run (its peak is the process's); one CSV line per run.
 # Usage: tools/memory.sh [path/to/cellflip]   (default: target/release/cellflip)
 set -euo pipefail
@@ -26,6 +26,6 @@ for m in flip ccp idp nbflip powerpic; do
 done
 for m in flip ccp idp nbflip; do run $m deep-pool-3d 96; done
 for r in 64 96 128; do for s in drop-3d falling-obstacle-3d; do run ccp $s $r; run flip $s $r; done; done
-# The band methods' fit (docs/benchmarks.md, "Memory"): their particles held and their start.
+# The band methods' fit (docs/benchmarks/memory.md): their particles held and their start.
 for m in ccp nbflip; do for s in drop-3d falling-obstacle-3d; do run $m $s 160; done; done
 for r in 64 96 128; do run nbflip deep-pool-3d $r; done

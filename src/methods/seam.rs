@@ -102,7 +102,7 @@ pub struct SettingContext {
 
 /// A method's peak memory, measured: resident bytes per grid cell, per fluid cell and per
 /// particle held, the fit behind the up-front estimate ([`crate::scene::memory`]; the
-/// measurements and the command that repeats them are in docs/benchmarks.md, "Memory").
+/// measurements and the command that repeats them are in docs/benchmarks/memory.md).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Footprint {
     pub per_cell: f64,

@@ -113,7 +113,25 @@ pub enum Kind {
     TextDocument,
 }
 
+/// The spatial views' background in both of the viewer's themes: the colours of particles,
+/// cells and labels are chosen against a dark one (white labels, a speed ramp that ends in
+/// white), which the light theme would otherwise turn white (the web viewer follows the
+/// browser's theme).
+const DARK_BACKGROUND: [u8; 3] = [18, 18, 18];
+
 impl Kind {
+    /// A spatial view's background, dark whatever the viewer's theme.
+    fn background(self) -> Option<bp::Background> {
+        match self {
+            Kind::Spatial2D => Some(
+                bp::Background::new(bpc::BackgroundKind::SolidColor)
+                    .with_color(DARK_BACKGROUND),
+            ),
+            Kind::Spatial3D => Some(bp::Background::new(bpc::BackgroundKind::GradientDark)),
+            _ => None,
+        }
+    }
+
     fn class(self) -> &'static str {
         match self {
             Kind::Spatial2D => "2D",
@@ -550,6 +568,9 @@ fn write_view(rec: &RecordingStream, v: &View) -> RecordingStreamResult<Uuid> {
         ];
         let rows = bp::TextLogRows::new().with_filter_by_log_level(levels);
         rec.log(format!("{path}/TextLogRows"), &rows)?;
+    }
+    if let Some(background) = v.kind.background() {
+        rec.log(format!("{path}/Background"), &background)?;
     }
     if let Some((position, target)) = v.eye {
         let eye = bp::EyeControls3D::new()

@@ -346,60 +346,73 @@ fn finish<const D: usize>(
         };
     }
     if !args.quiet {
-        let mut title = format!(
-            "{} ({}D, {}",
-            scene.name(),
-            scene.dim(),
-            scene.method.kind.name()
-        );
-        if !scene.file.obstacle.is_empty() {
-            title += &format!(", obstacles {}", scene.obstacle_mode.name());
-        }
-        title += ")";
-        runner.summary.print(&title);
-        if let Some(peak) = peak_memory_mib() {
-            crate::outln!(
-                "memory: peak {peak:.0} MiB resident (the process's); estimated up front {:.0} MiB",
-                estimate.mib()
-            );
-        }
-        let cadence = Cadence::of(args.record_every, D).describe();
-        let live = match sink {
-            Some(s @ (Sink::Spawn | Sink::Connect(_) | Sink::Stdout)) => {
-                Some(format!("streamed to {}", s.describe()))
-            }
-            Some(Sink::Web { serve, .. }) => Some(format!("served at {}", serve.url())),
-            _ => None,
-        };
-        if let Some(live) = live {
-            crate::outln!("recording: {live}, particles and cells {cadence}");
-        }
-        if let Some(p) = sink.and_then(Sink::file).filter(|p| p.exists()) {
-            let mb = std::fs::metadata(p).map_or(0.0, |m| m.len() as f64 / 1e6);
-            crate::outln!(
-                "recording: {}, {mb:.1} MB, particles and cells {cadence}  (open with: rerun {}, \
-                 or in a browser: cellflip view --serve-web {})",
-                p.display(),
-                p.display(),
-                p.display()
-            );
-        }
-        if let Some(c) = saver.as_ref().map(|s| &s.checkpoints) {
-            let last = c.last_step.map_or("none written".into(), |k| {
-                format!("the last after step {k}")
-            });
-            crate::outln!(
-                "checkpoints: {} ({last}; go on with: cellflip run --resume {})",
-                c.dir().display(),
-                c.dir().display()
-            );
-        }
+        summarise(scene, estimate, &runner, sink, saver.as_ref(), args);
     }
     result.and_then(|()| check_export_written(args.ccp.export_lp, runner.sim.state.steps))?;
     if let Some(s) = served {
         s.hold(|| interrupt::signal().is_some());
     }
     Ok(())
+}
+
+/// The run's summary: its stages and figures, its memory, where its recording and its
+/// checkpoints went.
+fn summarise<const D: usize>(
+    scene: &Scene,
+    estimate: &MemoryEstimate,
+    runner: &Runner<D>,
+    sink: Option<&Sink>,
+    saver: Option<&Saver>,
+    args: &RunArgs,
+) {
+    let mut title = format!(
+        "{} ({}D, {}",
+        scene.name(),
+        scene.dim(),
+        scene.method.kind.name()
+    );
+    if !scene.file.obstacle.is_empty() {
+        title += &format!(", obstacles {}", scene.obstacle_mode.name());
+    }
+    title += ")";
+    runner.summary.print(&title);
+    if let Some(peak) = peak_memory_mib() {
+        crate::outln!(
+            "memory: peak {peak:.0} MiB resident (the process's); estimated up front {:.0} MiB",
+            estimate.mib()
+        );
+    }
+    let cadence = Cadence::of(args.record_every, D).describe();
+    let live = match sink {
+        Some(s @ (Sink::Spawn | Sink::Connect(_) | Sink::Stdout)) => {
+            Some(format!("streamed to {}", s.describe()))
+        }
+        Some(Sink::Web { serve, .. }) => Some(format!("served at {}", serve.url())),
+        _ => None,
+    };
+    if let Some(live) = live {
+        crate::outln!("recording: {live}, particles and cells {cadence}");
+    }
+    if let Some(p) = sink.and_then(Sink::file).filter(|p| p.exists()) {
+        let mb = std::fs::metadata(p).map_or(0.0, |m| m.len() as f64 / 1e6);
+        crate::outln!(
+            "recording: {}, {mb:.1} MB, particles and cells {cadence}  (open with: rerun {}, \
+             or in a browser: cellflip view --serve-web {})",
+            p.display(),
+            p.display(),
+            p.display()
+        );
+    }
+    if let Some(c) = saver.map(|s| &s.checkpoints) {
+        let last = c.last_step.map_or("none written".into(), |k| {
+            format!("the last after step {k}")
+        });
+        crate::outln!(
+            "checkpoints: {} ({last}; go on with: cellflip run --resume {})",
+            c.dir().display(),
+            c.dir().display()
+        );
+    }
 }
 
 impl SinkArgs {

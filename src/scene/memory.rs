@@ -10,7 +10,7 @@
 //! liquid's first markings and the band of that liquid settled at rest over the tank's floor
 //! (a column that spreads into a sheet is all band). It holds every particle seeded while it
 //! starts, which is a second peak the estimate takes the larger of. The footprints are fits
-//! to the peak resident memory of whole runs (docs/benchmarks.md, "Memory", gives the
+//! to the peak resident memory of whole runs (docs/benchmarks/memory.md, gives the
 //! measurements, the ratio of estimate to peak per method and the command that repeats them).
 
 use super::Scene;

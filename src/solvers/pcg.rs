@@ -86,8 +86,7 @@ impl<const D: usize> StencilMatrix<D> {
 pub enum Preconditioner {
     /// By the system's size: multigrid from 10,000 unknown rows in 2D and 100,000 in 3D
     /// (`Preconditioner::AUTO_ROWS`), MIC(0) below, where the multigrid's set-up and heavier
-    /// iterations do not pay (the crossover measured in docs/benchmarks.md, "Pressure
-    /// preconditioners").
+    /// iterations do not pay (the crossover measured in docs/benchmarks/pressure.md).
     #[default]
     Auto,
     /// Modified incomplete Cholesky: cheap per iteration, but its triangular solves are

@@ -298,6 +298,9 @@ pub struct ReadView {
     pub origin: String,
     /// Its query lines (`+ path`, `- path`).
     pub queries: Vec<String>,
+    /// Its background's kind (`BackgroundKind` as a number: 1 gradient dark, 2 gradient
+    /// bright, 3 solid colour) and colour (RGBA), if set.
+    pub background: Option<(u8, Option<u32>)>,
 }
 
 /// The views of a recording's blueprint, and the state of each side panel (`blueprint_panel`,
@@ -325,6 +328,13 @@ pub fn blueprint(path: &Path) -> (Vec<ReadView>, std::collections::BTreeMap<Stri
             ["view", id, "ViewContents"] => {
                 views.entry(id.to_string()).or_default().queries =
                     text(&c, bp::ViewContents::descriptor_query());
+            }
+            ["view", id, "Background"] => {
+                let kind = bp::Background::descriptor_kind().component;
+                let color = bp::Background::descriptor_color().component;
+                let kind = c.iter_slices::<u8>(kind).flatten().copied().next();
+                let color = c.iter_slices::<u32>(color).flatten().copied().next();
+                views.entry(id.to_string()).or_default().background = kind.map(|k| (k, color));
             }
             [panel @ ("blueprint_panel" | "selection_panel" | "time_panel")] => {
                 let d = match *panel {

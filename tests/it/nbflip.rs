@@ -139,7 +139,8 @@ fn the_narrow_level_set_gives_the_dense_one_s_results_2d_and_3d() {
     check::<2>("dam-2d", None, 300, None);
     check::<3>("dam-3d", Some(24), 12, None);
     check::<2>("deep-pool-2d", Some(128), 60, Some(0.5));
-    // At 48 cells the margin (10 cells each way, whole tiles) still spans most of the depth.
+    // At 48 cells the margin (10 cells into the liquid and 8 into the air for R = 3, whole
+    // tiles) still spans most of the depth.
     check::<3>("deep-pool-3d", Some(48), 15, Some(0.7));
 }
 

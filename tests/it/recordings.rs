@@ -122,6 +122,26 @@ fn the_world_view_comes_first_the_side_panels_start_collapsed_and_3d_has_a_slice
     }
 }
 
+/// The web viewer follows the browser's theme, and in the light one a view's background is
+/// white, where white labels and the speed ramp's white vanish: every spatial view keeps a dark
+/// background in both themes (docs/cli.md, "In a browser").
+#[test]
+fn every_spatial_view_keeps_a_dark_background_in_either_theme() {
+    for (scene, res) in [("dam-2d", "24"), ("drop-3d", "12")] {
+        let (_dir, rrd) = record("background", scene, "1", &["--res", res]);
+        let (views, _) = common::blueprint(&rrd);
+        let spatial: Vec<&ReadView> = views.iter().filter(|v| v.class.ends_with('D')).collect();
+        assert!(!spatial.is_empty(), "{views:?}");
+        for v in spatial {
+            let expected = match v.class.as_str() {
+                "2D" => (3, Some(0x121212ff)),
+                _ => (1, None),
+            };
+            assert_eq!(v.background, Some(expected), "{v:?}");
+        }
+    }
+}
+
 #[test]
 fn band_levels_have_their_own_view_and_leave_the_world_view_but_not_the_paths() {
     let q = |s: &str| s.to_string();

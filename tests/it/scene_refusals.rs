@@ -276,8 +276,8 @@ fn options_a_method_lacks_are_refused_before_anything_is_written() {
 /// particles make a problem the flow solver halves (`cellflip bench` prints the process's
 /// peak beside the estimate). The estimate is fitted to whole runs, whose peaks grow past
 /// those of a few steps (ccp's by half: its correction meets more conflicts once the water
-/// moves), so the upper check here is only against gross overestimates, 2x; docs/benchmarks.md,
-/// "Memory", holds the fit's ratios on whole runs.
+/// moves), so the upper check here is only against gross overestimates, 2x; docs/benchmarks/memory.md
+/// holds the fit's ratios on whole runs.
 #[test]
 fn the_memory_estimate_is_not_below_a_runs_peak() {
     let dam = ["--scene", "dam-3d", "--res", "48"];

@@ -69,7 +69,7 @@ impl MethodType for Ccp {
         Box::new(Totals::new(s))
     }
 
-    /// Measured peak memory over a run ([`Footprint`]; docs/benchmarks.md, "Memory"). With the
+    /// Measured peak memory over a run ([`Footprint`]; docs/benchmarks/memory.md). With the
     /// band: a fit to whole runs of the particles it may hold (the band seeded or settled), the
     /// liquid's cells and the grid's (5% above each run's peak, the spread of repeated runs),
     /// and the peak while it starts holding every particle seeded (in 2D the band holds so few

@@ -33,7 +33,7 @@ impl MethodType for Flip {
         Box::new(NoSummary)
     }
 
-    /// Measured peak memory over a run ([`Footprint`]; docs/benchmarks.md, "Memory").
+    /// Measured peak memory over a run ([`Footprint`]; docs/benchmarks/memory.md).
     fn footprint(_settings: &(), dim: usize) -> Footprint {
         Footprint::of(dim, [(111.0, 115.0), (165.0, 100.0)])
     }

@@ -105,7 +105,7 @@ impl MethodType for Idp {
         Box::new(Totals::default())
     }
 
-    /// Measured peak memory over a run ([`Footprint`]; docs/benchmarks.md, "Memory").
+    /// Measured peak memory over a run ([`Footprint`]; docs/benchmarks/memory.md).
     fn footprint(_settings: &IdpSettings, dim: usize) -> Footprint {
         Footprint::of(dim, [(145.0, 115.0), (195.0, 150.0)])
     }

@@ -19,9 +19,11 @@
 //!    new ones, with the grid's velocity;
 //! 6. markings: the level set's inside is fluid, with or without particles.
 //!
-//! MantaFlow resamples right after the FLIP update, against the level set built before the
-//! particles moved; here the level set is rebuilt first, so the particles a step starts with
-//! lie in the band of the level set the step uses. The pressure solve and the advection are
+//! Both read a level set built from the particles where they are, but MantaFlow resamples at
+//! the end of its step, after the pressure solve and the FLIP update, and seeds with the
+//! projected velocity; here resampling follows the rebuild at once, so the next transfer to the
+//! grid and pressure solve see the resampled band, and new particles take the advected grid
+//! velocity. The pressure solve and the advection are
 //! those of the other methods (first-order free surface, forward Euler), so that the band is
 //! the only difference to flip; MantaFlow's scene uses a ghost-fluid surface, RK4 for the
 //! particles and MacCormack for the grid velocity.
@@ -92,7 +94,7 @@ impl MethodType for Nbflip {
         Box::new(Totals::new(s.band_r))
     }
 
-    /// Measured peak memory over a run ([`Footprint`]; docs/benchmarks.md, "Memory"): a fit to
+    /// Measured peak memory over a run ([`Footprint`]; docs/benchmarks/memory.md): a fit to
     /// whole runs of the particles it may hold (the band seeded or settled), the liquid's cells
     /// and the grid's (5% above each run's peak, the spread of repeated runs), and the peak
     /// while it starts, holding every particle seeded and resampling them all (a chunk at a

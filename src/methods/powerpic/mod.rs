@@ -113,7 +113,7 @@ impl MethodType for Powerpic {
         Box::new(Totals::new(s.max_iterations))
     }
 
-    /// Measured peak memory over a run ([`Footprint`]; docs/benchmarks.md, "Memory").
+    /// Measured peak memory over a run ([`Footprint`]; docs/benchmarks/memory.md).
     fn footprint(_settings: &PowerPicSettings, dim: usize) -> Footprint {
         Footprint::of(dim, [(282.0, 850.0), (700.0, 2750.0)])
     }
