@@ -90,6 +90,12 @@ impl WebServe {
                  on ports {} and {}, without a password",
                 self.bind, self.web_port, self.grpc_port
             );
+            if self.bind.is_unspecified() {
+                eprintln!(
+                    "other machines open the URL below with this machine's address in place of its \
+                     host (127.0.0.1 or [::1]), in both places"
+                );
+            }
         }
         let sink = rerun::web_viewer::new_sink(
             false,
