@@ -96,32 +96,8 @@ impl RrdFile {
     /// recording there now (what a checkpoint noted: what lies after is left out); the run
     /// logs on after them. The file there is replaced at [`RrdFile::commit`].
     pub fn continue_from(path: &Path, at: u64) -> Result<Self> {
-        use rerun::external::re_log_encoding::DecoderApp;
-        use std::io::Read;
-        let fail = |e: &dyn std::fmt::Display| {
-            anyhow!("cannot go on with recording '{}': {e}", path.display())
-        };
-        let old = File::open(path).map_err(|e| fail(&e))?;
-        let len = old.metadata().map_err(|e| fail(&e))?.len();
-        if len < at {
-            bail!(
-                "cannot go on with recording '{}': it has {len} bytes, fewer than the {at} the \
-                 checkpoint recorded up to (record to a new file with --save PATH)",
-                path.display()
-            );
-        }
         let f = Self::create(path)?;
-        let reader = std::io::BufReader::new(old.take(at));
-        for msg in DecoderApp::decode_lazy(reader) {
-            match msg {
-                Ok(msg) => f.send(msg),
-                Err(e) => {
-                    f.discard();
-                    return Err(fail(&e));
-                }
-            }
-        }
-        if let Err(e) = f.check() {
+        if let Err(e) = replay(path, at, &f).and_then(|()| f.check()) {
             f.discard();
             return Err(e);
         }
@@ -259,6 +235,29 @@ fn os_error(e: EncodeError) -> String {
 }
 
 /// `dir/.NAME.partial` for `dir/NAME`.
+/// Sends the messages in the first `at` bytes of the recording at `path` to `sink`, in order:
+/// what a checkpoint noted of a recording to go on with (what lies after is left out).
+pub fn replay(path: &Path, at: u64, sink: &dyn LogSink) -> Result<()> {
+    use rerun::external::re_log_encoding::DecoderApp;
+    use std::io::Read;
+    let fail = |e: &dyn std::fmt::Display| {
+        anyhow!("cannot go on with recording '{}': {e}", path.display())
+    };
+    let old = File::open(path).map_err(|e| fail(&e))?;
+    let len = old.metadata().map_err(|e| fail(&e))?.len();
+    if len < at {
+        bail!(
+            "cannot go on with recording '{}': it has {len} bytes, fewer than the {at} the \
+             checkpoint recorded up to (record to a new file with --save PATH)",
+            path.display()
+        );
+    }
+    for msg in DecoderApp::decode_lazy(std::io::BufReader::new(old.take(at))) {
+        sink.send(msg.map_err(|e| fail(&e))?);
+    }
+    Ok(())
+}
+
 fn partial_path(path: &Path) -> PathBuf {
     let name = path
         .file_name()

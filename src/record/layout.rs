@@ -124,8 +124,7 @@ impl Kind {
     fn background(self) -> Option<bp::Background> {
         match self {
             Kind::Spatial2D => Some(
-                bp::Background::new(bpc::BackgroundKind::SolidColor)
-                    .with_color(DARK_BACKGROUND),
+                bp::Background::new(bpc::BackgroundKind::SolidColor).with_color(DARK_BACKGROUND),
             ),
             Kind::Spatial3D => Some(bp::Background::new(bpc::BackgroundKind::GradientDark)),
             _ => None,

@@ -138,8 +138,12 @@ impl Output {
         let to_file = || file.iter().map(|f| Box::new(f.clone()) as Box<dyn LogSink>);
         let rec = match sink {
             Sink::File(_) => builder.set_sinks(to_file().collect::<Vec<_>>()),
-            Sink::Web { serve, .. } => {
+            Sink::Web { serve, save } => {
                 let web = serve.start()?;
+                // A run that goes on in its file: browsers get the part before, too.
+                if let (Some(path), Some(at)) = (save, resumed.and_then(|r| r.append_at)) {
+                    super::file::replay(path, at, web.as_ref())?;
+                }
                 builder.set_sinks(to_file().chain([web]).collect::<Vec<_>>())
             }
             Sink::Spawn => builder.spawn(),

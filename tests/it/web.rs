@@ -226,3 +226,24 @@ fn taken_ports_missing_files_and_a_missing_viewer_are_refused_before_anything_ru
     );
     ok(&cellflip_in(&dir, &["view", "--help"]));
 }
+
+/// A run resumed from a checkpoint goes on in its file and is served whole: browsers get the
+/// steps before the checkpoint too, with the layout and static data sent once.
+#[test]
+fn a_resumed_run_is_served_from_its_start() {
+    let dir = scratch_dir("serve_web_resume");
+    let two = ["run", "dam-2d", "--method", "ccp", "--steps", "2"];
+    let saving = ["--save", "served.rrd", "--checkpoint-every", "10"];
+    ok(&cellflip_in(&dir, &[&two[..], &saving].concat()));
+    let (web, grpc) = (free_port(), free_port());
+    let (web_s, grpc_s) = (web.to_string(), grpc.to_string());
+    let resume = ["run", "--resume", "served.checkpoints", "--steps", "4"];
+    let served = ["--serve-web", &web_s, "--grpc-port", &grpc_s];
+    let mut child = start(&dir, &[&resume[..], &served].concat());
+    wait_until_serving(&mut child, &dir);
+    let streamed = dir.join("streamed.rrd");
+    save(&read_served(grpc), &streamed);
+    interrupt(child);
+    assert_same_recording(&streamed, &dir.join("served.rrd"));
+    assert_same_recording(&streamed, &saved_run(&dir));
+}
