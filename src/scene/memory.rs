@@ -1,6 +1,7 @@
 //! Runs that cannot fit are refused up front: a run's peak memory, estimated from its cell and
-//! particle counts with its method's measured [`Footprint`], against the memory this machine
-//! has available (Linux `MemAvailable`).
+//! particle counts with its method's measured [`Footprint`], against the smallest limit on the
+//! process's memory ([`super::limits`]: the machine's `MemAvailable`, its cgroup's limit, its
+//! own `ulimit -v` and `-d`).
 //!
 //! The estimate is `BASE + per_cell * cells + per_fluid_cell * fluid cells + per_particle *
 //! particles held (+ a large problem's surcharge, + the spreading of a band beyond its seeded
@@ -125,8 +126,10 @@ impl Scene {
         }
     }
 
-    /// Fails, naming the key that makes the run large, when the estimate exceeds the memory
-    /// available now; passes where that is unknown (no `/proc/meminfo`). Gives the estimate.
+    /// Fails, naming the key that makes the run large and the limit it exceeds, when the
+    /// estimate exceeds the memory left under the smallest limit on this process (the
+    /// machine's, its cgroup's, its own: [`super::limits`]); passes where none can be read.
+    /// Gives the estimate.
     pub fn ensure_fits_in_memory(&self, recorded: bool) -> Result<MemoryEstimate> {
         let mut estimates = ensure_fit(&[self], recorded)?;
         Ok(estimates.remove(0))
@@ -144,7 +147,7 @@ pub fn ensure_fit(scenes: &[&Scene], recorded: bool) -> Result<Vec<MemoryEstimat
         scenes.iter().map(|s| s.memory_estimate(recorded)).collect();
     let sum = |f: fn(&MemoryEstimate) -> f64| estimates.iter().map(f).sum::<f64>();
     let bytes = process_bytes(recorded) + sum(MemoryEstimate::run_bytes);
-    let Some(available) = available_bytes().filter(|&a| bytes > a) else {
+    let Some(limit) = super::limits::smallest().filter(|l| bytes > l.bytes) else {
         return Ok(estimates);
     };
     let key = match sum(|e| e.particle_bytes + e.recording_bytes) > sum(|e| e.cell_bytes) {
@@ -158,7 +161,7 @@ pub fn ensure_fit(scenes: &[&Scene], recorded: bool) -> Result<Vec<MemoryEstimat
     };
     bail!(
         "{}: key '{key}': {runs} about {:.1} GiB ({} cells, about {:.3e} particles{}), \
-         more than the {:.1} GiB this machine has available",
+         more than the {:.1} GiB left under {}",
         first.source,
         gib(bytes),
         estimates[0].cells,
@@ -167,13 +170,9 @@ pub fn ensure_fit(scenes: &[&Scene], recorded: bool) -> Result<Vec<MemoryEstimat
             1 => "",
             _ => " each",
         },
-        gib(available)
+        gib(limit.bytes),
+        limit.source
     )
-}
-
-/// `MemAvailable` from `/proc/meminfo`, bytes.
-fn available_bytes() -> Option<f64> {
-    proc_kib("/proc/meminfo", "MemAvailable:").map(|kib| kib * 1024.0)
 }
 
 /// Peak resident memory of this process so far (Linux `VmHWM`), in MiB.
@@ -183,9 +182,7 @@ pub fn peak_memory_mib() -> Option<f64> {
 
 /// The figure in KiB on the line starting with `key` of the `/proc` file `path`.
 fn proc_kib(path: &str, key: &str) -> Option<f64> {
-    let text = std::fs::read_to_string(path).ok()?;
-    let line = text.lines().find(|l| l.starts_with(key))?;
-    line.split_whitespace().nth(1)?.parse().ok()
+    super::limits::kib_field(&std::fs::read_to_string(path).ok()?, key)
 }
 
 /// The liquid a scene seeds, counted in cells: all of them, those whose particles the method

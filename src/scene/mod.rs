@@ -5,6 +5,7 @@
 //! [`SceneError`] that names the file, the key and the reason.
 
 mod check;
+mod limits;
 mod memory;
 
 pub use check::{ErrorKind, SceneError};

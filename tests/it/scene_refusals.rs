@@ -378,3 +378,31 @@ fn the_memory_estimate_counts_the_particles_a_band_holds() {
     assert!(e.held < e.particles, "{e:?}");
     assert_eq!(e.held_most, e.particles, "{e:?}");
 }
+
+/// A run that exceeds the process's own memory limits (`ulimit -v`, `ulimit -d`, as a batch
+/// job may have) is refused up front, naming the limit, instead of aborting midway on a failed
+/// allocation: the check takes the smallest of the machine's, the cgroup's and these.
+#[test]
+fn a_run_larger_than_the_process_limits_is_refused_naming_the_limit() {
+    let dir = scratch_dir("rlimit");
+    for (limit, named) in [("-v 2000000", "ulimit -v"), ("-d 1000000", "ulimit -d")] {
+        let script = format!(
+            "ulimit {limit}; exec {} run dam-3d --res 250 --steps 1 -q",
+            env!("CARGO_BIN_EXE_cellflip")
+        );
+        let out = std::process::Command::new("bash")
+            .args(["-c", &script])
+            .current_dir(&*dir)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{stderr}");
+        assert!(stderr.contains("the run needs about"), "{stderr}");
+        assert!(stderr.contains("left under the process's"), "{stderr}");
+        assert!(stderr.contains(named), "{stderr}");
+        assert!(
+            !dir.join("recordings/dam-3d.rrd").exists(),
+            "nothing written"
+        );
+    }
+}
