@@ -254,6 +254,21 @@ pub struct ReportArgs {
     /// if interrupted, the runs done go to --out and the docs are left as they were
     #[arg(long, conflicts_with_all = ["scenes", "methods", "res", "seeds", "duration", "stability", "no_stability"])]
     pub docs: bool,
+    /// Print the matrix's jobs, one line each (id, scene, method, cells, particles, seed,
+    /// memory estimate, estimated CPU-seconds), and their totals; nothing is run. The lines of
+    /// the jobs are those not starting with '#' (docs/cluster.md)
+    #[arg(long, conflicts_with_all = ["job", "merge"])]
+    pub plan: bool,
+    /// Run only these jobs of the matrix (ids from --plan), comma-separated, each kept under
+    /// --out: a job whose result is there is skipped, one stopped midway goes on from its
+    /// checkpoint; no report is written (--merge does)
+    #[arg(long, value_name = "ID", value_delimiter = ',', conflicts_with_all = ["merge", "docs"])]
+    pub job: Vec<String>,
+    /// Build the report (report.md, report.csv, plots, report.rrd, written into DIR; with --docs
+    /// the manual's pages) from the jobs' results kept in DIR, with the same matrix options;
+    /// nothing is run, and jobs without a result are listed as missing
+    #[arg(long, value_name = "DIR", conflicts_with = "out")]
+    pub merge: Option<PathBuf>,
     /// No progress bar and no closing line
     #[arg(long, short)]
     pub quiet: bool,

@@ -43,6 +43,7 @@ mod seam;
 pub use seam::{
     FluidMethod, Footprint, Holds, MethodInfo, MethodOption, MethodRecording, MethodReport,
     MethodSummary, MethodType, NoReport, NoSummary, SettingContext, SettingError, StartPeak,
+    StepCost,
 };
 
 /// Registers the methods (each module declared above, where `cargo fmt` sees it): makes
@@ -78,6 +79,13 @@ macro_rules! methods {
             pub fn footprint(&self, dim: usize) -> Footprint {
                 match self.kind {
                     $(MethodKind::$ty => $module::$ty::footprint(&self.$module, dim),)*
+                }
+            }
+
+            /// The wall time per step of the method to run ([`MethodType::step_cost`]).
+            pub fn step_cost(&self, dim: usize) -> StepCost {
+                match self.kind {
+                    $(MethodKind::$ty => $module::$ty::step_cost(&self.$module, dim),)*
                 }
             }
 

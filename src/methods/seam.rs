@@ -231,6 +231,33 @@ impl Footprint {
 }
 
 /// The figure for `dim` dimensions of measured `[2D, 3D]` ones.
+/// A method's wall time per step on the machine its fit was measured on (2 cores), the cost
+/// model of `cellflip report --plan` (docs/cluster.md, "The cost model"): nanoseconds per
+/// particle held and per grid cell, fitted to the median step times of the report's default
+/// matrix.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepCost {
+    pub ns_per_particle: f64,
+    pub ns_per_cell: f64,
+}
+
+impl StepCost {
+    /// The cost in `dim` dimensions from the fitted `[2D, 3D]` pairs of nanoseconds per
+    /// particle and per cell.
+    pub fn of(dim: usize, fitted: [(f64, f64); 2]) -> Self {
+        let (ns_per_particle, ns_per_cell) = in_dim(dim, fitted);
+        Self {
+            ns_per_particle,
+            ns_per_cell,
+        }
+    }
+
+    /// Seconds per step with `particles` held on `cells` cells.
+    pub fn step_secs(&self, particles: f64, cells: f64) -> f64 {
+        (self.ns_per_particle * particles + self.ns_per_cell * cells) * 1e-9
+    }
+}
+
 fn in_dim<T: Copy>(dim: usize, measured: [T; 2]) -> T {
     measured[dim.clamp(2, 3) - 2]
 }
@@ -271,6 +298,8 @@ pub trait MethodType {
     /// Its peak memory over a run in `dim` dimensions with these settings (the particles of its
     /// band, if it holds one, are counted up front from the seeded liquid).
     fn footprint(settings: &Self::Settings, dim: usize) -> Footprint;
+    /// Its wall time per step in `dim` dimensions, for the plan of a sweep.
+    fn step_cost(settings: &Self::Settings, dim: usize) -> StepCost;
 }
 
 /// One fluid method's step: the places where it departs from plain FLIP. Every hook has

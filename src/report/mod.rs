@@ -14,6 +14,7 @@ mod measured;
 mod output;
 pub mod plots;
 pub mod saved;
+pub mod sweep;
 
 use crate::cli::ReportArgs;
 use crate::methods::MethodKind;
@@ -204,10 +205,22 @@ pub fn load(spec: &RunSpec) -> Result<Scene> {
     Ok(scene)
 }
 
-/// `cellflip report`.
+/// `cellflip report`: the plan (`--plan`), some jobs (`--job`), the merge of their results
+/// (`--merge`), or all three in one process.
 pub fn report(args: &ReportArgs) -> Result<()> {
     let specs = matrix(args)?;
+    if args.plan {
+        sweep::print_plan(&sweep::plan(&specs)?);
+        return Ok(());
+    }
+    if let Some(dir) = &args.merge {
+        return merge(args, &specs, dir);
+    }
     check_loads(&specs)?;
+    let jobs = match args.job.is_empty() {
+        true => specs.iter().collect(),
+        false => sweep::select(&specs, &args.job)?,
+    };
     // When and at which commit the binary ran, read before the matrix: the checkout may move on
     // during a run of a quarter of an hour.
     let header = docs::provenance(&command());
@@ -219,40 +232,73 @@ pub fn report(args: &ReportArgs) -> Result<()> {
         .with_context(|| format!("cannot create the output folder '{}'", args.out.display()))?;
     crate::interrupt::install()?;
     let stop = || crate::interrupt::signal().is_some();
-    let results = run_all(&specs, args.quiet, &stop, &args.out);
+    run_all(&jobs, args.quiet, &stop, &args.out);
     let interrupted = stop();
-    match &docs {
+    if args.job.is_empty() {
         // An interrupted matrix would leave the manual with half its runs: keep the pages.
-        Some(_) if interrupted => write_all(&args.out, &specs, &results, &header)?,
-        Some(target) => write_docs(target, &specs, &results, &header)?,
-        None => write_all(&args.out, &specs, &results, &header)?,
+        let to_docs = docs.filter(|_| !interrupted);
+        write(args, &specs, &args.out, &header, to_docs.as_ref())?;
+    }
+    if interrupted {
+        anyhow::bail!(
+            "stopped by {}; the runs that ended are kept in '{}'",
+            crate::interrupt::name(crate::interrupt::signal().unwrap_or(0)),
+            args.out.display()
+        );
+    }
+    Ok(())
+}
+
+/// `--merge DIR`: the report (with `--docs`, the manual's pages) from the results kept in
+/// `dir`, nothing run.
+fn merge(args: &ReportArgs, specs: &[RunSpec], dir: &Path) -> Result<()> {
+    let header = docs::provenance(&command());
+    let docs = match args.docs {
+        true => Some(docs::DocsTarget::at(Path::new("."))?),
+        false => None,
+    };
+    write(args, specs, dir, &header, docs.as_ref())
+}
+
+/// Writes the report of the results kept in `dir` there (or the manual's pages), lists the
+/// jobs without a result and says where it all went.
+fn write(
+    args: &ReportArgs,
+    specs: &[RunSpec],
+    dir: &Path,
+    header: &str,
+    docs: Option<&docs::DocsTarget>,
+) -> Result<()> {
+    let (results, missing) = sweep::gather(dir, specs)?;
+    for (spec, why) in &missing {
+        eprintln!(
+            "missing: {} {} {}: {why}",
+            spec.label,
+            spec.method.name(),
+            spec.res.map_or("(scene's)".into(), |r| r.to_string())
+        );
+    }
+    match docs {
+        Some(target) => write_docs(target, specs, &results, header)?,
+        None => write_all(dir, specs, &results, header)?,
     }
     if !args.quiet {
-        let failed = results
-            .iter()
-            .filter(|m| !m.ok() && m.status != "interrupted");
+        let failed = results.iter().filter(|m| !m.ok());
         crate::outln!(
-            "report: {} of {} runs ({} failed) written to {}",
+            "report: {} of {} runs ({} failed, {} missing) written to {}",
             results.len(),
             specs.len(),
             failed.count(),
-            match &docs {
-                Some(t) if !interrupted => format!(
+            missing.len(),
+            match docs {
+                Some(t) => format!(
                     "{}, {} and {}",
                     t.page.display(),
                     t.plots.display(),
                     t.readme.display()
                 ),
-                _ => args.out.display().to_string(),
+                None => dir.display().to_string(),
             }
-        );
-    }
-    if interrupted {
-        anyhow::bail!(
-            "stopped by {}; wrote the {} runs done to '{}'",
-            crate::interrupt::name(crate::interrupt::signal().unwrap_or(0)),
-            results.len(),
-            args.out.display()
         );
     }
     Ok(())
@@ -281,14 +327,10 @@ fn check_loads(specs: &[RunSpec]) -> Result<()> {
     }
 }
 
-/// Runs the matrix in order with a progress bar, until done or stopped.
-pub fn run_all(
-    specs: &[RunSpec],
-    quiet: bool,
-    stop: &dyn Fn() -> bool,
-    out: &Path,
-) -> Vec<Measured> {
-    let bar = ProgressBar::with_draw_target(Some(specs.len() as u64), ProgressDrawTarget::stderr());
+/// Runs `jobs` in order with a progress bar, until done or stopped, each kept under `out`: a
+/// job whose result is there is skipped, one stopped midway goes on from its checkpoint.
+pub fn run_all(jobs: &[&RunSpec], quiet: bool, stop: &dyn Fn() -> bool, out: &Path) {
+    let bar = ProgressBar::with_draw_target(Some(jobs.len() as u64), ProgressDrawTarget::stderr());
     if quiet {
         bar.set_draw_target(ProgressDrawTarget::hidden());
     }
@@ -297,8 +339,7 @@ pub fn run_all(
     )
     .expect("a valid progress template");
     bar.set_style(style);
-    let mut results = vec![];
-    for spec in specs {
+    for &spec in jobs {
         if stop() {
             break;
         }
@@ -309,10 +350,13 @@ pub fn run_all(
             spec.res.map_or(String::new(), |r| r.to_string())
         ));
         let files = saved::RunFiles::of(out, spec);
-        if let Some(kept) = saved::load_result(&files.result, spec) {
-            results.push(kept);
-            bar.inc(1);
-            continue;
+        match saved::load_result(&files.result, spec) {
+            Ok(Some(_)) => {
+                bar.inc(1);
+                continue;
+            }
+            Ok(None) => {}
+            Err(e) => bar.suspend(|| eprintln!("warning: {e}; running it again")),
         }
         let resumed = measure::resumable(&files.checkpoints);
         if let (Some(c), false) = (&resumed, quiet) {
@@ -324,11 +368,17 @@ pub fn run_all(
                 )
             });
         }
-        results.push(measure::run(spec, stop, Some(&files), resumed));
+        let m = measure::run(spec, stop, Some(&files), resumed);
+        // A run that could not start is a result too (a row that says why); one a signal
+        // stopped is not, and goes on from its checkpoint next time.
+        if m.status != "interrupted" && !files.result.exists() {
+            if let Err(e) = saved::save_result(&files.result, &m) {
+                bar.suspend(|| eprintln!("warning: {e:#}"));
+            }
+        }
         bar.inc(1);
     }
     bar.finish_and_clear();
-    results
 }
 
 /// Writes every output, naming the file that could not be written.

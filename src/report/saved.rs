@@ -46,7 +46,7 @@ impl RunFiles {
 /// A name of the run as the matrix gives it: its label, method, resolution and seed, readable,
 /// and a digest of all it is run with (scene text, duration, budget), so that another matrix
 /// in the same `--out` never takes its result.
-fn id(spec: &RunSpec) -> String {
+pub fn id(spec: &RunSpec) -> String {
     let label = crate::record::path_part(&spec.label);
     let or_default = |x: Option<String>| x.unwrap_or_else(|| "default".into());
     let (res, seed) = (
@@ -81,10 +81,12 @@ pub fn save_result(path: &Path, m: &Measured) -> Result<()> {
         .map_err(|e| anyhow!("cannot write '{}': {e}", path.display()))
 }
 
-/// A run kept by [`save_result`], for `spec`; `None` when there is none, or it cannot be read
-/// (then it is run again, with a warning).
-pub fn load_result(path: &Path, spec: &RunSpec) -> Option<Measured> {
-    let bytes = std::fs::read(path).ok()?;
+/// A run kept by [`save_result`], for `spec`: `None` when there is none, an error (why) when
+/// the file is there but cannot be taken (damaged, or kept by another build).
+pub fn load_result(path: &Path, spec: &RunSpec) -> Result<Option<Measured>, String> {
+    let Ok(bytes) = std::fs::read(path) else {
+        return Ok(None);
+    };
     let read = || -> Result<Measured, SnapshotError> {
         let r = Reader::from_bytes(bytes)?;
         let program = r.meta("program")?;
@@ -114,8 +116,8 @@ pub fn load_result(path: &Path, spec: &RunSpec) -> Option<Measured> {
         })
     };
     read()
-        .inspect_err(|e| eprintln!("warning: '{}': {e}; running it again", path.display()))
-        .ok()
+        .map(Some)
+        .map_err(|e| format!("'{}': {e}", path.display()))
 }
 
 fn pairs(w: &mut Writer<'_>, name: &str, series: &[(f64, f64)]) {

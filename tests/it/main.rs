@@ -24,5 +24,6 @@ mod scene_refusals;
 mod scenes;
 mod solids;
 mod surface;
+mod sweep;
 mod validation;
 mod web;

@@ -20,7 +20,7 @@ pub use settings::{BandMode, CcpArgs, CcpSettings, Directions, Solver};
 
 use super::seam::{
     FluidMethod, Footprint, MethodInfo, MethodOption, MethodSummary, MethodType, SettingContext,
-    SettingError,
+    SettingError, StepCost,
 };
 use crate::draw::{LayerView, Needs};
 use crate::sim::solids::ObstacleMode;
@@ -96,5 +96,11 @@ impl MethodType for Ccp {
                 ],
             ),
         }
+    }
+
+    fn step_cost(_settings: &CcpSettings, dim: usize) -> StepCost {
+        // ns per particle held and per cell, [2D, 3D], fitted to the default matrix's whole
+        // runs (2026-11-26, `2271d263a7`, docs/results/report.csv; docs/cluster.md).
+        StepCost::of(dim, [(692.0, 331.0), (457.0, 692.0)])
     }
 }

@@ -5,6 +5,7 @@
 
 use super::seam::{
     FluidMethod, Footprint, MethodInfo, MethodRecording, MethodSummary, MethodType, NoSummary,
+    StepCost,
 };
 use crate::sim::solids::ObstacleMode;
 
@@ -36,6 +37,12 @@ impl MethodType for Flip {
     /// Measured peak memory over a run ([`Footprint`]; docs/benchmarks/memory.md).
     fn footprint(_settings: &(), dim: usize) -> Footprint {
         Footprint::of(dim, [(111.0, 115.0), (165.0, 100.0)])
+    }
+
+    fn step_cost(_settings: &(), dim: usize) -> StepCost {
+        // ns per particle held and per cell, [2D, 3D], fitted to the default matrix's whole
+        // runs (2026-11-26, `2271d263a7`, docs/results/report.csv; docs/cluster.md).
+        StepCost::of(dim, [(138.0, 158.0), (302.0, 115.0)])
     }
 }
 

@@ -66,7 +66,9 @@ pub use physics::{
     CLAMP, PUSH_MARGIN, RESAMPLE_BELOW,
 };
 
-use super::seam::{FluidMethod, Footprint, MethodInfo, MethodOption, MethodSummary, MethodType};
+use super::seam::{
+    FluidMethod, Footprint, MethodInfo, MethodOption, MethodSummary, MethodType, StepCost,
+};
 use crate::sim::solids::ObstacleMode;
 use physics::IdpSim;
 use record::{Totals, LAYER_VIEWS, PANELS};
@@ -108,5 +110,11 @@ impl MethodType for Idp {
     /// Measured peak memory over a run ([`Footprint`]; docs/benchmarks/memory.md).
     fn footprint(_settings: &IdpSettings, dim: usize) -> Footprint {
         Footprint::of(dim, [(145.0, 115.0), (195.0, 150.0)])
+    }
+
+    fn step_cost(_settings: &IdpSettings, dim: usize) -> StepCost {
+        // ns per particle held and per cell, [2D, 3D], fitted to the default matrix's whole
+        // runs (2026-11-26, `2271d263a7`, docs/results/report.csv; docs/cluster.md).
+        StepCost::of(dim, [(550.0, 105.0), (457.0, 126.0)])
     }
 }

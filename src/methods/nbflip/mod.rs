@@ -37,7 +37,7 @@ pub use physics::{combine, level, NbflipReport, Resampling};
 
 use super::seam::{
     FluidMethod, Footprint, MethodInfo, MethodOption, MethodSummary, MethodType, SettingContext,
-    SettingError,
+    SettingError, StepCost,
 };
 use crate::sim::band::{check_band_r, DEFAULT_BAND_R};
 use crate::sim::solids::ObstacleMode;
@@ -113,5 +113,11 @@ impl MethodType for Nbflip {
                 ([179.0, 255.0, 217.0, 291.0], (59.0, 57.0)),
             ],
         )
+    }
+
+    fn step_cost(_settings: &NbflipSettings, dim: usize) -> StepCost {
+        // ns per particle held and per cell, [2D, 3D], fitted to the default matrix's whole
+        // runs (2026-11-26, `2271d263a7`, docs/results/report.csv; docs/cluster.md).
+        StepCost::of(dim, [(158.0, 501.0), (1380.0, 25.0)])
     }
 }

@@ -73,7 +73,7 @@ pub use settings::{AirForm, PowerPicSettings};
 
 use super::seam::{
     FluidMethod, Footprint, MethodInfo, MethodOption, MethodSummary, MethodType, SettingContext,
-    SettingError,
+    SettingError, StepCost,
 };
 use crate::sim::solids::ObstacleMode;
 use physics::PowerPicSim;
@@ -116,5 +116,11 @@ impl MethodType for Powerpic {
     /// Measured peak memory over a run ([`Footprint`]; docs/benchmarks/memory.md).
     fn footprint(_settings: &PowerPicSettings, dim: usize) -> Footprint {
         Footprint::of(dim, [(282.0, 850.0), (700.0, 2750.0)])
+    }
+
+    fn step_cost(_settings: &PowerPicSettings, dim: usize) -> StepCost {
+        // ns per particle held and per cell, [2D, 3D], fitted to the default matrix's whole
+        // runs (2026-11-26, `2271d263a7`, docs/results/report.csv; docs/cluster.md).
+        StepCost::of(dim, [(1096.0, 871.0), (3311.0, 2188.0)])
     }
 }

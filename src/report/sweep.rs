@@ -1,0 +1,182 @@
+//! The report as a sweep of independent jobs (docs/cluster.md): the plan of the matrix's jobs
+//! with their memory and cost, the selection of jobs to run, and the merge of their results.
+//! A job is one run of the matrix, kept under `--out` as `runs/<id>.result` ([`super::saved`]);
+//! the one-process report runs every job and then merges, so both paths share this code.
+
+use super::measured::Measured;
+use super::saved::{self, RunFiles};
+use super::{load, RunSpec};
+use crate::scene::Scene;
+use anyhow::{bail, Result};
+use std::path::Path;
+
+/// Threads a job runs with on the machine the cost model was fitted on (2 cores): its
+/// CPU-seconds are its wall seconds times these.
+pub const FITTED_THREADS: f64 = 2.0;
+
+/// One job of the plan: its run and what it is estimated to need.
+#[derive(Clone, Debug)]
+pub struct Job<'a> {
+    pub id: String,
+    pub spec: &'a RunSpec,
+    pub cells: usize,
+    /// Particles the method holds (the band's, for a band method).
+    pub particles: f64,
+    pub seed: u64,
+    /// The up-front memory estimate the run is admitted on, MiB.
+    pub mib: f64,
+    /// Simulated seconds, and the estimated steps and CPU-seconds ([`cost`]).
+    pub sim_secs: f64,
+    pub steps: f64,
+    pub cpu_secs: f64,
+}
+
+/// The jobs of the matrix, each scene loaded for its size, memory and cost.
+pub fn plan(specs: &[RunSpec]) -> Result<Vec<Job<'_>>> {
+    specs
+        .iter()
+        .map(|spec| {
+            let scene = load(spec)?;
+            let estimate = scene.memory_estimate(false);
+            let (steps, step_secs) = cost(&scene, estimate.held_most, estimate.cells as f64);
+            Ok(Job {
+                id: saved::id(spec),
+                spec,
+                cells: estimate.cells,
+                particles: estimate.held_most,
+                seed: scene.file.simulation.seed,
+                mib: estimate.mib(),
+                sim_secs: scene.duration_secs(),
+                steps,
+                cpu_secs: steps * step_secs * FITTED_THREADS,
+            })
+        })
+        .collect()
+}
+
+/// The cost model (docs/cluster.md, "The cost model"): the steps the run takes and the wall
+/// seconds of one, with `particles` held on `cells` cells.
+///
+/// A step is as long as the smaller of `max_dt` and the time to cross `cfl` cells at the
+/// faster of an emitter's speed and that of a fall through half the tank's height, `sqrt(g H)`
+/// (the dam's front runs at about that); its wall time is the method's
+/// [`crate::methods::StepCost`].
+pub fn cost(scene: &Scene, particles: f64, cells: f64) -> (f64, f64) {
+    let f = &scene.file;
+    let longest = f.domain.size.iter().copied().fold(0.0, f64::max);
+    let h = longest / f.domain.cells as f64;
+    let norm = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
+    let g = (f.simulation.gravity.as_deref()).map_or(9.81, norm);
+    let height = f.domain.size.get(1).copied().unwrap_or(longest);
+    let poured = f
+        .emitter
+        .iter()
+        .map(|e| norm(&e.velocity))
+        .fold(0.0, f64::max);
+    let speed = (g * height).sqrt().max(poured);
+    let dt = f
+        .simulation
+        .max_dt
+        .min(f.simulation.cfl * h / speed.max(1e-9));
+    let steps = (scene.duration_secs() / dt).ceil();
+    let step = scene.method.step_cost(scene.dim());
+    (steps, step.step_secs(particles, cells))
+}
+
+/// Prints the plan: a line per job, then the totals, every line but the jobs' starting with
+/// `#` (so that `grep -v '^#'` leaves the jobs, their id first).
+pub fn print_plan(jobs: &[Job<'_>]) {
+    crate::outln!(
+        "# {:<44} {:<24} {:<8} {:>10} {:>11} {:>5} {:>9} {:>7} {:>8} {:>10}",
+        "id",
+        "scene",
+        "method",
+        "cells",
+        "particles",
+        "seed",
+        "mem_mib",
+        "sim_s",
+        "steps",
+        "cpu_s"
+    );
+    for j in jobs {
+        crate::outln!(
+            "{:<46} {:<24} {:<8} {:>10} {:>11.0} {:>5} {:>9.0} {:>7} {:>8.0} {:>10.2}",
+            j.id,
+            j.spec.label,
+            j.spec.method.name(),
+            j.cells,
+            j.particles,
+            j.seed,
+            j.mib,
+            j.sim_secs,
+            j.steps,
+            j.cpu_secs
+        );
+    }
+    let total: f64 = jobs.iter().map(|j| j.cpu_secs).sum();
+    if let Some(big) = jobs.iter().max_by(|a, b| a.mib.total_cmp(&b.mib)) {
+        crate::outln!(
+            "# {} jobs, about {:.2} CPU-hours in all; the largest memory estimate {:.0} MiB ({})",
+            jobs.len(),
+            total / 3600.0,
+            big.mib,
+            big.id
+        );
+    }
+    crate::outln!(
+        "# cpu_s: estimated CPU-seconds ({FITTED_THREADS} threads x wall seconds on the machine \
+         the model was fitted on; docs/cluster.md)"
+    );
+}
+
+/// The specs `ids` name, in the plan's order; an id not in the plan is an error that says
+/// how to list them.
+pub fn select<'a>(specs: &'a [RunSpec], ids: &[String]) -> Result<Vec<&'a RunSpec>> {
+    let known: Vec<String> = specs.iter().map(saved::id).collect();
+    if let Some(bad) = ids.iter().find(|id| !known.contains(id)) {
+        bail!(
+            "--job {bad}: no such job in this matrix ({} jobs; `cellflip report` with the same \
+             matrix options and --plan lists their ids)",
+            known.len()
+        );
+    }
+    Ok(specs
+        .iter()
+        .zip(&known)
+        .filter(|(_, id)| ids.contains(id))
+        .map(|(s, _)| s)
+        .collect())
+}
+
+/// A job without a result, and why (not run, or its file cannot be taken).
+pub type Missing<'a> = (&'a RunSpec, String);
+
+/// The results of the matrix's jobs kept in `dir`, in the plan's order, and the jobs that
+/// have none. Fails when there is none at all.
+pub fn gather<'a>(dir: &Path, specs: &'a [RunSpec]) -> Result<(Vec<Measured>, Vec<Missing<'a>>)> {
+    let (mut results, mut missing) = (vec![], vec![]);
+    for spec in specs {
+        let files = RunFiles::of(dir, spec);
+        match saved::load_result(&files.result, spec) {
+            Ok(Some(m)) => results.push(m),
+            Ok(None) => missing.push((spec, "not run".to_string())),
+            Err(e) => missing.push((spec, e)),
+        }
+    }
+    if results.is_empty() {
+        let kept = std::fs::read_dir(dir.join("runs")).map_or(0, |d| {
+            d.flatten()
+                .filter(|e| e.path().extension().is_some_and(|x| x == "result"))
+                .count()
+        });
+        bail!(
+            "--merge {}: no result of this matrix's {} jobs in '{}' ({kept} results there, of \
+             another matrix or another build of cellflip)",
+            dir.display(),
+            specs.len(),
+            dir.join("runs").display()
+        );
+    }
+    Ok((results, missing))
+}

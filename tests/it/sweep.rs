@@ -1,0 +1,193 @@
+//! `cellflip report` as a sweep (docs/cluster.md): the plan, jobs run one by one in separate
+//! processes and in reverse order, and their merge, equal to the one-process report in every
+//! column but the timings; the cost model against the measured default matrix; bad input.
+
+use crate::common::{ok, scratch_dir};
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::process::{Command, Output};
+
+/// The matrix every test here uses: two scenes, two methods, two sizes, short runs.
+const MATRIX: [&str; 10] = [
+    "report",
+    "--scenes",
+    "dam-2d,hydrostatic-2d",
+    "--methods",
+    "flip,ccp",
+    "--res",
+    "24,32",
+    "--duration",
+    "0.1",
+    "--no-stability",
+];
+
+fn cellflip(dir: &Path, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_cellflip"))
+        .args(MATRIX)
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .unwrap()
+}
+
+/// The job ids of the plan, in its order.
+fn plan_ids(dir: &Path) -> Vec<String> {
+    let out = cellflip(dir, &["--plan"]);
+    ok(&out);
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .map(|l| l.split_whitespace().next().unwrap().to_string())
+        .collect()
+}
+
+/// report.csv's rows, keyed by scene, method and resolution, without the timing columns.
+fn untimed_rows(dir: &Path) -> BTreeMap<String, BTreeMap<String, String>> {
+    let text = std::fs::read_to_string(dir.join("report.csv")).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<String> = lines.next().unwrap().split(',').map(String::from).collect();
+    let timed = |c: &str| {
+        c.starts_with("ms_") || c.starts_with("share_") || c == "peak_mib" || c.contains("_ms_")
+    };
+    lines
+        .map(|l| {
+            let row: BTreeMap<String, String> = header
+                .iter()
+                .cloned()
+                .zip(split_quoted(l).into_iter().map(String::from))
+                .filter(|(c, _)| !timed(c))
+                .collect();
+            (
+                format!("{} {} {}", row["scene"], row["method"], row["res"]),
+                row,
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn jobs_run_apart_in_reverse_order_merge_into_the_one_process_report() {
+    let dir = scratch_dir("sweep");
+    let ids = plan_ids(&dir);
+    assert_eq!(ids.len(), 8, "2 scenes x 2 methods x 2 sizes: {ids:?}");
+    ok(&cellflip(&dir, &["-q", "--out", "whole"]));
+    for id in ids.iter().rev() {
+        let out = cellflip(&dir, &["-q", "--out", "apart", "--job", id]);
+        ok(&out);
+        assert!(
+            !dir.join("apart/report.csv").exists(),
+            "a job writes no report"
+        );
+    }
+    let again = cellflip(&dir, &["--out", "apart", "--job", &ids[0]]);
+    ok(&again);
+    let merged = cellflip(&dir, &["--merge", "apart"]);
+    ok(&merged);
+    let said = String::from_utf8_lossy(&merged.stdout);
+    assert!(said.contains("8 of 8 runs (0 failed, 0 missing)"), "{said}");
+    let (whole, apart) = (
+        untimed_rows(&dir.join("whole")),
+        untimed_rows(&dir.join("apart")),
+    );
+    assert_eq!(whole.len(), 8);
+    assert_eq!(whole, apart);
+    for f in ["report.md", "report.rrd", "volume-dam-2d.png"] {
+        assert!(dir.join("apart").join(f).exists(), "{f}");
+    }
+}
+
+/// A merge lists the jobs without a result and leaves out a damaged result file; a merge with
+/// none, an unknown job id, `--job` with `--merge`, and `--merge` of another matrix are refused.
+#[test]
+fn missing_damaged_and_unknown_jobs_are_named() {
+    let dir = scratch_dir("sweep_bad");
+    let ids = plan_ids(&dir);
+    let out = cellflip(&dir, &["--merge", "nowhere"]);
+    assert_eq!(out.status.code(), Some(1));
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        said.contains("--merge nowhere: no result of this matrix's 8 jobs"),
+        "{said}"
+    );
+    let out = cellflip(&dir, &["--job", "no-such-job"]);
+    assert_eq!(out.status.code(), Some(1));
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        said.contains("--job no-such-job: no such job in this matrix (8 jobs"),
+        "{said}"
+    );
+    let out = cellflip(&dir, &["--job", &ids[0], "--merge", "x"]);
+    assert_eq!(out.status.code(), Some(1), "a usage error");
+    ok(&cellflip(&dir, &["-q", "--out", "part", "--job", &ids[0]]));
+    ok(&cellflip(&dir, &["-q", "--out", "part", "--job", &ids[1]]));
+    let damaged = dir.join("part/runs").join(format!("{}.result", ids[1]));
+    let mut bytes = std::fs::read(&damaged).unwrap();
+    let mid = bytes.len() / 2;
+    bytes[mid] ^= 0xff;
+    std::fs::write(&damaged, bytes).unwrap();
+    let out = cellflip(&dir, &["--merge", "part"]);
+    ok(&out);
+    let (said, err) = (
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr),
+    );
+    assert!(said.contains("1 of 8 runs (0 failed, 7 missing)"), "{said}");
+    assert!(err.contains(&format!("{}.result", ids[1])), "{err}");
+    assert_eq!(untimed_rows(&dir.join("part")).len(), 1);
+    let other = Command::new(env!("CARGO_BIN_EXE_cellflip"))
+        .args(["report", "--scenes", "dam-2d", "--merge", "part"])
+        .current_dir(&*dir)
+        .output()
+        .unwrap();
+    assert_eq!(other.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&other.stderr).contains("of another matrix"));
+}
+
+/// The cost model's estimate of each job of the default matrix against the wall time that job
+/// took in the committed results (docs/results/report.csv): within 2x either way.
+#[test]
+fn the_cost_model_is_within_2x_of_the_default_matrix_as_measured() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let csv = std::fs::read_to_string(root.join("docs/results/report.csv")).unwrap();
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|c| *c == name).unwrap();
+    let (per_s, method) = (col("ms_per_sim_s"), col("method"));
+    use clap::Parser;
+    let cli = cellflip::cli::Cli::parse_from(["cellflip", "report", "--budget", "90"]);
+    let cellflip::cli::Command::Report(args) = cli.command else {
+        unreachable!("a report command")
+    };
+    let specs = cellflip::report::matrix(&args).unwrap();
+    let jobs = cellflip::report::sweep::plan(&specs).unwrap();
+    let rows: Vec<Vec<&str>> = lines.map(|l| split_quoted(l)).collect();
+    assert_eq!(rows.len(), jobs.len());
+    for (job, row) in jobs.iter().zip(&rows) {
+        assert_eq!(row[method], job.spec.method.name());
+        let measured = row[per_s].parse::<f64>().unwrap() / 1e3 * job.sim_secs;
+        let estimated = job.cpu_secs / cellflip::report::sweep::FITTED_THREADS;
+        let ratio = estimated / measured;
+        assert!(
+            (0.5..=2.0).contains(&ratio),
+            "{}: {estimated} s against {measured} s",
+            job.id
+        );
+    }
+}
+
+/// A CSV line's fields, commas inside double quotes kept.
+fn split_quoted(line: &str) -> Vec<&str> {
+    let (mut out, mut start, mut quoted) = (vec![], 0, false);
+    for (i, c) in line.char_indices() {
+        match c {
+            '"' => quoted = !quoted,
+            ',' if !quoted => {
+                out.push(&line[start..i]);
+                start = i + 1;
+            }
+            _ => {}
+        }
+    }
+    out.push(&line[start..]);
+    out
+}
