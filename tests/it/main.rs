@@ -22,6 +22,7 @@ mod regression;
 mod report;
 mod scene_refusals;
 mod scenes;
+mod slurm;
 mod solids;
 mod surface;
 mod sweep;

@@ -8,7 +8,7 @@ use std::path::Path;
 use std::process::{Command, Output};
 
 /// The matrix every test here uses: two scenes, two methods, two sizes, short runs.
-const MATRIX: [&str; 10] = [
+pub const MATRIX: [&str; 10] = [
     "report",
     "--scenes",
     "dam-2d,hydrostatic-2d",
@@ -42,7 +42,7 @@ fn plan_ids(dir: &Path) -> Vec<String> {
 }
 
 /// report.csv's rows, keyed by scene, method and resolution, without the timing columns.
-fn untimed_rows(dir: &Path) -> BTreeMap<String, BTreeMap<String, String>> {
+pub fn untimed_rows(dir: &Path) -> BTreeMap<String, BTreeMap<String, String>> {
     let text = std::fs::read_to_string(dir.join("report.csv")).unwrap();
     let mut lines = text.lines();
     let header: Vec<String> = lines.next().unwrap().split(',').map(String::from).collect();

@@ -1,0 +1,108 @@
+#!/usr/bin/env bash
+# `cellflip report` as a Slurm sweep (docs/cluster.md): one array task per job of the plan, with
+# --mem from the job's memory estimate and --time from its estimated cost, and a merge job that
+# runs after the arrays.
+#
+#   tools/slurm/sweep.sh --out DIR [report's matrix options...]
+#   e.g. tools/slurm/sweep.sh --out sweep --scenes dam-2d,dam-3d --res 50,100
+#
+# Prints the merge job's id last. Jobs with the same memory and time request share an array.
+# Each task runs with --signal=B:USR1@$CELLFLIP_SIGNAL_SECS --requeue: near its time limit it
+# stops its run with a checkpoint (SIGTERM to cellflip) and requeues itself, and the requeued
+# task goes on from that checkpoint; its log line says SLURM_RESTART_COUNT. A task requeued by
+# Slurm (preemption, `scontrol requeue`) gets SIGTERM and does the same.
+#
+# Environment: CELLFLIP (the binary, default `cellflip` on the PATH), CELLFLIP_CPUS (CPUs per
+# task, default 2: the cost model's threads), CELLFLIP_SIGNAL_SECS (default 120),
+# CELLFLIP_TIME_MARGIN (time limit over the estimate, default 3), SBATCH_EXTRA (more sbatch
+# options, e.g. a partition or an account).
+set -euo pipefail
+cellflip=${CELLFLIP:-cellflip}
+cpus=${CELLFLIP_CPUS:-2}
+signal_secs=${CELLFLIP_SIGNAL_SECS:-120}
+margin=${CELLFLIP_TIME_MARGIN:-3}
+
+out=
+matrix=()
+while [ $# -gt 0 ]; do
+    case "$1" in
+    --out) out=$2; shift 2 ;;
+    --out=*) out=${1#--out=}; shift ;;
+    *) matrix+=("$1"); shift ;;
+    esac
+done
+[ -n "$out" ] || { echo "usage: $0 --out DIR [report's matrix options...]" >&2; exit 2; }
+mkdir -p "$out/slurm/logs"
+out=$(cd "$out" && pwd)
+cellflip=$(command -v "$cellflip")
+
+"$cellflip" report "${matrix[@]}" --plan >"$out/slurm/plan.txt"
+
+# One task script for every array: it picks its job from its array's list of ids.
+task=$out/slurm/task.sh
+{
+    echo '#!/usr/bin/env bash'
+    printf 'cellflip=%q\nout=%q\n' "$cellflip" "$out"
+    printf 'matrix=('; printf '%q ' "${matrix[@]}"; printf ')\n'
+    cat <<'EOF'
+id=$(sed -n "${SLURM_ARRAY_TASK_ID}p" "$1")
+echo "cellflip job $id: task ${SLURM_ARRAY_JOB_ID}_${SLURM_ARRAY_TASK_ID}, SLURM_RESTART_COUNT=${SLURM_RESTART_COUNT:-0}"
+export RAYON_NUM_THREADS=${SLURM_CPUS_PER_TASK:-2}
+"$cellflip" report "${matrix[@]}" --out "$out" --job "$id" &
+pid=$!
+near_limit() {
+    echo "cellflip job $id: near the time limit: checkpoint, then requeue"
+    kill -TERM "$pid"
+    wait "$pid"
+    scontrol requeue "${SLURM_ARRAY_JOB_ID}_${SLURM_ARRAY_TASK_ID}"
+    exit 0
+}
+# Cancelled or requeued by Slurm: cellflip has its own SIGTERM (a second one would end it before
+# its checkpoint), so only wait for it.
+stopped() { wait "$pid"; exit 143; }
+trap near_limit USR1
+trap stopped TERM
+wait "$pid"
+EOF
+} >"$task"
+chmod +x "$task"
+
+# Jobs grouped by their request: memory in 256 MiB steps (the estimate and a quarter, at
+# least 512), time in minutes (the estimate times the margin and 5 minutes, a power of two).
+declare -A lists
+while read -r id rest; do
+    read -r -a f <<<"$rest"
+    n=${#f[@]}
+    mib=${f[$((n - 4))]}
+    cpu_s=${f[$((n - 1))]}
+    mem=$(awk -v m="$mib" 'BEGIN { r = int(m * 1.25 / 256 + 1) * 256; print (r < 512 ? 512 : r) }')
+    # cpu_s is wall seconds on 2 threads times 2: wall seconds on p CPUs are about cpu_s / p.
+    minutes=$(awk -v c="$cpu_s" -v k="$margin" -v p="$cpus" 'BEGIN {
+        t = c / p * k / 60 + 5; m = 8; while (m < t) m *= 2; print m }')
+    key="${mem}M-${minutes}min"
+    lists[$key]+="$id"$'\n'
+done < <(grep -v '^#' "$out/slurm/plan.txt")
+
+arrays=()
+for key in "${!lists[@]}"; do
+    ids=$out/slurm/$key.ids
+    printf '%s' "${lists[$key]}" >"$ids"
+    n=$(wc -l <"$ids")
+    mem=${key%%-*}
+    minutes=${key#*-}
+    minutes=${minutes%min}
+    # shellcheck disable=SC2086
+    jid=$(sbatch --parsable --job-name="cellflip-$key" --array="1-$n" --mem="$mem" \
+        --time="$minutes" --cpus-per-task="$cpus" --signal="B:USR1@$signal_secs" --requeue \
+        --output="$out/slurm/logs/%A_%a.out" --open-mode=append ${SBATCH_EXTRA:-} "$task" "$ids")
+    echo "array $jid: $n jobs, --mem=$mem --time=${minutes} min" >&2
+    arrays+=("$jid")
+done
+
+deps=$(IFS=:; echo "${arrays[*]}")
+# shellcheck disable=SC2086
+merge=$(sbatch --parsable --job-name=cellflip-merge --dependency="afterany:$deps" --mem=1G \
+    --time=30 --output="$out/slurm/logs/merge-%j.out" ${SBATCH_EXTRA:-} \
+    --wrap="$(printf '%q ' "$cellflip" report "${matrix[@]}" --merge "$out")")
+echo "merge job $merge runs after the arrays ($deps); the report goes to $out" >&2
+echo "$merge"
