@@ -119,7 +119,26 @@ fn a_sweep_on_slurm_merges_into_the_one_process_report() {
 #[test]
 fn a_requeued_task_goes_on_from_its_checkpoint_and_ends_as_run_straight() {
     let Some(conf) = cluster() else { return };
-    let dir = scratch_dir("slurm_requeue");
+    requeued(&conf, "slurm_requeue", &["scontrol", "requeue"]);
+}
+
+/// The same for a task near its time limit: Slurm's `--signal=B:USR1@N` (sent here at once with
+/// `scancel --signal=USR1 --batch`) makes it checkpoint and requeue itself.
+#[test]
+fn a_task_near_its_time_limit_checkpoints_requeues_itself_and_goes_on() {
+    let Some(conf) = cluster() else { return };
+    requeued(
+        &conf,
+        "slurm_near_limit",
+        &["scancel", "--signal=USR1", "--batch"],
+    );
+}
+
+/// A one-job sweep whose task is stopped by `stop` (a Slurm command, the task's id appended)
+/// while it runs: it must restart, resume and end as the job run straight.
+fn requeued(conf: &str, test: &str, stop: &[&str]) {
+    let conf = conf.to_string();
+    let dir = scratch_dir(test);
     let matrix = [
         "--scenes",
         "dam-2d",
@@ -128,7 +147,7 @@ fn a_requeued_task_goes_on_from_its_checkpoint_and_ends_as_run_straight() {
         "--res",
         "100",
         "--duration",
-        "6",
+        "10",
         "--no-stability",
     ];
     let merge = sweep(&conf, &dir, &matrix);
@@ -159,7 +178,7 @@ fn a_requeued_task_goes_on_from_its_checkpoint_and_ends_as_run_straight() {
         std::thread::sleep(Duration::from_millis(100));
     }
     std::thread::sleep(Duration::from_secs(3));
-    slurm(&conf, "scontrol", &["requeue", &task]);
+    slurm(&conf, stop[0], &[&stop[1..], &[task.as_str()]].concat());
     wait_for(&conf, &task, &["PENDING"], 60);
     // Slurm holds a requeued job back two minutes; the test does not wait for that.
     let _ = Command::new("scontrol")
