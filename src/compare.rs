@@ -172,7 +172,7 @@ fn compare_dim<const D: usize>(
     // Runs that stopped early are part of the comparison: it is served all the same.
     let summary = summarise(entries, &runners, args.quiet);
     if let Some(s) = served {
-        s.hold(|| interrupt::signal().is_some());
+        s.hold_until_signal();
     }
     summary
 }

@@ -17,7 +17,7 @@ pub fn view(args: &ViewArgs) -> Result<()> {
     };
     interrupt::install()?;
     let served = record::serve_files(&serve, &args.recordings)?;
-    served.hold(|| interrupt::signal().is_some());
+    served.hold_until_signal();
     Ok(())
 }
 

@@ -230,11 +230,9 @@ impl Footprint {
     }
 }
 
-/// The figure for `dim` dimensions of measured `[2D, 3D]` ones.
 /// A method's wall time per step on the machine its fit was measured on (2 cores), the cost
 /// model of `cellflip report --plan` (docs/cluster.md, "The cost model"): nanoseconds per
-/// particle held and per grid cell, fitted to the median step times of the report's default
-/// matrix.
+/// particle held and per grid cell, fitted to the whole runs of the report's default matrix.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StepCost {
     pub ns_per_particle: f64,
@@ -258,6 +256,7 @@ impl StepCost {
     }
 }
 
+/// The figure for `dim` dimensions of measured `[2D, 3D]` ones.
 fn in_dim<T: Copy>(dim: usize, measured: [T; 2]) -> T {
     measured[dim.clamp(2, 3) - 2]
 }

@@ -234,7 +234,6 @@ fn os_error(e: EncodeError) -> String {
     }
 }
 
-/// `dir/.NAME.partial` for `dir/NAME`.
 /// Sends the messages in the first `at` bytes of the recording at `path` to `sink`, in order:
 /// what a checkpoint noted of a recording to go on with (what lies after is left out).
 pub fn replay(path: &Path, at: u64, sink: &dyn LogSink) -> Result<()> {
@@ -258,6 +257,7 @@ pub fn replay(path: &Path, at: u64, sink: &dyn LogSink) -> Result<()> {
     Ok(())
 }
 
+/// `dir/.NAME.partial` for `dir/NAME`.
 fn partial_path(path: &Path) -> PathBuf {
     let name = path
         .file_name()

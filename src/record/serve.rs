@@ -3,7 +3,7 @@
 //!
 //! The gRPC server (rerun's message proxy) keeps what was logged, up to its memory limit, so a
 //! browser that opens the page late still gets the whole run; past the limit it drops the
-//! oldest non-static data. Serving goes on after the run until Ctrl-C ([`Served::hold`]).
+//! oldest non-static data. Serving goes on after the run until Ctrl-C ([`Served::hold_until_signal`]).
 
 use anyhow::{anyhow, bail, Result};
 use rerun::sink::LogSink;
@@ -126,9 +126,10 @@ impl Served {
         }
     }
 
-    /// Serves until `stop` says so (a signal), polling it ten times a second; the servers
-    /// close when this returns.
-    pub fn hold(self, stop: impl Fn() -> bool) {
+    /// Serves until a signal stops the process (Ctrl-C: [`crate::interrupt`]), polling ten
+    /// times a second; the servers close when this returns.
+    pub fn hold_until_signal(self) {
+        let stop = || crate::interrupt::signal().is_some();
         if !stop() {
             eprintln!(
                 "still serving at {} so that late browsers see the whole recording; Ctrl-C ends it",

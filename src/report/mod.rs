@@ -188,8 +188,17 @@ pub fn matrix(args: &ReportArgs) -> Result<Vec<RunSpec>> {
     Ok(out)
 }
 
-/// Loads a run's scene with its overrides.
+/// Loads a run's scene with its overrides and checks that it fits in the memory this process
+/// may take.
 pub fn load(spec: &RunSpec) -> Result<Scene> {
+    let scene = scene_of(spec)?;
+    scene.ensure_fits_in_memory(false)?;
+    Ok(scene)
+}
+
+/// A run's scene with its overrides, whatever memory this machine has (the plan of a sweep
+/// lists jobs for larger ones).
+pub fn scene_of(spec: &RunSpec) -> Result<Scene> {
     let o = Overrides {
         method: Some(spec.method),
         cells: spec.res,
@@ -197,12 +206,10 @@ pub fn load(spec: &RunSpec) -> Result<Scene> {
         duration: spec.duration,
         ..Default::default()
     };
-    let scene = match &spec.source {
+    match &spec.source {
         Source::Named(name) => Scene::load(name, &o),
         Source::Text(text) => Scene::parse(&format!("scene variant '{}'", spec.label), text, &o),
-    }?;
-    scene.ensure_fits_in_memory(false)?;
-    Ok(scene)
+    }
 }
 
 /// `cellflip report`: the plan (`--plan`), some jobs (`--job`), the merge of their results
@@ -216,18 +223,16 @@ pub fn report(args: &ReportArgs) -> Result<()> {
     if let Some(dir) = &args.merge {
         return merge(args, &specs, dir);
     }
-    check_loads(&specs)?;
+    // Only the jobs this process runs must fit here: a sweep's others may be a cluster's.
     let jobs = match args.job.is_empty() {
         true => specs.iter().collect(),
         false => sweep::select(&specs, &args.job)?,
     };
+    check_loads(&jobs)?;
     // When and at which commit the binary ran, read before the matrix: the checkout may move on
     // during a run of a quarter of an hour.
     let header = docs::provenance(&command());
-    let docs = match args.docs {
-        true => Some(docs::DocsTarget::at(Path::new("."))?),
-        false => None,
-    };
+    let docs = docs_target(args)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create the output folder '{}'", args.out.display()))?;
     crate::interrupt::install()?;
@@ -253,11 +258,15 @@ pub fn report(args: &ReportArgs) -> Result<()> {
 /// `dir`, nothing run.
 fn merge(args: &ReportArgs, specs: &[RunSpec], dir: &Path) -> Result<()> {
     let header = docs::provenance(&command());
-    let docs = match args.docs {
-        true => Some(docs::DocsTarget::at(Path::new("."))?),
-        false => None,
-    };
-    write(args, specs, dir, &header, docs.as_ref())
+    write(args, specs, dir, &header, docs_target(args)?.as_ref())
+}
+
+/// With `--docs`, the manual's pages in the folder the command runs from (checked first).
+fn docs_target(args: &ReportArgs) -> Result<Option<docs::DocsTarget>> {
+    match args.docs {
+        true => docs::DocsTarget::at(Path::new(".")).map(Some),
+        false => Ok(None),
+    }
 }
 
 /// Writes the report of the results kept in `dir` there (or the manual's pages), lists the
@@ -306,7 +315,7 @@ fn write(
 
 /// Every run's scene loads: an unknown scene, an unreadable or malformed file and an impossible
 /// resolution stop the report before any run, with nothing written (each reason once).
-fn check_loads(specs: &[RunSpec]) -> Result<()> {
+fn check_loads(specs: &[&RunSpec]) -> Result<()> {
     let mut reasons: Vec<String> = vec![];
     for spec in specs {
         if let Err(e) = load(spec) {

@@ -5,7 +5,7 @@
 
 use super::measured::Measured;
 use super::saved::{self, RunFiles};
-use super::{load, RunSpec};
+use super::{scene_of, RunSpec};
 use crate::scene::Scene;
 use anyhow::{bail, Result};
 use std::path::Path;
@@ -31,12 +31,13 @@ pub struct Job<'a> {
     pub cpu_secs: f64,
 }
 
-/// The jobs of the matrix, each scene loaded for its size, memory and cost.
+/// The jobs of the matrix, each scene loaded for its size, memory and cost (larger than this
+/// machine, too: the plan is for wherever they run).
 pub fn plan(specs: &[RunSpec]) -> Result<Vec<Job<'_>>> {
     specs
         .iter()
         .map(|spec| {
-            let scene = load(spec)?;
+            let scene = scene_of(spec)?;
             let estimate = scene.memory_estimate(false);
             let (steps, step_secs) = cost(&scene, estimate.held_most, estimate.cells as f64);
             Ok(Job {

@@ -350,7 +350,7 @@ fn finish<const D: usize>(
     }
     result.and_then(|()| check_export_written(args.ccp.export_lp, runner.sim.state.steps))?;
     if let Some(s) = served {
-        s.hold(|| interrupt::signal().is_some());
+        s.hold_until_signal();
     }
     Ok(())
 }
@@ -430,8 +430,9 @@ impl SinkArgs {
             SinkArgs {
                 connect: Some(url), ..
             } => Some(Sink::Connect(url.clone())),
-            SinkArgs { save, .. } if serve.serve_web.is_some() => serve.sink(save.clone()),
-            SinkArgs { save: Some(p), .. } => Some(Sink::File(p.clone())),
+            SinkArgs { save, .. } if save.is_some() || serve.serve_web.is_some() => {
+                serve.sink(save.clone())
+            }
             _ => {
                 let dir = PathBuf::from("recordings");
                 std::fs::create_dir_all(&dir)

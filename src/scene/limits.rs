@@ -6,6 +6,8 @@
 
 use std::path::{Path, PathBuf};
 
+const GIB: f64 = (1u64 << 30) as f64;
+
 /// A limit on the memory a run may still take.
 #[derive(Clone, Debug, PartialEq)]
 pub struct MemoryLimit {
@@ -105,7 +107,7 @@ fn tightest(root: &Path, path: &str, limit: &str, usage: &str, kind: &str) -> Op
                     "the memory limit of the control group ({kind} {}: {:.1} GiB, as a batch \
                      scheduler's --mem sets it)",
                     dir.join(limit).display(),
-                    max / 2f64.powi(30)
+                    max / GIB
                 ),
             })
         })
@@ -134,10 +136,7 @@ fn rlimits() -> Vec<MemoryLimit> {
             let in_use = kib_field(&status, used).unwrap_or(0.0) * 1024.0;
             Some(MemoryLimit {
                 bytes: (max - in_use).max(0.0),
-                source: format!(
-                    "the process's {what} limit ({shell}: {:.1} GiB)",
-                    max / 2f64.powi(30)
-                ),
+                source: format!("the process's {what} limit ({shell}: {:.1} GiB)", max / GIB),
             })
         })
         .collect()
@@ -180,14 +179,11 @@ mod tests {
         std::fs::write(root.join("slurm/memory.max"), "8589934592\n").unwrap();
         std::fs::write(job.join("memory.max"), "2147483648\n").unwrap();
         std::fs::write(job.join("memory.current"), "1073741824\n").unwrap();
-        let l = tightest(
-            &root,
-            "/slurm/job_1",
-            "memory.max",
-            "memory.current",
-            "cgroup v2",
-        );
-        let l = l.unwrap();
+        let limit = || {
+            let l = tightest(&root, "/slurm/job_1", "memory.max", "memory.current", "v2");
+            l.expect("a limit")
+        };
+        let l = limit();
         assert_eq!(l.bytes, 1073741824.0);
         assert!(
             l.source.contains("job_1/memory.max: 2.0 GiB"),
@@ -195,14 +191,13 @@ mod tests {
             l.source
         );
         std::fs::write(job.join("memory.max"), "9223372036854771712\n").unwrap();
-        let l = tightest(
-            &root,
-            "/slurm/job_1",
-            "memory.max",
-            "memory.current",
-            "cgroup v1",
+        let l = limit();
+        assert_eq!(l.bytes, 8589934592.0);
+        assert!(
+            l.source.contains("slurm/memory.max: 8.0 GiB"),
+            "{}",
+            l.source
         );
-        assert!(l.unwrap().source.contains("slurm/memory.max: 8.0 GiB"));
         std::fs::remove_dir_all(&root).unwrap();
     }
 }

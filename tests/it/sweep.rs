@@ -102,19 +102,13 @@ fn jobs_run_apart_in_reverse_order_merge_into_the_one_process_report() {
 fn missing_damaged_and_unknown_jobs_are_named() {
     let dir = scratch_dir("sweep_bad");
     let ids = plan_ids(&dir);
-    let out = cellflip(&dir, &["--merge", "nowhere"]);
-    assert_eq!(out.status.code(), Some(1));
-    let said = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        said.contains("--merge nowhere: no result of this matrix's 8 jobs"),
-        "{said}"
+    refused(
+        &cellflip(&dir, &["--merge", "nowhere"]),
+        "--merge nowhere: no result of this matrix's 8 jobs",
     );
-    let out = cellflip(&dir, &["--job", "no-such-job"]);
-    assert_eq!(out.status.code(), Some(1));
-    let said = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        said.contains("--job no-such-job: no such job in this matrix (8 jobs"),
-        "{said}"
+    refused(
+        &cellflip(&dir, &["--job", "no-such-job"]),
+        "--job no-such-job: no such job in this matrix (8 jobs",
     );
     let out = cellflip(&dir, &["--job", &ids[0], "--merge", "x"]);
     assert_eq!(out.status.code(), Some(1), "a usage error");
@@ -141,6 +135,48 @@ fn missing_damaged_and_unknown_jobs_are_named() {
         .unwrap();
     assert_eq!(other.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&other.stderr).contains("of another matrix"));
+}
+
+/// A command that exited 1 saying `why` on standard error.
+fn refused(out: &Output, why: &str) {
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{said}");
+    assert!(said.contains(why), "{said}");
+}
+
+/// The plan lists jobs larger than this machine (it is for wherever they run), and a job that
+/// fits runs beside them; only the job too large is refused, naming the limit. The limit here
+/// is `ulimit -v`, as a cluster node's may be.
+#[test]
+fn the_plan_lists_jobs_larger_than_this_machine_and_only_those_are_refused() {
+    let dir = scratch_dir("sweep_large");
+    let matrix = "report --scenes dam-3d --methods ccp --res 24,250 --duration 0.02 --no-stability";
+    let under_limit = |rest: &str| {
+        let script = format!(
+            "ulimit -v 2000000; exec {} {matrix} {rest}",
+            env!("CARGO_BIN_EXE_cellflip")
+        );
+        Command::new("bash")
+            .args(["-c", &script])
+            .current_dir(&*dir)
+            .output()
+            .unwrap()
+    };
+    let plan = under_limit("--plan");
+    ok(&plan);
+    let said = String::from_utf8_lossy(&plan.stdout);
+    let ids: Vec<&str> = said
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .map(|l| l.split(' ').next().unwrap())
+        .collect();
+    assert_eq!(ids.len(), 2, "{said}");
+    assert!(ids[1].contains("r250"), "{ids:?}");
+    ok(&under_limit(&format!("-q --out o --job {}", ids[0])));
+    refused(
+        &under_limit(&format!("-q --out o --job {}", ids[1])),
+        "address space limit (ulimit -v",
+    );
 }
 
 /// The cost model's estimate of each job of the default matrix against the wall time that job
