@@ -177,27 +177,22 @@ mod tests {
         std::fs::create_dir_all(&job).unwrap();
         std::fs::write(root.join("memory.max"), "max\n").unwrap();
         std::fs::write(root.join("slurm/memory.max"), "8589934592\n").unwrap();
-        std::fs::write(job.join("memory.max"), "2147483648\n").unwrap();
         std::fs::write(job.join("memory.current"), "1073741824\n").unwrap();
-        let limit = || {
+        // The job's own limit, then none (v1's "no limit"): its parent's rules.
+        for (job_max, room, named) in [
+            ("2147483648", 1073741824.0, "job_1/memory.max: 2.0 GiB"),
+            (
+                "9223372036854771712",
+                8589934592.0,
+                "slurm/memory.max: 8.0 GiB",
+            ),
+        ] {
+            std::fs::write(job.join("memory.max"), job_max).unwrap();
             let l = tightest(&root, "/slurm/job_1", "memory.max", "memory.current", "v2");
-            l.expect("a limit")
-        };
-        let l = limit();
-        assert_eq!(l.bytes, 1073741824.0);
-        assert!(
-            l.source.contains("job_1/memory.max: 2.0 GiB"),
-            "{}",
-            l.source
-        );
-        std::fs::write(job.join("memory.max"), "9223372036854771712\n").unwrap();
-        let l = limit();
-        assert_eq!(l.bytes, 8589934592.0);
-        assert!(
-            l.source.contains("slurm/memory.max: 8.0 GiB"),
-            "{}",
-            l.source
-        );
+            let l = l.expect("a limit");
+            assert_eq!(l.bytes, room);
+            assert!(l.source.contains(named), "{}", l.source);
+        }
         std::fs::remove_dir_all(&root).unwrap();
     }
 }
