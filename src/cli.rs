@@ -4,6 +4,7 @@ use crate::methods::ccp::{BandMode, CcpArgs, Solver};
 use crate::methods::powerpic::AirForm;
 use crate::methods::MethodKind;
 use crate::record::{parse_memory_limit, Moves};
+use crate::report::Matrix;
 use crate::sim::solids::ObstacleMode;
 use crate::solvers::pcg::Preconditioner;
 use clap::{Args, Parser, Subcommand};
@@ -218,15 +219,20 @@ pub struct SolveArgs {
 
 #[derive(Args, Debug, Clone)]
 pub struct ReportArgs {
-    /// Scenes (built-in names or .toml paths), comma-separated [default: the paper's matrix,
-    /// about 15 minutes on 2 cores]
-    #[arg(long, value_delimiter = ',')]
+    /// Which scenes and sizes: `default` (the paper's scenes at small sizes and the hard
+    /// cases, about 15 minutes on 2 cores) or `paper` (every scene of the paper's sec. 8 at
+    /// the size the paper names, whole runs: hours to days, a sweep for a cluster;
+    /// docs/cluster.md). --scenes replaces either
+    #[arg(long, value_enum, default_value_t = Matrix::Default)]
+    pub matrix: Matrix,
+    /// Scenes (built-in names or .toml paths), comma-separated [default: the --matrix's]
+    #[arg(long, value_delimiter = ',', conflicts_with = "matrix")]
     pub scenes: Vec<String>,
     /// Methods, comma-separated [default: every method]
     #[arg(long, value_enum, value_delimiter = ',')]
     pub methods: Vec<MethodKind>,
     /// Resolutions (cells along the longest axis), comma-separated; every scene runs at each
-    /// [default: each scene's, three for martin-moyce-2d]
+    /// [default: the --matrix's for each scene]
     #[arg(long, value_delimiter = ',')]
     pub res: Vec<usize>,
     /// Seeds, comma-separated; every run is repeated with each [default: the scene's]
@@ -248,10 +254,11 @@ pub struct ReportArgs {
     /// Output folder
     #[arg(long, default_value = "report")]
     pub out: PathBuf,
-    /// Regenerate the manual's results: the default matrix with every method, written to
-    /// docs/results.md, docs/results/ (PNG plots, report.csv) and README.md's headline table,
-    /// each headed by the date, commit, machine and command. Run from the repository's root;
-    /// if interrupted, the runs done go to --out and the docs are left as they were
+    /// Regenerate the manual's results: the matrix with every method, written to
+    /// docs/results.md, docs/results/ (PNG plots, report.csv) and README.md's headline table
+    /// (with --matrix paper: docs/results-paper.md and docs/results-paper/), each headed by the
+    /// date, commit, machine and command. Run from the repository's root; if interrupted, the
+    /// runs done go to --out and the docs are left as they were
     #[arg(long, conflicts_with_all = ["scenes", "methods", "res", "seeds", "duration", "stability", "no_stability"])]
     pub docs: bool,
     /// Print the matrix's jobs, one line each (id, scene, method, cells, particles, seed,

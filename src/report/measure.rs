@@ -20,7 +20,7 @@ use std::path::Path;
 use std::time::Duration;
 
 /// The columns of `report.csv` that every run has, with what they hold. Each method adds
-/// `<figure>_median` for the figures it lists ([`crate::methods::MethodInfo::figures`]).
+/// `<figure>_median` and `<figure>_mean` for the figures it lists ([`crate::methods::MethodInfo::figures`]).
 pub const COLUMNS: &[(&str, &str)] = &[
     ("scene", "the scene (or variant) as the tables name it"),
     ("method", "the fluid method"),
@@ -31,6 +31,8 @@ pub const COLUMNS: &[(&str, &str)] = &[
     ("dim", "2 or 3"),
     ("particles", "particles held at the end"),
     ("steps", "steps run"),
+    ("n_mean", "particles in the scene, a band method's imaginary ones included, mean over the steps (the paper's n)"),
+    ("held_mean", "particles the method holds, mean over the steps (the paper's band, for a band method)"),
     ("sim_s", "simulated seconds"),
     ("volume_min", "lowest V/V* over the run, % (eq. volume)"),
     ("volume_max", "highest V/V*, %"),
@@ -51,6 +53,8 @@ pub const COLUMNS: &[(&str, &str)] = &[
     ("ms_per_sim_s", "wall time of the stages per simulated second, ms"),
     ("peak_mib", "peak resident memory during the run, MiB"),
     ("pcg_median", "median PCG iterations of the pressure solve"),
+    ("pressure_ms_mean", "mean wall time of the pressure solve per step, ms (the paper's Poisson)"),
+    ("correct_ms_mean", "mean wall time of the position correction per step, ms (the paper's LP and MCFP together)"),
     ("share_emit", "share of the stage in the step time, %"),
     ("share_p2g", "share of particles-to-grid, %"),
     ("share_forces", "share of forces, %"),
@@ -260,6 +264,9 @@ fn observe<const D: usize>(
     let most = s.markings.count.iter().max().copied().unwrap_or(0) as f64;
     g.compression = g.compression.max(most / mu);
     g.held += rep.blocked.first().copied().unwrap_or(false) as u64;
+    let held = s.particles.len() as f64;
+    g.particles_held += held;
+    g.particles_all += held + sim.method.particles_not_held() as f64;
     for (name, v) in rep.method.figures() {
         g.figures.entry(name).or_default().push(v);
     }
@@ -301,6 +308,8 @@ fn finish<const D: usize>(runner: &Runner<D>, g: &Gathered, lowest: f64, m: &mut
     let steps = sum.steps.max(1) as f64;
     put("particles", s.particles.len() as f64);
     put("steps", sum.steps as f64);
+    put("n_mean", g.particles_all / steps);
+    put("held_mean", g.particles_held / steps);
     put("sim_s", s.time_secs);
     put("volume_min", sum.volume_min);
     put("volume_max", sum.volume_max);
@@ -339,6 +348,7 @@ fn finish<const D: usize>(runner: &Runner<D>, g: &Gathered, lowest: f64, m: &mut
     for (name, xs) in &g.figures {
         m.values
             .insert(format!("{name}_median"), median(xs).unwrap_or(f64::NAN));
+        m.values.insert(format!("{name}_mean"), mean(xs));
     }
 }
 
@@ -358,6 +368,13 @@ fn costs<const D: usize>(runner: &Runner<D>, v: &mut BTreeMap<String, f64>) {
         ("pcg_median", pcg),
     ] {
         v.insert(k.to_string(), x);
+    }
+    let steps = sum.step_times.len() as f64;
+    for (k, st) in [
+        ("pressure_ms_mean", Stage::Pressure),
+        ("correct_ms_mean", Stage::Correct),
+    ] {
+        v.insert(k.to_string(), 1e3 * sum.stage_total(st).as_secs_f64() / steps);
     }
     for st in Stage::ALL {
         let share = 100.0 * sum.stage_total(st).as_secs_f64() / total.max(1e-12);
@@ -380,8 +397,14 @@ fn reset_peak_memory() {
 pub fn figure_columns() -> Vec<String> {
     MethodKind::ALL
         .iter()
-        .flat_map(|k| k.info().figures.iter().map(|f| format!("{f}_median")))
+        .flat_map(|k| k.info().figures.iter())
+        .flat_map(|f| [format!("{f}_median"), format!("{f}_mean")])
         .collect()
+}
+
+/// The mean of `xs` (NaN when empty).
+fn mean(xs: &[f64]) -> f64 {
+    xs.iter().sum::<f64>() / xs.len() as f64
 }
 
 /// The runs' time series for the comparison recording.

@@ -40,6 +40,11 @@ impl Measured {
 pub struct Gathered {
     pub compression: f64,
     pub figures: BTreeMap<&'static str, Vec<f64>>,
+    /// Steps the first obstacle had to stay.
     pub held: u64,
+    /// Sums over the steps of the particles the method holds and of those the scene has
+    /// (imaginary ones included: ccp's deep).
+    pub particles_held: f64,
+    pub particles_all: f64,
     pub probe: Option<MartinMoyceProbe>,
 }

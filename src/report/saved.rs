@@ -148,6 +148,8 @@ impl Progress<'_> {
         pairs(w, "report.ke", &m.ke);
         w.scalar("report.compression", g.compression);
         w.scalar("report.held", g.held);
+        w.scalar("report.particles_held", g.particles_held);
+        w.scalar("report.particles_all", g.particles_all);
         let names: Vec<&str> = g.figures.keys().copied().collect();
         w.meta("report.figures", names.join("\n"));
         for (name, xs) in &g.figures {
@@ -225,6 +227,8 @@ pub fn restore_progress(
     m.ke = read_pairs(r, "report.ke")?;
     g.compression = r.scalar("report.compression")?;
     g.held = r.scalar("report.held")?;
+    g.particles_held = r.scalar("report.particles_held")?;
+    g.particles_all = r.scalar("report.particles_all")?;
     let names = r.meta("report.figures")?;
     for name in names.split('\n').filter(|n| !n.is_empty()) {
         let known = crate::methods::MethodKind::ALL.iter();

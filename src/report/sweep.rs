@@ -150,6 +150,34 @@ pub fn select<'a>(specs: &'a [RunSpec], ids: &[String]) -> Result<Vec<&'a RunSpe
         .collect())
 }
 
+/// The report's section on the jobs without a result: each with why, its memory estimate and
+/// its estimated cost, and their totals (empty when every job has one).
+pub fn not_run(missing: &[Missing<'_>]) -> Result<String> {
+    if missing.is_empty() {
+        return Ok(String::new());
+    }
+    let specs: Vec<RunSpec> = missing.iter().map(|(s, _)| (*s).clone()).collect();
+    let jobs = plan(&specs)?;
+    let mut s = format!(
+        "## Not run\n\n{} jobs of the matrix have no result; their estimates are the plan's \
+         (`--plan`, docs/cluster.md).\n\n| scene | grid cells | method | why | memory MiB | estimated CPU-s |\n|---|---|---|---|---|---|\n",
+        jobs.len()
+    );
+    for (j, (_, why)) in jobs.iter().zip(missing) {
+        s += &format!(
+            "| {} | {} | {} | {why} | {:.0} | {:.0} |\n",
+            j.spec.label,
+            j.cells,
+            j.spec.method.name(),
+            j.mib,
+            j.cpu_secs
+        );
+    }
+    let total: f64 = jobs.iter().map(|j| j.cpu_secs).sum();
+    s += &format!("\nIn all about {:.1} CPU-hours.\n\n", total / 3600.0);
+    Ok(s)
+}
+
 /// A job without a result, and why (not run, or its file cannot be taken).
 pub type Missing<'a> = (&'a RunSpec, String);
 

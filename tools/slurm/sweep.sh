@@ -3,9 +3,12 @@
 # --mem from the job's memory estimate and --time from its estimated cost, and a merge job that
 # runs after the arrays.
 #
-#   tools/slurm/sweep.sh --out DIR [report's matrix options...]
+#   tools/slurm/sweep.sh --out DIR [--only REGEX] [report's matrix options...]
 #   e.g. tools/slurm/sweep.sh --out sweep --scenes dam-2d,dam-3d --res 50,100
+#        tools/slurm/sweep.sh --out paper --only '^(dam-3d|[a-z0-9-]*-2d)-' --matrix paper
 #
+# --only submits only the jobs whose id matches the extended regular expression (e.g. what fits
+# a small cluster); the merge lists the others as missing, with their estimates.
 # Prints the merge job's id last. Jobs with the same memory and time request share an array.
 # Each task runs with --signal=B:USR1@$CELLFLIP_SIGNAL_SECS --requeue: near its time limit it
 # stops its run with a checkpoint (SIGTERM to cellflip) and requeues itself, and the requeued
@@ -23,15 +26,18 @@ signal_secs=${CELLFLIP_SIGNAL_SECS:-120}
 margin=${CELLFLIP_TIME_MARGIN:-3}
 
 out=
+only=
 matrix=()
 while [ $# -gt 0 ]; do
     case "$1" in
     --out) out=$2; shift 2 ;;
     --out=*) out=${1#--out=}; shift ;;
+    --only) only=$2; shift 2 ;;
+    --only=*) only=${1#--only=}; shift ;;
     *) matrix+=("$1"); shift ;;
     esac
 done
-[ -n "$out" ] || { echo "usage: $0 --out DIR [report's matrix options...]" >&2; exit 2; }
+[ -n "$out" ] || { echo "usage: $0 --out DIR [--only REGEX] [report's matrix options...]" >&2; exit 2; }
 mkdir -p "$out/slurm/logs"
 out=$(cd "$out" && pwd)
 cellflip=$(command -v "$cellflip")
@@ -81,7 +87,8 @@ while read -r id rest; do
         t = c / p * k / 60 + 5; m = 8; while (m < t) m *= 2; print m }')
     key="${mem}M-${minutes}min"
     lists[$key]+="$id"$'\n'
-done < <(grep -v '^#' "$out/slurm/plan.txt")
+done < <(grep -v '^#' "$out/slurm/plan.txt" | grep -E -- "${only:-.}" || true)
+[ ${#lists[@]} -gt 0 ] || { echo "$0: no job of the plan matches --only '$only'" >&2; exit 2; }
 
 arrays=()
 for key in "${!lists[@]}"; do

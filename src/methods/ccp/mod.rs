@@ -52,7 +52,7 @@ impl MethodType for Ccp {
             marks: &["world/corrector/paths"],
             needs: Needs::Band,
         }],
-        figures: &["ccp_augmentations", "ccp_moved", "ccp_solver_ms"],
+        figures: &["ccp_augmentations", "ccp_moved", "ccp_solver_ms", "ccp_band_ms"],
     };
 
     type Settings = CcpSettings;
