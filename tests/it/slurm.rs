@@ -125,6 +125,26 @@ fn a_sweep_on_slurm_merges_into_the_one_process_report() {
     assert_eq!(a, b);
 }
 
+/// `--only` that matches no job of the plan is refused before anything is submitted (no
+/// cluster needed: the script stops before `sbatch`).
+#[test]
+fn a_sweep_of_no_job_is_refused() {
+    let dir = scratch_dir("slurm_only");
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tools/slurm/sweep.sh");
+    let out = Command::new(script)
+        .args(["--out", "out", "--only", "^no-such-job-"])
+        .args(&MATRIX[1..])
+        .current_dir(&*dir)
+        .env("CELLFLIP", env!("CARGO_BIN_EXE_cellflip"))
+        .env("PATH", "/usr/bin:/bin")
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{said}");
+    assert!(said.contains("no job of the plan matches --only '^no-such-job-'"), "{said}");
+    assert!(!dir.join("out/slurm/logs").read_dir().unwrap().any(|_| true));
+}
+
 /// A task requeued while it runs (`scontrol requeue`, as on preemption) stops with a
 /// checkpoint, runs again (SLURM_RESTART_COUNT=1), goes on from the checkpoint and ends with
 /// the figures of the job run straight.

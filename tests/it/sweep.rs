@@ -128,6 +128,9 @@ fn missing_damaged_and_unknown_jobs_are_named() {
     assert!(said.contains("1 of 8 runs (0 failed, 7 missing)"), "{said}");
     assert!(err.contains(&format!("{}.result", ids[1])), "{err}");
     assert_eq!(untimed_rows(&dir.join("part")).len(), 1);
+    // The report says which jobs it lacks, with their estimates.
+    let md = std::fs::read_to_string(dir.join("part/report.md")).unwrap();
+    assert!(md.contains("## Not run\n\n7 jobs of the matrix have no result"), "{md}");
     let other = Command::new(env!("CARGO_BIN_EXE_cellflip"))
         .args(["report", "--scenes", "dam-2d", "--merge", "part"])
         .current_dir(&*dir)
@@ -209,6 +212,56 @@ fn the_cost_model_is_within_2x_of_the_default_matrix_as_measured() {
             job.id
         );
     }
+}
+
+/// The paper's matrix: every scene of sec. 8 at the size the paper names (docs/cluster.md), five
+/// methods each, and a plan that says what to ask a cluster for.
+#[test]
+fn the_paper_matrix_has_the_papers_scenes_at_the_papers_sizes() {
+    use clap::Parser;
+    let cli = cellflip::cli::Cli::parse_from(["cellflip", "report", "--matrix", "paper"]);
+    let cellflip::cli::Command::Report(args) = cli.command else {
+        unreachable!("a report command")
+    };
+    let specs = cellflip::report::matrix(&args).unwrap();
+    let jobs = cellflip::report::sweep::plan(&specs).unwrap();
+    let methods = cellflip::methods::MethodKind::ALL.len();
+    let mut scenes: Vec<(&str, usize)> = jobs.iter().map(|j| (&*j.spec.label, j.cells)).collect();
+    scenes.dedup();
+    let cells_2d = |n: usize| n * n;
+    assert_eq!(
+        scenes,
+        [
+            ("dam-2d", cells_2d(50)),
+            ("dam-1ppc-2d", cells_2d(100)),
+            ("drop-2d", cells_2d(50)),
+            ("compress-2d", cells_2d(50)),
+            ("spiral-2d", cells_2d(64)),
+            ("falling-obstacle-2d", cells_2d(50)),
+            ("falling-obstacle-zero-bc-2d", cells_2d(50)),
+            ("large-obstacle-2d", cells_2d(50)),
+            ("dam-3d", 100 * 100 * 100),
+            ("drop-3d", 300 * 300 * 300),
+            ("falling-obstacle-200x300x200", 200 * 300 * 200),
+            ("large-obstacle-3d", 50 * 75 * 50),
+        ]
+    );
+    assert_eq!(jobs.len(), scenes.len() * methods);
+    // Whole runs, and the particle count the paper gives for its largest falling obstacle.
+    assert!(specs.iter().all(|s| s.duration.is_none() && s.budget.is_none()));
+    let flip = |label: &str| {
+        let j = jobs.iter().find(|j| j.spec.label == label && j.spec.method.name() == "flip");
+        j.unwrap().particles
+    };
+    assert!((flip("falling-obstacle-200x300x200") / 46.7e6 - 1.0).abs() < 0.01);
+    let plan = Command::new(env!("CARGO_BIN_EXE_cellflip"))
+        .args(["report", "--matrix", "paper", "--plan"])
+        .output()
+        .unwrap();
+    ok(&plan);
+    let said = String::from_utf8_lossy(&plan.stdout);
+    let total = said.lines().find(|l| l.starts_with("# 60 jobs, about ")).unwrap_or_default();
+    assert!(total.contains("CPU-hours in all; the largest memory estimate"), "{said}");
 }
 
 /// A CSV line's fields, commas inside double quotes kept.

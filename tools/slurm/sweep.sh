@@ -88,7 +88,7 @@ while read -r id rest; do
     key="${mem}M-${minutes}min"
     lists[$key]+="$id"$'\n'
 done < <(grep -v '^#' "$out/slurm/plan.txt" | grep -E -- "${only:-.}" || true)
-[ ${#lists[@]} -gt 0 ] || { echo "$0: no job of the plan matches --only '$only'" >&2; exit 2; }
+[ -n "${lists[*]+x}" ] || { echo "$0: no job of the plan matches --only '$only'" >&2; exit 2; }
 
 arrays=()
 for key in "${!lists[@]}"; do
