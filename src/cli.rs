@@ -4,7 +4,6 @@ use crate::methods::ccp::{BandMode, CcpArgs, Solver};
 use crate::methods::powerpic::AirForm;
 use crate::methods::MethodKind;
 use crate::record::{parse_memory_limit, Moves};
-use crate::report::Matrix;
 use crate::sim::solids::ObstacleMode;
 use crate::solvers::pcg::Preconditioner;
 use clap::{Args, Parser, Subcommand};
@@ -279,6 +278,16 @@ pub struct ReportArgs {
     /// No progress bar and no closing line
     #[arg(long, short)]
     pub quiet: bool,
+}
+
+/// The scenes a report runs when `--scenes` does not name them (`crate::report`'s entries).
+#[derive(clap::ValueEnum, Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Matrix {
+    /// The paper's scenes at small sizes for accuracy, its hard cases for stability.
+    #[default]
+    Default,
+    /// Every scene of the paper's sec. 8 at the size the paper names, whole runs.
+    Paper,
 }
 
 #[derive(Args, Debug, Clone)]

@@ -16,7 +16,7 @@ pub mod plots;
 pub mod saved;
 pub mod sweep;
 
-use crate::cli::ReportArgs;
+use crate::cli::{Matrix, ReportArgs};
 use crate::methods::MethodKind;
 use crate::scene::{Overrides, Scene, SceneFile};
 use crate::validation::MartinMoyceProbe;
@@ -77,16 +77,6 @@ impl Entry {
             stability,
         }
     }
-}
-
-/// The scenes a report runs when `--scenes` does not name them.
-#[derive(clap::ValueEnum, Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum Matrix {
-    /// The paper's scenes at small sizes for accuracy, its hard cases for stability.
-    #[default]
-    Default,
-    /// Every scene of the paper's sec. 8 at the size the paper names, whole runs.
-    Paper,
 }
 
 /// The falling obstacle on the paper's largest grid, 200 x 300 x 200 (a scene file kept with
