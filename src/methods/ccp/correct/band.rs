@@ -12,23 +12,21 @@
 //!   negative, solve again with the one-way constraint eq. band_con2 or eq. band_con3, an
 //!   integer program with one dense row (sec. band_con2).
 //! - [`BandVariant::Paths`]: keep `b*` and push `n_move` particles along grid paths into or out
-//!   of `L` (sec. push_part): alg. find (a multi-source Dijkstra over cells), alg. edge (the
-//!   cheapest particle per edge, by `sigma_edge` of eq. edge) and alg. update, as written.
+//!   of `L` (sec. push_part): alg. find, alg. edge and alg. update, as written
+//!   ([`super::path_search`]).
 //! - [`BandVariant::ExactPaths`] (beyond the paper): keep `b*` and solve the problem the paths
 //!   solve greedily to optimality, as a min-cost flow ([`super::exact_paths`]).
 
-use crate::grid::{Cell, Grid, Vector};
-use crate::sim::advect::CELL_MARGIN;
+use crate::grid::{Grid, Vector};
 use crate::sim::markings::{CellKind, DepthLevel, Markings};
 use crate::solvers::lp::{self, SideConstraint};
 use crate::solvers::min_cost_flow::FlowStats;
 use rayon::prelude::*;
-use std::cmp::Ordering;
-use std::collections::BinaryHeap;
 use std::time::{Duration, Instant};
 
 use super::exact_paths::SecondStep;
-use super::paths::{BandPath, PathDirection};
+use super::path_search::PathSearch;
+use super::paths::{BandPath, BandScene, PathDirection};
 use super::problem::CorrectionProblem;
 use super::Solved;
 
@@ -310,266 +308,6 @@ pub fn solve_one_way<const D: usize>(
     Ok(choice.iter().map(|&k| original[k as usize]).collect())
 }
 
-/// What pushing particles along paths did.
-#[derive(Clone, Debug, Default)]
-pub struct PathOutcome<const D: usize> {
-    pub applied: usize,
-    pub found: usize,
-    pub find_calls: usize,
-    pub paths: Vec<BandPath<D>>,
-}
-
-const NONE: u32 = u32::MAX;
-const ROOT: u32 = u32::MAX - 1;
-
-/// A node of alg. find's priority queue: lowest cost first, ties by cell, root and edge.
-#[derive(Clone, Copy, Debug, PartialEq)]
-struct Node {
-    cost: f64,
-    cell: u32,
-    edge: u32,
-    root: u32,
-}
-
-impl Eq for Node {}
-
-impl Ord for Node {
-    fn cmp(&self, o: &Self) -> Ordering {
-        o.cost
-            .total_cmp(&self.cost)
-            .then_with(|| o.cell.cmp(&self.cell))
-            .then_with(|| o.root.cmp(&self.root))
-            .then_with(|| o.edge.cmp(&self.edge))
-    }
-}
-
-impl PartialOrd for Node {
-    fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
-        Some(self.cmp(o))
-    }
-}
-
-/// A path found by alg. find: the edge into its sink and the sink.
-struct FoundPath {
-    edge: u32,
-    sink: u32,
-    cost: f64,
-}
-
-/// The state alg. find, alg. edge and alg. update work on.
-struct PathPusher<'a, const D: usize> {
-    sc: &'a BandScene<'a, D>,
-    r: u32,
-    direction: PathDirection,
-}
-
-impl<const D: usize> PathPusher<'_, D> {
-    fn is_source(&self, c: usize) -> bool {
-        self.direction.is_source(self.sc.previous, self.r, c)
-    }
-
-    /// Whether `c` can end a path. Cells an obstacle wants (`C_new_solid`, sec. 7) only with
-    /// `allow_wanted`: a path into one blocks the obstacle, so they are the last resort.
-    fn is_sink(&self, c: usize, allow_wanted: bool) -> bool {
-        let wanted = self.sc.penalty.is_some_and(|p| p[c] > 0.0);
-        (allow_wanted || !wanted)
-            && !self.sc.solid[c]
-            && self.direction.is_sink(self.sc.previous, self.r, c)
-    }
-
-    /// `sigma_edge(j, c)` of eq. edge: the cost of particle `j` at its best point of cell `c`
-    /// minus the cost of where it is now.
-    fn sigma_edge(&self, j: usize, c: Cell<D>, x: &Vector<D>) -> f64 {
-        let xh = &self.sc.x_hat[j];
-        (self.sc.grid.closest_in_cell(xh, c, CELL_MARGIN) - xh).norm_squared()
-            - (x - xh).norm_squared()
-    }
-
-    /// Pushes `n_move` particles along paths (sec. push_part): alg. find, then alg. update
-    /// for each path found until `n_move` are applied, and again while more are needed and
-    /// alg. find still finds some. Paths into cells an obstacle wants are searched for only
-    /// when no other path is left (reverting `b*` must stay possible, sec. push_part).
-    pub fn push(&self, pos: &mut [Vector<D>], n_move: usize) -> PathOutcome<D> {
-        let grid = self.sc.grid;
-        let n = grid.num_cells();
-        let cells = |xs: &[Vector<D>]| -> Vec<u32> {
-            xs.iter().map(|x| grid.cell_index_of(x) as u32).collect()
-        };
-        let mut cell_of = cells(pos);
-        // Each particle's previous cell, which alg. edge reads for every move it considers.
-        let home = cells(self.sc.x_bar);
-        let mut out = PathOutcome::default();
-        let mut allow_wanted = self.sc.penalty.is_none();
-        while out.applied < n_move {
-            // gamma_c of the current positions, as lists (counting sort).
-            let mut start = vec![0usize; n + 1];
-            for &c in &cell_of {
-                start[c as usize + 1] += 1;
-            }
-            for c in 0..n {
-                start[c + 1] += start[c];
-            }
-            let mut fill = start.clone();
-            let mut members = vec![0u32; cell_of.len()];
-            for (j, &c) in cell_of.iter().enumerate() {
-                members[fill[c as usize]] = j as u32;
-                fill[c as usize] += 1;
-            }
-            let gamma = |c: usize| &members[start[c]..start[c + 1]];
-            let want = n_move - out.applied;
-            let (found, parent) = self.find(pos, &cell_of, &home, &gamma, allow_wanted, want);
-            out.find_calls += 1;
-            out.found += found.len();
-            if found.is_empty() {
-                if allow_wanted {
-                    break;
-                }
-                allow_wanted = true;
-                continue;
-            }
-            for path in found {
-                out.paths
-                    .push(self.update(&parent, &path, pos, &mut cell_of));
-                out.applied += 1;
-            }
-        }
-        out
-    }
-
-    /// alg. find: non-intersecting cheapest paths from every non-empty source, one per source,
-    /// each ending at the first sink with room that its search reaches. Returns the paths in
-    /// the order found and `J`, each cell's edge (particle) to its parent.
-    ///
-    /// The search stops once `want` paths are found: alg. update applies the paths in the order
-    /// found, only as many as are still needed, and a path's cells and edges are final when its
-    /// sink is reached (a visited cell is never revisited), so the paths that would be found
-    /// later could not change the ones applied.
-    ///
-    /// One deviation from the listing: a node extends its path from its own cost rather than
-    /// from `sigma[c]`, which a cheaper node of an already finished root may have lowered.
-    fn find<'g>(
-        &self,
-        pos: &[Vector<D>],
-        cell_of: &[u32],
-        home: &[u32],
-        gamma: &impl Fn(usize) -> &'g [u32],
-        allow_wanted: bool,
-        want: usize,
-    ) -> (Vec<FoundPath>, Vec<u32>) {
-        let grid = self.sc.grid;
-        let n = grid.num_cells();
-        let mut parent = vec![NONE; n];
-        let mut finished = vec![false; n];
-        let mut sigma = vec![f64::INFINITY; n];
-        let mut queue = BinaryHeap::new();
-        for c in 0..n {
-            if self.is_source(c) && !gamma(c).is_empty() {
-                parent[c] = ROOT;
-                sigma[c] = 0.0;
-                queue.push(Node {
-                    cost: 0.0,
-                    cell: c as u32,
-                    edge: ROOT,
-                    root: c as u32,
-                });
-            }
-        }
-        let mut paths = vec![];
-        while let Some(a) = queue.pop() {
-            let c = a.cell as usize;
-            if parent[c] != NONE && parent[c] != ROOT {
-                continue; // visited
-            }
-            if finished[a.root as usize] {
-                continue;
-            }
-            parent[c] = a.edge;
-            sigma[c] = a.cost;
-            if self.is_sink(c, allow_wanted) && (gamma(c).len() as u32) < self.sc.mu {
-                finished[a.root as usize] = true;
-                paths.push(FoundPath {
-                    edge: a.edge,
-                    sink: a.cell,
-                    cost: a.cost,
-                });
-                if paths.len() == want {
-                    break;
-                }
-                continue;
-            }
-            let cc = grid.cell_coords(c);
-            for axis in 0..D {
-                for dir in [-1, 1] {
-                    let Some(nb) = grid.neighbor(cc, axis, dir) else {
-                        continue;
-                    };
-                    let c2 = grid.cell_index(nb);
-                    if parent[c2] != NONE || self.sc.solid[c2] {
-                        continue; // visited, a source or solid
-                    }
-                    // alg. edge: the cheapest particle of c that may move to c2, i.e. one whose
-                    // previous cell is c or c2.
-                    let mut best: Option<(f64, u32)> = None;
-                    for &j in gamma(c) {
-                        let home = home[j as usize] as usize;
-                        if home != c && home != c2 {
-                            continue;
-                        }
-                        let e = self.sigma_edge(j as usize, nb, &pos[j as usize]);
-                        if best.is_none_or(|(b, _)| e < b) {
-                            best = Some((e, j));
-                        }
-                    }
-                    let Some((e, j)) = best else {
-                        continue;
-                    };
-                    debug_assert_eq!(cell_of[j as usize] as usize, c);
-                    let t = a.cost + e;
-                    if t >= sigma[c2] {
-                        continue;
-                    }
-                    sigma[c2] = t;
-                    queue.push(Node {
-                        cost: t,
-                        cell: c2 as u32,
-                        edge: j,
-                        root: a.root,
-                    });
-                }
-            }
-        }
-        (paths, parent)
-    }
-
-    /// alg. update: walks the path back from its sink, moving each edge's particle into the
-    /// cell after it, and returns the path's cell centres from source to sink.
-    fn update(
-        &self,
-        parent: &[u32],
-        path: &FoundPath,
-        pos: &mut [Vector<D>],
-        cell_of: &mut [u32],
-    ) -> BandPath<D> {
-        let grid = self.sc.grid;
-        let (mut j, mut c) = (path.edge, path.sink as usize);
-        let mut cells = vec![grid.center(grid.cell_coords(c))];
-        while j != ROOT {
-            let from = cell_of[j as usize] as usize;
-            let ju = j as usize;
-            pos[ju] = grid.closest_in_cell(&self.sc.x_hat[ju], grid.cell_coords(c), CELL_MARGIN);
-            cell_of[ju] = c as u32;
-            cells.push(grid.center(grid.cell_coords(from)));
-            j = parent[from];
-            c = from;
-        }
-        cells.reverse();
-        BandPath {
-            cells,
-            cost: path.cost,
-        }
-    }
-}
-
 /// The result of a band correction.
 pub struct BandOutcome<const D: usize> {
     /// Final positions `x`.
@@ -585,36 +323,6 @@ pub struct BandOutcome<const D: usize> {
     pub first_cost: f64,
     /// `exact-paths`: the second step's problem and its optimum, for export.
     pub second_step: Option<(SecondStep, f64)>,
-}
-
-/// Everything a band correction reads besides the problem.
-pub struct BandScene<'a, const D: usize> {
-    pub grid: &'a Grid<D>,
-    pub x_bar: &'a [Vector<D>],
-    pub x_hat: &'a [Vector<D>],
-    pub previous: &'a Markings,
-    pub solid: &'a [bool],
-    /// `sigma_solid_obj`'s penalty per cell (sec. 7), > 0 on `C_new_solid`.
-    pub penalty: Option<&'a [f64]>,
-    pub mu: u32,
-}
-
-impl<const D: usize> BandScene<'_, D> {
-    fn pusher<'s>(&'s self, r: u32, direction: PathDirection) -> PathPusher<'s, D> {
-        PathPusher {
-            sc: self,
-            r,
-            direction,
-        }
-    }
-
-    /// Eq. problem3's objective of final positions in two parts: the squared displacement of
-    /// the particles outside `C_new_solid`, and the penalty of those in it.
-    pub fn cost_parts(&self, pos: &[Vector<D>]) -> (f64, f64) {
-        let ends = pos.iter().zip(self.x_hat);
-        let ends = ends.map(|(x, h)| (self.grid.cell_index_of(x), (x - h).norm_squared()));
-        super::objective_parts(ends, self.penalty)
-    }
 }
 
 /// Corrects the advected positions `x_hat` with the band variant of `ctx`: the first solve of
@@ -649,7 +357,7 @@ pub fn correct_band<const D: usize>(
                 Err(e) => {
                     // The paper says the second solve is always feasible; if it is not (or
                     // times out), correct b* along paths instead.
-                    let o = sc.pusher(ctx.r, direction).push(&mut pos, rep.n_move);
+                    let o = PathSearch::new(sc, ctx.r, direction).push(&mut pos, rep.n_move);
                     rep.failure = Some(format!(
                         "one-way second solve failed ({e}); corrected along {} paths instead",
                         o.applied
@@ -658,7 +366,7 @@ pub fn correct_band<const D: usize>(
             }
         }
         BandVariant::Paths => {
-            let o = sc.pusher(ctx.r, direction).push(&mut pos, rep.n_move);
+            let o = PathSearch::new(sc, ctx.r, direction).push(&mut pos, rep.n_move);
             rep.paths_applied = o.applied;
             rep.paths_found = o.found;
             rep.find_calls = o.find_calls;

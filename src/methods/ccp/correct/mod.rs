@@ -9,6 +9,7 @@
 pub mod band;
 pub mod exact_paths;
 pub mod guarantees;
+pub mod path_search;
 pub mod paths;
 pub mod problem;
 
@@ -16,7 +17,8 @@ use crate::grid::{Grid, Vector};
 use crate::sim::markings::Markings;
 use crate::solvers::min_cost_flow::{self, FlowStats};
 use crate::solvers::{lp, mps};
-use band::{BandContext, BandCorrection, BandScene, BandVariant, ILP_CROSS_CHECK_CANDIDATES};
+use band::{BandContext, BandCorrection, BandVariant, ILP_CROSS_CHECK_CANDIDATES};
+use paths::BandScene;
 use problem::{BuildError, CorrectionProblem, Directions};
 use rayon::prelude::*;
 use std::time::{Duration, Instant};

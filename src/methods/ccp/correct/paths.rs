@@ -1,8 +1,8 @@
-//! The paths of sec. push_part, shared by the greedy `paths` variant ([`super::band`]) and
-//! the exact one ([`super::exact_paths`]): which way they run, where they may start and end,
-//! and what one applied path was.
+//! The paths of sec. push_part, shared by the greedy `paths` variant ([`super::path_search`])
+//! and the exact one ([`super::exact_paths`]): what a band correction reads, which way the
+//! paths run, where they may start and end, and what one applied path was.
 
-use crate::grid::Vector;
+use crate::grid::{Grid, Vector};
 use crate::sim::markings::{CellKind, DepthLevel, Markings};
 
 /// The direction of the paths (sec. push_part).
@@ -52,4 +52,26 @@ pub struct BandPath<const D: usize> {
     /// Sum of `sigma_edge` along the path (eq. edge); negative when the path lowers the
     /// objective.
     pub cost: f64,
+}
+
+/// Everything a band correction reads besides the problem.
+pub struct BandScene<'a, const D: usize> {
+    pub grid: &'a Grid<D>,
+    pub x_bar: &'a [Vector<D>],
+    pub x_hat: &'a [Vector<D>],
+    pub previous: &'a Markings,
+    pub solid: &'a [bool],
+    /// `sigma_solid_obj`'s penalty per cell (sec. 7), > 0 on `C_new_solid`.
+    pub penalty: Option<&'a [f64]>,
+    pub mu: u32,
+}
+
+impl<const D: usize> BandScene<'_, D> {
+    /// Eq. problem3's objective of final positions in two parts: the squared displacement of
+    /// the particles outside `C_new_solid`, and the penalty of those in it.
+    pub fn cost_parts(&self, pos: &[Vector<D>]) -> (f64, f64) {
+        let ends = pos.iter().zip(self.x_hat);
+        let ends = ends.map(|(x, h)| (self.grid.cell_index_of(x), (x - h).norm_squared()));
+        super::objective_parts(ends, self.penalty)
+    }
 }

@@ -1,0 +1,445 @@
+//! The greedy path search of sec. push_part (the band variant `paths`): alg. find (a
+//! multi-source Dijkstra over cells from the band's sources to sinks with room), alg. edge (the
+//! cheapest particle per edge, by `sigma_edge` of eq. edge) and alg. update (moving each path's
+//! particles one cell on), as the paper writes them.
+
+use super::paths::{BandPath, BandScene, PathDirection};
+use crate::grid::{Cell, Vector};
+use crate::sim::advect::CELL_MARGIN;
+use std::cmp::Ordering;
+use std::collections::BinaryHeap;
+
+/// What pushing particles along paths did.
+#[derive(Clone, Debug, Default)]
+pub struct PathOutcome<const D: usize> {
+    pub applied: usize,
+    pub found: usize,
+    pub find_calls: usize,
+    pub paths: Vec<BandPath<D>>,
+}
+
+const NONE: u32 = u32::MAX;
+const ROOT: u32 = u32::MAX - 1;
+
+/// A node of alg. find's priority queue: lowest cost first, ties by cell, root and edge.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Node {
+    cost: f64,
+    cell: u32,
+    edge: u32,
+    root: u32,
+}
+
+impl Eq for Node {}
+
+impl Ord for Node {
+    fn cmp(&self, o: &Self) -> Ordering {
+        o.cost
+            .total_cmp(&self.cost)
+            .then_with(|| o.cell.cmp(&self.cell))
+            .then_with(|| o.root.cmp(&self.root))
+            .then_with(|| o.edge.cmp(&self.edge))
+    }
+}
+
+impl PartialOrd for Node {
+    fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
+        Some(self.cmp(o))
+    }
+}
+
+/// A path found by alg. find: the edge into its sink and the sink.
+struct FoundPath {
+    edge: u32,
+    sink: u32,
+    cost: f64,
+}
+
+/// The state alg. find, alg. edge and alg. update work on: the band's scene, its depth `R`
+/// and the paths' direction.
+pub struct PathSearch<'a, const D: usize> {
+    sc: &'a BandScene<'a, D>,
+    r: u32,
+    direction: PathDirection,
+}
+
+impl<'a, const D: usize> PathSearch<'a, D> {
+    pub fn new(sc: &'a BandScene<'a, D>, r: u32, direction: PathDirection) -> Self {
+        Self { sc, r, direction }
+    }
+
+    fn is_source(&self, c: usize) -> bool {
+        self.direction.is_source(self.sc.previous, self.r, c)
+    }
+
+    /// Whether `c` can end a path. Cells an obstacle wants (`C_new_solid`, sec. 7) only with
+    /// `allow_wanted`: a path into one blocks the obstacle, so they are the last resort.
+    fn is_sink(&self, c: usize, allow_wanted: bool) -> bool {
+        let wanted = self.sc.penalty.is_some_and(|p| p[c] > 0.0);
+        (allow_wanted || !wanted)
+            && !self.sc.solid[c]
+            && self.direction.is_sink(self.sc.previous, self.r, c)
+    }
+
+    /// `sigma_edge(j, c)` of eq. edge: the cost of particle `j` at its best point of cell `c`
+    /// minus the cost of where it is now.
+    fn sigma_edge(&self, j: usize, c: Cell<D>, x: &Vector<D>) -> f64 {
+        let xh = &self.sc.x_hat[j];
+        (self.sc.grid.closest_in_cell(xh, c, CELL_MARGIN) - xh).norm_squared()
+            - (x - xh).norm_squared()
+    }
+
+    /// Pushes `n_move` particles along paths (sec. push_part): alg. find, then alg. update
+    /// for each path found until `n_move` are applied, and again while more are needed and
+    /// alg. find still finds some. Paths into cells an obstacle wants are searched for only
+    /// when no other path is left (reverting `b*` must stay possible, sec. push_part).
+    pub fn push(&self, pos: &mut [Vector<D>], n_move: usize) -> PathOutcome<D> {
+        let grid = self.sc.grid;
+        let n = grid.num_cells();
+        let cells = |xs: &[Vector<D>]| -> Vec<u32> {
+            xs.iter().map(|x| grid.cell_index_of(x) as u32).collect()
+        };
+        let mut cell_of = cells(pos);
+        // Each particle's previous cell, which alg. edge reads for every move it considers.
+        let home = cells(self.sc.x_bar);
+        let mut out = PathOutcome::default();
+        let mut allow_wanted = self.sc.penalty.is_none();
+        while out.applied < n_move {
+            // gamma_c of the current positions, as lists (counting sort).
+            let mut start = vec![0usize; n + 1];
+            for &c in &cell_of {
+                start[c as usize + 1] += 1;
+            }
+            for c in 0..n {
+                start[c + 1] += start[c];
+            }
+            let mut fill = start.clone();
+            let mut members = vec![0u32; cell_of.len()];
+            for (j, &c) in cell_of.iter().enumerate() {
+                members[fill[c as usize]] = j as u32;
+                fill[c as usize] += 1;
+            }
+            let gamma = |c: usize| &members[start[c]..start[c + 1]];
+            let want = n_move - out.applied;
+            let (found, parent) = self.find(pos, &cell_of, &home, &gamma, allow_wanted, want);
+            out.find_calls += 1;
+            out.found += found.len();
+            if found.is_empty() {
+                if allow_wanted {
+                    break;
+                }
+                allow_wanted = true;
+                continue;
+            }
+            for path in found {
+                out.paths
+                    .push(self.update(&parent, &path, pos, &mut cell_of));
+                out.applied += 1;
+            }
+        }
+        out
+    }
+
+    /// alg. find: non-intersecting cheapest paths from every non-empty source, one per source,
+    /// each ending at the first sink with room that its search reaches. Returns the paths in
+    /// the order found and `J`, each cell's edge (particle) to its parent.
+    ///
+    /// The search stops once `want` paths are found: alg. update applies the paths in the order
+    /// found, only as many as are still needed, and a path's cells and edges are final when its
+    /// sink is reached (a visited cell is never revisited), so the paths that would be found
+    /// later could not change the ones applied.
+    ///
+    /// One deviation from the listing: a node extends its path from its own cost rather than
+    /// from `sigma[c]`, which a cheaper node of an already finished root may have lowered.
+    fn find<'g>(
+        &self,
+        pos: &[Vector<D>],
+        cell_of: &[u32],
+        home: &[u32],
+        gamma: &impl Fn(usize) -> &'g [u32],
+        allow_wanted: bool,
+        want: usize,
+    ) -> (Vec<FoundPath>, Vec<u32>) {
+        let grid = self.sc.grid;
+        let n = grid.num_cells();
+        let mut parent = vec![NONE; n];
+        let mut finished = vec![false; n];
+        let mut sigma = vec![f64::INFINITY; n];
+        let mut queue = BinaryHeap::new();
+        for c in 0..n {
+            if self.is_source(c) && !gamma(c).is_empty() {
+                parent[c] = ROOT;
+                sigma[c] = 0.0;
+                queue.push(Node {
+                    cost: 0.0,
+                    cell: c as u32,
+                    edge: ROOT,
+                    root: c as u32,
+                });
+            }
+        }
+        let mut paths = vec![];
+        while let Some(a) = queue.pop() {
+            let c = a.cell as usize;
+            if parent[c] != NONE && parent[c] != ROOT {
+                continue; // visited
+            }
+            if finished[a.root as usize] {
+                continue;
+            }
+            parent[c] = a.edge;
+            sigma[c] = a.cost;
+            if self.is_sink(c, allow_wanted) && (gamma(c).len() as u32) < self.sc.mu {
+                finished[a.root as usize] = true;
+                paths.push(FoundPath {
+                    edge: a.edge,
+                    sink: a.cell,
+                    cost: a.cost,
+                });
+                if paths.len() == want {
+                    break;
+                }
+                continue;
+            }
+            let cc = grid.cell_coords(c);
+            for axis in 0..D {
+                for dir in [-1, 1] {
+                    let Some(nb) = grid.neighbor(cc, axis, dir) else {
+                        continue;
+                    };
+                    let c2 = grid.cell_index(nb);
+                    if parent[c2] != NONE || self.sc.solid[c2] {
+                        continue; // visited, a source or solid
+                    }
+                    // alg. edge: the cheapest particle of c that may move to c2, i.e. one whose
+                    // previous cell is c or c2.
+                    let mut best: Option<(f64, u32)> = None;
+                    for &j in gamma(c) {
+                        let home = home[j as usize] as usize;
+                        if home != c && home != c2 {
+                            continue;
+                        }
+                        let e = self.sigma_edge(j as usize, nb, &pos[j as usize]);
+                        if best.is_none_or(|(b, _)| e < b) {
+                            best = Some((e, j));
+                        }
+                    }
+                    let Some((e, j)) = best else {
+                        continue;
+                    };
+                    debug_assert_eq!(cell_of[j as usize] as usize, c);
+                    let t = a.cost + e;
+                    if t >= sigma[c2] {
+                        continue;
+                    }
+                    sigma[c2] = t;
+                    queue.push(Node {
+                        cost: t,
+                        cell: c2 as u32,
+                        edge: j,
+                        root: a.root,
+                    });
+                }
+            }
+        }
+        (paths, parent)
+    }
+
+    /// alg. update: walks the path back from its sink, moving each edge's particle into the
+    /// cell after it, and returns the path's cell centres from source to sink.
+    fn update(
+        &self,
+        parent: &[u32],
+        path: &FoundPath,
+        pos: &mut [Vector<D>],
+        cell_of: &mut [u32],
+    ) -> BandPath<D> {
+        let grid = self.sc.grid;
+        let (mut j, mut c) = (path.edge, path.sink as usize);
+        let mut cells = vec![grid.center(grid.cell_coords(c))];
+        while j != ROOT {
+            let from = cell_of[j as usize] as usize;
+            let ju = j as usize;
+            pos[ju] = grid.closest_in_cell(&self.sc.x_hat[ju], grid.cell_coords(c), CELL_MARGIN);
+            cell_of[ju] = c as u32;
+            cells.push(grid.center(grid.cell_coords(from)));
+            j = parent[from];
+            c = from;
+        }
+        cells.reverse();
+        BandPath {
+            cells,
+            cost: path.cost,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::grid::Grid;
+    use crate::sim::markings::{CellKind, Markings, DEPTH_NOT_FLUID};
+
+    /// A hand-made 2D scene of `mu = 1` from rows of characters, top row first: `#` solid, `.`
+    /// empty, `i`/`I`/`J` a band interface cell (depth -R) with 0/1/2 particles, `b` a band
+    /// cell above it (depth -1, one particle), `s`/`S` a surface cell (depth 0) with 1/2
+    /// particles. Every particle sits at its cell's centre, where it also was (`x_bar`) and
+    /// wanted to go (`x_hat`).
+    struct Scene {
+        grid: Grid<2>,
+        previous: Markings,
+        solid: Vec<bool>,
+        x: Vec<Vector<2>>,
+        penalty: Option<Vec<f64>>,
+    }
+
+    const R: u32 = 2;
+
+    impl Scene {
+        fn new(rows: &[&str]) -> Self {
+            let (w, h) = (rows[0].len(), rows.len());
+            let grid = Grid::<2>::new([w, h]);
+            let n = grid.num_cells();
+            let mut m = Markings {
+                kind: vec![CellKind::Empty; n],
+                count: vec![0; n],
+                surface: vec![false; n],
+                depth: vec![DEPTH_NOT_FLUID; n],
+            };
+            let (mut solid, mut x) = (vec![false; n], vec![]);
+            for (row, line) in rows.iter().enumerate() {
+                for (i, ch) in line.chars().enumerate() {
+                    let cell = [i, h - 1 - row];
+                    let c = grid.cell_index(cell);
+                    let (kind, depth, count) = match ch {
+                        '#' => (CellKind::Solid, DEPTH_NOT_FLUID, 0),
+                        '.' => (CellKind::Empty, DEPTH_NOT_FLUID, 0),
+                        'i' | 'I' | 'J' => (CellKind::Fluid, -(R as i32), "iIJ".find(ch).unwrap()),
+                        'b' => (CellKind::Fluid, -1, 1),
+                        's' | 'S' => (CellKind::Fluid, 0, 1 + "sS".find(ch).unwrap()),
+                        _ => panic!("unknown cell '{ch}'"),
+                    };
+                    (m.kind[c], m.depth[c], m.count[c]) = (kind, depth, count as u32);
+                    (solid[c], m.surface[c]) = (ch == '#', depth == 0);
+                    x.extend(std::iter::repeat_n(grid.center(cell), count));
+                }
+            }
+            Self {
+                grid,
+                previous: m,
+                solid,
+                x,
+                penalty: None,
+            }
+        }
+
+        /// Pushes `n_move` particles in `direction`: the outcome and the final positions.
+        fn push(
+            &self,
+            direction: PathDirection,
+            n_move: usize,
+        ) -> (PathOutcome<2>, Vec<Vector<2>>) {
+            let sc = BandScene {
+                grid: &self.grid,
+                x_bar: &self.x,
+                x_hat: &self.x,
+                previous: &self.previous,
+                solid: &self.solid,
+                penalty: self.penalty.as_deref(),
+                mu: 1,
+            };
+            let mut pos = self.x.clone();
+            let out = PathSearch::new(&sc, R, direction).push(&mut pos, n_move);
+            (out, pos)
+        }
+
+        fn cell(&self, x: &Vector<2>) -> [usize; 2] {
+            self.grid.cell_coords(self.grid.cell_index_of(x))
+        }
+
+        /// A path's first and last cells.
+        fn ends(&self, p: &BandPath<2>) -> ([usize; 2], [usize; 2]) {
+            (self.cell(&p.cells[0]), self.cell(p.cells.last().unwrap()))
+        }
+
+        /// Every particle moved at most one cell from where it was (alg. edge's rule).
+        fn check_moves(&self, pos: &[Vector<2>]) {
+            for (a, b) in self.x.iter().zip(pos) {
+                let (a, b) = (self.cell(a), self.cell(b));
+                assert!(
+                    a[0].abs_diff(b[0]) + a[1].abs_diff(b[1]) <= 1,
+                    "{a:?} -> {b:?}"
+                );
+            }
+        }
+    }
+
+    /// The paper's fig. v_paths: two cheap paths start in two neighbouring cells in the middle
+    /// of the band interface and leave along the two narrow passages between an obstacle and
+    /// the tank's walls, a V. They share no cell, and between them they block every other way
+    /// out: a third particle needs another call of alg. find, which here finds none (each
+    /// passage's particles have moved on and may not move twice).
+    #[test]
+    fn a_v_of_two_paths_blocks_the_rest() {
+        let s = Scene::new(&[
+            "......", //
+            "b####b", //
+            "b####b", //
+            "bbbbbb", //
+            "iiJJii", //
+        ]);
+        let (out, pos) = s.push(PathDirection::Out, 3);
+        assert_eq!((out.find_calls, out.found, out.applied), (2, 2, 2));
+        let mut ends: Vec<_> = out.paths.iter().map(|p| s.ends(p)).collect();
+        ends.sort();
+        assert_eq!(ends, [([2, 0], [0, 4]), ([3, 0], [5, 4])]);
+        let cells =
+            |p: &BandPath<2>| -> Vec<[usize; 2]> { p.cells.iter().map(|x| s.cell(x)).collect() };
+        let (a, b) = (cells(&out.paths[0]), cells(&out.paths[1]));
+        assert!(
+            a.iter().all(|c| !b.contains(c)),
+            "{a:?} and {b:?} share a cell"
+        );
+        assert_eq!(a.len(), 7, "{a:?}: the shortest way out");
+        s.check_moves(&pos);
+        // Each path moved one particle into its sink and one out of its source.
+        let count = |cell: [usize; 2]| pos.iter().filter(|x| s.cell(x) == cell).count();
+        assert_eq!(
+            [count([0, 4]), count([5, 4]), count([2, 0]), count([3, 0])],
+            [1, 1, 1, 1]
+        );
+    }
+
+    /// Paths into the band interface end in a cell with room, and one that an obstacle wants
+    /// (`C_new_solid`, a penalty there) is the last resort: taken only by a second call of
+    /// alg. find when no other sink is left.
+    #[test]
+    fn paths_in_avoid_cells_an_obstacle_wants_until_nothing_else_is_left() {
+        let mut s = Scene::new(&[
+            "...", //
+            ".s.", //
+            "iIi", //
+        ]);
+        let (left, right) = (s.grid.cell_index([0, 0]), s.grid.cell_index([2, 0]));
+        let (out, pos) = s.push(PathDirection::In, 1);
+        assert_eq!((out.find_calls, out.applied), (1, 1));
+        let first_choice = s.ends(&out.paths[0]).1;
+        assert!([[0, 0], [2, 0]].contains(&first_choice), "{first_choice:?}");
+        s.check_moves(&pos);
+
+        let wanted = if first_choice == [0, 0] { left } else { right };
+        let mut penalty = vec![0.0; s.grid.num_cells()];
+        penalty[wanted] = 1000.0;
+        s.penalty = Some(penalty.clone());
+        let (out, _) = s.push(PathDirection::In, 1);
+        assert_eq!((out.find_calls, out.applied), (1, 1));
+        assert_ne!(s.grid.cell_index(s.ends(&out.paths[0]).1), wanted);
+
+        penalty[left] = 1000.0;
+        penalty[right] = 1000.0;
+        s.penalty = Some(penalty);
+        let (out, _) = s.push(PathDirection::In, 1);
+        assert_eq!((out.find_calls, out.found, out.applied), (2, 1, 1));
+        assert_eq!(s.ends(&out.paths[0]), ([1, 1], first_choice));
+    }
+}
