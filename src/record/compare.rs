@@ -52,7 +52,7 @@ impl Comparison {
             .scene;
         let obstacles: Vec<String> = first.file.obstacle.iter().map(|o| o.name.clone()).collect();
         let root = layout::compare_layout(&compared, &obstacles);
-        layout::send(rec, &root, "sim_time").map_err(cannot)?;
+        super::blueprint::send(rec, &root, "sim_time").map_err(cannot)?;
         let deep = compared.iter().any(|c| c.facts.shows("world/grid/depth"));
         let legend = legend::markdown(first.file.simulation.max_speed, deep);
         rec.log_static("legend", &rerun::TextDocument::from_markdown(legend))

@@ -7,6 +7,7 @@
 //! Methods log their own reports through the drawing vocabulary's [`Log`] trait
 //! ([`crate::draw`]), which the [`Canvas`] implements.
 
+mod blueprint;
 mod canvas;
 mod compare;
 mod file;
@@ -89,7 +90,7 @@ impl Recorder {
                 continued,
             });
         }
-        layout::send(rec, &layout::layout(&facts), "step").map_err(cannot)?;
+        blueprint::send(rec, &layout::layout(&facts), "step").map_err(cannot)?;
         rec.send_property("run", &run_properties(scene))
             .map_err(cannot)?;
         rec.log_static(
