@@ -34,16 +34,17 @@
 //! same words on both input paths ([`MethodKind::refusal`]).
 
 pub mod ccp;
+mod cost;
 pub mod flip;
 pub mod idp;
 pub mod nbflip;
 pub mod powerpic;
 mod seam;
 
+pub use cost::{Footprint, Holds, StartPeak, StepCost};
 pub use seam::{
-    FluidMethod, Footprint, Holds, MethodInfo, MethodOption, MethodRecording, MethodReport,
-    MethodSummary, MethodType, NoReport, NoSummary, SettingContext, SettingError, StartPeak,
-    StepCost,
+    FluidMethod, MethodInfo, MethodOption, MethodRecording, MethodReport, MethodSummary,
+    MethodType, NoReport, NoSummary, SettingContext, SettingError,
 };
 
 /// Registers the methods (each module declared above, where `cargo fmt` sees it): makes

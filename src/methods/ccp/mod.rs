@@ -18,9 +18,9 @@ mod settings;
 pub use record::CcpReport;
 pub use settings::{BandMode, CcpArgs, CcpSettings, Directions, Solver};
 
+use super::cost::{Footprint, StepCost};
 use super::seam::{
-    FluidMethod, Footprint, MethodInfo, MethodOption, MethodSummary, MethodType, SettingContext,
-    SettingError, StepCost,
+    FluidMethod, MethodInfo, MethodOption, MethodSummary, MethodType, SettingContext, SettingError,
 };
 use crate::draw::{LayerView, Needs};
 use crate::sim::solids::ObstacleMode;
@@ -52,7 +52,12 @@ impl MethodType for Ccp {
             marks: &["world/corrector/paths"],
             needs: Needs::Band,
         }],
-        figures: &["ccp_augmentations", "ccp_moved", "ccp_solver_ms", "ccp_band_ms"],
+        figures: &[
+            "ccp_augmentations",
+            "ccp_moved",
+            "ccp_solver_ms",
+            "ccp_band_ms",
+        ],
     };
 
     type Settings = CcpSettings;

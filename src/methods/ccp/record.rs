@@ -159,7 +159,12 @@ impl<const D: usize> MethodReport<D> for CcpReport<D> {
             ("ccp_moved", c.moves.len() as f64),
             ("ccp_solver_ms", c.solver_time.as_secs_f64() * 1e3),
             // The band's second step (alg. find's paths for `paths`); NaN without a band.
-            ("ccp_band_ms", c.band.as_ref().map_or(f64::NAN, |b| b.second_time.as_secs_f64() * 1e3)),
+            (
+                "ccp_band_ms",
+                c.band
+                    .as_ref()
+                    .map_or(f64::NAN, |b| b.second_time.as_secs_f64() * 1e3),
+            ),
         ]
     }
 

@@ -3,10 +3,8 @@
 //! [`FluidMethod`] and [`MethodRecording`] keeps its default, so the whole method is its
 //! registration.
 
-use super::seam::{
-    FluidMethod, Footprint, MethodInfo, MethodRecording, MethodSummary, MethodType, NoSummary,
-    StepCost,
-};
+use super::cost::{Footprint, StepCost};
+use super::seam::{FluidMethod, MethodInfo, MethodRecording, MethodSummary, MethodType, NoSummary};
 use crate::sim::solids::ObstacleMode;
 
 /// Plain FLIP.

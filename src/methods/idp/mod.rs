@@ -66,9 +66,8 @@ pub use physics::{
     CLAMP, PUSH_MARGIN, RESAMPLE_BELOW,
 };
 
-use super::seam::{
-    FluidMethod, Footprint, MethodInfo, MethodOption, MethodSummary, MethodType, StepCost,
-};
+use super::cost::{Footprint, StepCost};
+use super::seam::{FluidMethod, MethodInfo, MethodOption, MethodSummary, MethodType};
 use crate::sim::solids::ObstacleMode;
 use physics::IdpSim;
 use record::{Totals, LAYER_VIEWS, PANELS};

@@ -35,9 +35,9 @@ pub mod region;
 
 pub use physics::{combine, level, NbflipReport, Resampling};
 
+use super::cost::{Footprint, StepCost};
 use super::seam::{
-    FluidMethod, Footprint, MethodInfo, MethodOption, MethodSummary, MethodType, SettingContext,
-    SettingError, StepCost,
+    FluidMethod, MethodInfo, MethodOption, MethodSummary, MethodType, SettingContext, SettingError,
 };
 use crate::sim::band::{check_band_r, DEFAULT_BAND_R};
 use crate::sim::solids::ObstacleMode;

@@ -71,9 +71,9 @@ mod settings;
 pub use physics::PowerPicReport;
 pub use settings::{AirForm, PowerPicSettings};
 
+use super::cost::{Footprint, StepCost};
 use super::seam::{
-    FluidMethod, Footprint, MethodInfo, MethodOption, MethodSummary, MethodType, SettingContext,
-    SettingError, StepCost,
+    FluidMethod, MethodInfo, MethodOption, MethodSummary, MethodType, SettingContext, SettingError,
 };
 use crate::sim::solids::ObstacleMode;
 use physics::PowerPicSim;

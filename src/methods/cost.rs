@@ -1,0 +1,194 @@
+//! What a method costs, measured: its memory footprint (the up-front estimate a run is admitted
+//! on, [`crate::scene::memory`]; docs/benchmarks/memory.md) and its wall time per step (the
+//! cost model of `cellflip report --plan`, docs/cluster.md). Each method gives its measured
+//! figures through [`super::MethodType::footprint`] and [`super::MethodType::step_cost`].
+
+/// A method's peak memory, measured: resident bytes per grid cell, per fluid cell and per
+/// particle held, the fit behind the up-front estimate ([`crate::scene::memory`]; the
+/// measurements and the command that repeats them are in docs/benchmarks/memory.md).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Footprint {
+    pub per_cell: f64,
+    /// Per cell of the seeded liquid: what only the liquid's cells store (the pressure rows,
+    /// the band's bookkeeping).
+    pub per_fluid_cell: f64,
+    pub per_particle: f64,
+    /// What a problem large enough to be solved in copies adds (none for most methods).
+    pub large: Option<LargeProblem>,
+    /// Which of the seeded particles the method holds.
+    pub holds: Holds,
+}
+
+/// Bytes per particle held that count only from `min_particles` particles up: a solver that
+/// works on copies of problems from a size on (ccp's flow solver halves a problem of 100,000
+/// items or more, and without the band every particle is an item).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LargeProblem {
+    pub min_particles: usize,
+    pub per_particle: f64,
+}
+
+/// The particles a method holds after its start.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Holds {
+    /// Every particle seeded (and emitted).
+    All,
+    /// Those of the cells in the top `layers` of the seeded liquid (by depth below its
+    /// surface), or, if more, of that liquid at rest over the floor (and every particle
+    /// emitted): the band of ccp and of narrow-band FLIP, which drop the deeper ones after
+    /// holding them all at the start.
+    Band {
+        layers: u32,
+        start: StartPeak,
+        /// Bytes per particle that the settled band counts beyond the seeded one, on top of
+        /// the footprint's per particle: a band that spreads as the liquid settles (a dam's
+        /// column into a sheet) can outgrow that count.
+        spreading: f64,
+    },
+}
+
+/// The peak while a band method starts, before it drops the deep particles: bytes per
+/// particle seeded (the particles and the start's own per-particle scratch) and per cell.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StartPeak {
+    pub per_particle: f64,
+    pub per_cell: f64,
+}
+
+impl Footprint {
+    /// The footprint in `dim` dimensions of a method holding every particle, from the measured
+    /// `[2D, 3D]` pairs of bytes per cell and bytes per particle.
+    pub fn of(dim: usize, measured: [(f64, f64); 2]) -> Self {
+        let (per_cell, per_particle) = in_dim(dim, measured);
+        Self::all(per_cell, per_particle)
+    }
+
+    /// The footprint in `dim` dimensions of a band method keeping the top `layers` of the
+    /// liquid, from the measured `[2D, 3D]` pairs of `[bytes per cell, per seeded fluid cell,
+    /// per particle it may hold, per particle the settled band holds beyond the seeded one]`
+    /// and the peak while it starts, `(per particle seeded, per cell)`.
+    pub fn band(dim: usize, layers: u32, measured: [([f64; 4], (f64, f64)); 2]) -> Self {
+        let ([per_cell, per_fluid_cell, per_particle, spreading], start) = in_dim(dim, measured);
+        let start = StartPeak {
+            per_particle: start.0,
+            per_cell: start.1,
+        };
+        Self {
+            per_cell,
+            per_fluid_cell,
+            per_particle,
+            large: None,
+            holds: Holds::Band {
+                layers,
+                start,
+                spreading,
+            },
+        }
+    }
+
+    /// The footprint of a method holding every particle, in the dimension it was measured in.
+    pub fn all(per_cell: f64, per_particle: f64) -> Self {
+        Self {
+            per_cell,
+            per_fluid_cell: 0.0,
+            per_particle,
+            large: None,
+            holds: Holds::All,
+        }
+    }
+
+    /// This footprint in `dim` dimensions, plus the measured `[2D, 3D]` bytes per particle of a
+    /// problem of at least `min_particles`.
+    pub fn with_large(self, dim: usize, min_particles: usize, measured: [f64; 2]) -> Self {
+        Self {
+            large: Some(LargeProblem {
+                min_particles,
+                per_particle: in_dim(dim, measured),
+            }),
+            ..self
+        }
+    }
+
+    /// Its bytes for the particles it may hold, `held` from the seeded liquid and `held_most`
+    /// at the most: [`Footprint::per_particle`] each of `held_most`, plus [`Footprint::large`]'s
+    /// from its size on, plus a band's spreading for those beyond `held`.
+    pub fn particle_bytes(&self, held: f64, held_most: f64) -> f64 {
+        let large = (self.large)
+            .filter(|l| held_most >= l.min_particles as f64)
+            .map_or(0.0, |l| l.per_particle);
+        let spreading = match self.holds {
+            Holds::All => 0.0,
+            Holds::Band { spreading, .. } => spreading * (held_most - held),
+        };
+        (self.per_particle + large) * held_most + spreading
+    }
+
+    /// Its bytes while a band method starts, holding all `seeded` particles on a grid of
+    /// `cells` (0 for a method without a band, whose footprint only grows from its start).
+    pub fn start_bytes(&self, seeded: f64, cells: f64) -> f64 {
+        match self.holds {
+            Holds::All => 0.0,
+            Holds::Band { start, .. } => start.per_particle * seeded + start.per_cell * cells,
+        }
+    }
+}
+
+/// A method's wall time per step on the machine its fit was measured on (2 cores), the cost
+/// model of `cellflip report --plan` (docs/cluster.md, "The cost model"): nanoseconds per
+/// particle held and per grid cell, fitted to the whole runs of the report's default matrix.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepCost {
+    pub ns_per_particle: f64,
+    pub ns_per_cell: f64,
+}
+
+impl StepCost {
+    /// The cost in `dim` dimensions from the fitted `[2D, 3D]` pairs of nanoseconds per
+    /// particle and per cell.
+    pub fn of(dim: usize, fitted: [(f64, f64); 2]) -> Self {
+        let (ns_per_particle, ns_per_cell) = in_dim(dim, fitted);
+        Self {
+            ns_per_particle,
+            ns_per_cell,
+        }
+    }
+
+    /// Seconds per step with `particles` held on `cells` cells.
+    pub fn step_secs(&self, particles: f64, cells: f64) -> f64 {
+        (self.ns_per_particle * particles + self.ns_per_cell * cells) * 1e-9
+    }
+}
+
+/// The figure for `dim` dimensions of measured `[2D, 3D]` ones.
+fn in_dim<T: Copy>(dim: usize, measured: [T; 2]) -> T {
+    measured[dim.clamp(2, 3) - 2]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_large_problem_counts_from_its_size_on() {
+        let f = Footprint::all(0.0, 100.0).with_large(3, 1000, [0.0, 50.0]);
+        assert_eq!(f.particle_bytes(999.0, 999.0), 99_900.0);
+        assert_eq!(f.particle_bytes(1000.0, 1000.0), 150_000.0);
+        assert_eq!(
+            Footprint::all(0.0, 100.0).particle_bytes(1000.0, 1000.0),
+            100_000.0
+        );
+    }
+
+    #[test]
+    fn a_band_prices_what_it_may_hold_beyond_the_seeded_band() {
+        let f = Footprint::band(
+            3,
+            3,
+            [([0.0; 4], (0.0, 0.0)), ([0.0, 0.0, 10.0, 5.0], (2.0, 1.0))],
+        );
+        // 100 held at most, 40 of them beyond the 60 of the seeded band.
+        assert_eq!(f.particle_bytes(60.0, 100.0), 10.0 * 100.0 + 5.0 * 40.0);
+        assert_eq!(f.start_bytes(500.0, 30.0), 2.0 * 500.0 + 30.0);
+        assert_eq!(Footprint::all(1.0, 1.0).start_bytes(500.0, 30.0), 0.0);
+    }
+}
