@@ -1,7 +1,7 @@
 //! Results change only on purpose: a digest of the whole state and of every step's report
 //! (all but timings), chained over a fixed number of steps, for every built-in scene with its
-//! default method and with flip, for the band variants, and for the other baselines on the
-//! dams, and the dams with the multigrid preconditioner (the default's size rule keeps these
+//! default method and with flip, for the band variants, and for every other registered method
+//! on the dams, and the dams with the multigrid preconditioner (the default's size rule keeps these
 //! small runs on MIC(0)). Each line also gives the run's PCG iterations (`pcg=`), so that a
 //! solver that takes more iterations shows as a number. The digests live in
 //! `tests/it/golden_digests.txt`; after a change that must alter results, regenerate them with
@@ -38,10 +38,15 @@ fn cases() -> Vec<Case> {
     v.push(("dam-2d".into(), None, Some(BandMode::Paths), None, 60));
     v.push(("dam-2d".into(), None, Some(BandMode::OneWay), None, 8));
     v.push(("dam-2d".into(), None, Some(BandMode::Full), None, 8));
-    // The baselines beyond flip, on the dams.
-    for m in [MethodKind::Idp, MethodKind::Nbflip, MethodKind::Powerpic] {
-        v.push(("dam-2d".into(), Some(m), None, None, 60));
-        v.push(("dam-3d".into(), Some(m), None, None, 12));
+    // Every other registered method on the dams: a new method gets its digests here (bless
+    // them once it works).
+    for &m in MethodKind::ALL {
+        for (dam, steps) in [("dam-2d", 60), ("dam-3d", 12)] {
+            let default = load(dam, &Overrides::default()).method.kind;
+            if m != default && m != MethodKind::Flip {
+                v.push((dam.into(), Some(m), None, None, steps));
+            }
+        }
     }
     // The multigrid preconditioner, which the size rule gives only larger systems: the
     // dams with their default method, and idp's second solve.
