@@ -374,7 +374,10 @@ fn costs<const D: usize>(runner: &Runner<D>, v: &mut BTreeMap<String, f64>) {
         ("pressure_ms_mean", Stage::Pressure),
         ("correct_ms_mean", Stage::Correct),
     ] {
-        v.insert(k.to_string(), 1e3 * sum.stage_total(st).as_secs_f64() / steps);
+        v.insert(
+            k.to_string(),
+            1e3 * sum.stage_total(st).as_secs_f64() / steps,
+        );
     }
     for st in Stage::ALL {
         let share = 100.0 * sum.stage_total(st).as_secs_f64() / total.max(1e-12);

@@ -113,8 +113,10 @@ fn the_csv_has_every_documented_column_and_a_row_per_run() {
     );
     for c in figure_columns() {
         assert!(header.contains(&c), "{c} missing");
-        let figure = (c.strip_suffix("_median").or_else(|| c.strip_suffix("_mean")))
-            .expect("a figure's column ends in _median or _mean");
+        let figure = (c
+            .strip_suffix("_median")
+            .or_else(|| c.strip_suffix("_mean")))
+        .expect("a figure's column ends in _median or _mean");
         assert!(
             page.contains(&format!("`{figure}`")),
             "the figure {figure} is not documented in docs/report.md"

@@ -141,7 +141,10 @@ fn a_sweep_of_no_job_is_refused() {
         .unwrap();
     let said = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{said}");
-    assert!(said.contains("no job of the plan matches --only '^no-such-job-'"), "{said}");
+    assert!(
+        said.contains("no job of the plan matches --only '^no-such-job-'"),
+        "{said}"
+    );
     assert!(!dir.join("out/slurm/logs").read_dir().unwrap().any(|_| true));
 }
 

@@ -130,7 +130,10 @@ fn missing_damaged_and_unknown_jobs_are_named() {
     assert_eq!(untimed_rows(&dir.join("part")).len(), 1);
     // The report says which jobs it lacks, with their estimates.
     let md = std::fs::read_to_string(dir.join("part/report.md")).unwrap();
-    assert!(md.contains("## Not run\n\n7 jobs of the matrix have no result"), "{md}");
+    assert!(
+        md.contains("## Not run\n\n7 jobs of the matrix have no result"),
+        "{md}"
+    );
     let other = Command::new(env!("CARGO_BIN_EXE_cellflip"))
         .args(["report", "--scenes", "dam-2d", "--merge", "part"])
         .current_dir(&*dir)
@@ -248,9 +251,13 @@ fn the_paper_matrix_has_the_papers_scenes_at_the_papers_sizes() {
     );
     assert_eq!(jobs.len(), scenes.len() * methods);
     // Whole runs, and the particle count the paper gives for its largest falling obstacle.
-    assert!(specs.iter().all(|s| s.duration.is_none() && s.budget.is_none()));
+    assert!(specs
+        .iter()
+        .all(|s| s.duration.is_none() && s.budget.is_none()));
     let flip = |label: &str| {
-        let j = jobs.iter().find(|j| j.spec.label == label && j.spec.method.name() == "flip");
+        let j = jobs
+            .iter()
+            .find(|j| j.spec.label == label && j.spec.method.name() == "flip");
         j.unwrap().particles
     };
     assert!((flip("falling-obstacle-200x300x200") / 46.7e6 - 1.0).abs() < 0.01);
@@ -260,8 +267,14 @@ fn the_paper_matrix_has_the_papers_scenes_at_the_papers_sizes() {
         .unwrap();
     ok(&plan);
     let said = String::from_utf8_lossy(&plan.stdout);
-    let total = said.lines().find(|l| l.starts_with("# 60 jobs, about ")).unwrap_or_default();
-    assert!(total.contains("CPU-hours in all; the largest memory estimate"), "{said}");
+    let total = said
+        .lines()
+        .find(|l| l.starts_with("# 60 jobs, about "))
+        .unwrap_or_default();
+    assert!(
+        total.contains("CPU-hours in all; the largest memory estimate"),
+        "{said}"
+    );
 }
 
 /// A CSV line's fields, commas inside double quotes kept.
