@@ -20,7 +20,8 @@ use std::path::Path;
 use std::time::Duration;
 
 /// The columns of `report.csv` that every run has, with what they hold. Each method adds
-/// `<figure>_median` and `<figure>_mean` for the figures it lists ([`crate::methods::MethodInfo::figures`]).
+/// `<figure>_median` and `<figure>_mean` for the figures it lists
+/// ([`crate::methods::MethodInfo::figures`]).
 pub const COLUMNS: &[(&str, &str)] = &[
     ("scene", "the scene (or variant) as the tables name it"),
     ("method", "the fluid method"),
