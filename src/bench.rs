@@ -49,10 +49,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
                 (MethodOption::PowerPicAir, args.air.is_some()),
             ];
             let given: Vec<_> = given.iter().filter(|g| g.1).map(|g| g.0).collect();
-            scene
-                .method
-                .check_given(&given)
-                .map_err(anyhow::Error::msg)?;
+            scene.method.check_given(&given)?;
             let m = match scene.dim() {
                 2 => bench_dim::<2>(&scene, &estimate, args)?,
                 _ => bench_dim::<3>(&scene, &estimate, args)?,

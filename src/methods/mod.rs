@@ -157,21 +157,41 @@ impl MethodKind {
 impl MethodKind {
     /// Why this method refuses `option`, or `None` when it has it: the same words whether the
     /// option came from the command line or the scene file.
-    pub fn refusal(self, option: MethodOption) -> Option<String> {
+    pub fn refusal(self, option: MethodOption) -> Option<NoSuchOption> {
         if self.info().options.contains(&option) {
             return None;
         }
-        let having: Vec<&str> = MethodKind::ALL
+        let having = MethodKind::ALL
             .iter()
             .filter(|k| k.info().options.contains(&option))
             .map(|k| k.name())
             .collect();
-        Some(format!(
-            "method '{}' has no such option (it is an option of {})",
-            self.name(),
-            having.join(", ")
-        ))
+        Some(NoSuchOption {
+            method: self,
+            having,
+        })
     }
+}
+
+/// A method that has not an option given for it.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error(
+    "method '{}' has no such option (it is an option of {})",
+    .method.name(),
+    .having.join(", ")
+)]
+pub struct NoSuchOption {
+    pub method: MethodKind,
+    /// The methods that have it.
+    pub having: Vec<&'static str>,
+}
+
+/// An option the user set for a method that has not it ([`MethodSettings::check_given`]).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("{}: {why}", .option.name())]
+pub struct OptionRefused {
+    pub option: MethodOption,
+    pub why: NoSuchOption,
 }
 
 impl MethodSettings {
@@ -186,12 +206,12 @@ impl MethodSettings {
 
     /// Refuses options the method does not have: `given` lists the ones the user set
     /// explicitly. The error names the option and the method.
-    pub fn check_given(&self, given: &[MethodOption]) -> Result<(), String> {
-        let refused = given.iter().find_map(|&o| Some((o, self.kind.refusal(o)?)));
-        match refused {
-            None => Ok(()),
-            Some((o, why)) => Err(format!("{}: {why}", o.name())),
-        }
+    pub fn check_given(&self, given: &[MethodOption]) -> Result<(), OptionRefused> {
+        let refused = given.iter().find_map(|&option| {
+            let why = self.kind.refusal(option)?;
+            Some(OptionRefused { option, why })
+        });
+        refused.map_or(Ok(()), Err)
     }
 }
 
@@ -222,7 +242,11 @@ mod tests {
     fn an_option_the_method_lacks_is_refused_naming_both() {
         let s = MethodSettings::new(MethodKind::Flip);
         let e = s.check_given(&[MethodOption::Band]).unwrap_err();
-        assert!(e.contains("--band") && e.contains("'flip'") && e.contains("ccp"));
+        assert_eq!(e.option, MethodOption::Band);
+        assert_eq!(e.why.method, MethodKind::Flip);
+        assert_eq!(e.why.having, ["ccp"]);
+        let said = e.to_string();
+        assert!(said.contains("--band") && said.contains("'flip'") && said.contains("ccp"));
         let ccp = MethodSettings {
             kind: MethodKind::Ccp,
             ..s

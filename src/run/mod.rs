@@ -73,10 +73,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
         }
     };
     let estimate = scene.ensure_fits_in_memory(!args.sink.no_record)?;
-    scene
-        .method
-        .check_given(&args.method_options())
-        .map_err(anyhow::Error::msg)?;
+    scene.method.check_given(&args.method_options())?;
     let limit = match args.steps {
         Some(0) => bail!("--steps: must be at least 1"),
         Some(n) => Limit::Steps(n),

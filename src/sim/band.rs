@@ -16,14 +16,17 @@ use rayon::prelude::*;
 pub const DEFAULT_BAND_R: u32 = 3;
 
 /// Refuses an `R` below 1 (or absurdly deep), with the reason.
-pub fn check_band_r(r: u32) -> Result<(), String> {
+pub fn check_band_r(r: u32) -> Result<(), BadBandDepth> {
     match (1..=10_000).contains(&r) {
         true => Ok(()),
-        false => Err(format!(
-            "must be at least 1 (the band interface lies R cells below the surface), got {r}"
-        )),
+        false => Err(BadBandDepth(r)),
     }
 }
+
+/// A band depth `R` no band can have.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("must be at least 1 (the band interface lies R cells below the surface), got {0}")]
+pub struct BadBandDepth(pub u32);
 
 /// A band `R + 1` cells thick: the interface is at depth `-R`, the deep below it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

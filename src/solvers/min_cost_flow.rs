@@ -92,31 +92,49 @@ impl BoundedAssignment {
 
     /// Checks that `choice` picks one of each item's own candidates and keeps every bin within
     /// its bounds.
-    pub fn check(&self, choice: &[u32]) -> Result<(), String> {
+    pub fn check(&self, choice: &[u32]) -> Result<(), InvalidChoice> {
         if choice.len() != self.items() {
-            return Err(format!(
-                "{} choices for {} items",
-                choice.len(),
-                self.items()
-            ));
+            return Err(InvalidChoice::Count {
+                choices: choice.len(),
+                items: self.items(),
+            });
         }
         let mut load = vec![0u32; self.bins()];
-        for (i, &k) in choice.iter().enumerate() {
-            if !self.candidates(i).contains(&(k as usize)) {
-                return Err(format!("item {i} picked candidate {k}, not one of its own"));
+        for (item, &k) in choice.iter().enumerate() {
+            if !self.candidates(item).contains(&(k as usize)) {
+                return Err(InvalidChoice::NotOwn { item, candidate: k });
             }
             load[self.cand_bin[k as usize] as usize] += 1;
         }
-        for (b, &l) in load.iter().enumerate() {
-            if l < self.lower[b] || l > self.upper[b] {
-                return Err(format!(
-                    "bin {b} holds {l}, outside [{}, {}]",
-                    self.lower[b], self.upper[b]
-                ));
+        for (bin, &load) in load.iter().enumerate() {
+            let (lower, upper) = (self.lower[bin], self.upper[bin]);
+            if load < lower || load > upper {
+                return Err(InvalidChoice::OutOfBounds {
+                    bin,
+                    load,
+                    lower,
+                    upper,
+                });
             }
         }
         Ok(())
     }
+}
+
+/// Why a choice is not an assignment of the problem ([`BoundedAssignment::check`]).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum InvalidChoice {
+    #[error("{choices} choices for {items} items")]
+    Count { choices: usize, items: usize },
+    #[error("item {item} picked candidate {candidate}, not one of its own")]
+    NotOwn { item: usize, candidate: u32 },
+    #[error("bin {bin} holds {load}, outside [{lower}, {upper}]")]
+    OutOfBounds {
+        bin: usize,
+        load: u32,
+        lower: u32,
+        upper: u32,
+    },
 }
 
 /// What a solve did.

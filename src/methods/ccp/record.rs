@@ -139,7 +139,7 @@ impl<const D: usize> MethodReport<D> for CcpReport<D> {
             None => {}
         }
         if let Some(f) = &c.fallback {
-            log.warn(f);
+            log.warn(&f.to_string());
         }
         if full {
             log.moves(&c.moves);

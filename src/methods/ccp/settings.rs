@@ -47,7 +47,7 @@ impl CcpSettings {
                 reason: why.into(),
             });
         }
-        check_band_r(self.band_r).map_err(|why| SettingError::range("band_r", why))
+        check_band_r(self.band_r).map_err(|why| SettingError::range("band_r", why.to_string()))
     }
 }
 

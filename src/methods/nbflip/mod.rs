@@ -83,7 +83,7 @@ impl MethodType for Nbflip {
     type Settings = NbflipSettings;
 
     fn check(s: &NbflipSettings, _ctx: SettingContext) -> Result<(), SettingError> {
-        check_band_r(s.band_r).map_err(|why| SettingError::range("band_r", why))
+        check_band_r(s.band_r).map_err(|why| SettingError::range("band_r", why.to_string()))
     }
 
     fn build<const D: usize>(s: &NbflipSettings) -> Box<dyn FluidMethod<D>> {

@@ -28,7 +28,7 @@ use super::exact_paths::SecondStep;
 use super::path_search::PathSearch;
 use super::paths::{BandPath, BandScene, PathDirection};
 use super::problem::CorrectionProblem;
-use super::Solved;
+use super::{Fallback, SolveError, Solved};
 
 /// How the correction keeps the band's count right (sec. band_con, band_con2, push_part).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -106,13 +106,13 @@ pub struct BandCorrection<const D: usize> {
     pub net_in: i64,
     /// Set when the variant could not meet the band constraint (a finding: the paper says it
     /// always can).
-    pub failure: Option<String>,
+    pub failure: Option<BandFailure>,
     /// The paths applied (`paths`), or the cell changes of the second step as paths
     /// (`exact-paths`, [`super::exact_paths::paths_of`]).
     pub paths: Vec<BandPath<D>>,
     /// With cross-checking: the final `cost` of every other variant on the same problem (the
     /// integer programs only on small problems, see [`ILP_CROSS_CHECK_CANDIDATES`]).
-    pub other_costs: Vec<(BandVariant, Result<f64, String>)>,
+    pub other_costs: Vec<(BandVariant, Result<f64, VariantFailure>)>,
 }
 
 impl<const D: usize> BandCorrection<D> {
@@ -149,6 +149,29 @@ impl<const D: usize> BandCorrection<D> {
 /// this many candidates: microlp's branch and bound takes minutes on larger ones.
 pub const ILP_CROSS_CHECK_CANDIDATES: usize = 50_000;
 
+/// Why a band correction did not keep the band constraint the way its variant should.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum BandFailure {
+    /// `one-way`'s second solve failed (the paper says it cannot): corrected along paths.
+    #[error("one-way second solve failed ({why}); corrected along {applied} paths instead")]
+    OneWaySolve { why: SolveError, applied: usize },
+    #[error("alg. find found only {applied} of the {needed} paths needed")]
+    TooFewPaths { applied: usize, needed: usize },
+    #[error("exact second step failed ({0}); b* kept")]
+    ExactSecondStep(SolveError),
+    #[error("the band constraint 0 <= n_in - n_out = {net_in} <= alpha = {alpha} does not hold")]
+    ConstraintBroken { net_in: i64, alpha: i64 },
+}
+
+/// Why a variant gave no cost when cross-checked against the others.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum VariantFailure {
+    #[error(transparent)]
+    Fallback(#[from] Fallback),
+    #[error(transparent)]
+    Band(#[from] BandFailure),
+}
+
 /// The first solve `b*` of eq. problem3 (for `full`, its only solve, with eq. band_con), and
 /// why it failed if it did: every particle then keeps its previous cell.
 fn first_solve<const D: usize>(
@@ -156,7 +179,7 @@ fn first_solve<const D: usize>(
     variant: BandVariant,
     alpha: i64,
     solver: super::Solver,
-) -> (Solved, Option<String>) {
+) -> (Solved, Option<Fallback>) {
     let a = &p.assignment;
     let first = match variant {
         BandVariant::Full => solve_full(p, alpha).map(|choice| Solved {
@@ -167,11 +190,11 @@ fn first_solve<const D: usize>(
         }),
         _ => solver.solve(a, None),
     }
-    .and_then(|s| a.check(&s.choice).map(|()| s));
+    .and_then(|s| Ok(a.check(&s.choice).map(|()| s)?));
     match first {
         Ok(s) => (s, None),
-        Err(e) => {
-            let who = match variant {
+        Err(why) => {
+            let solver = match variant {
                 BandVariant::Full => "band ILP (simplex)",
                 _ => solver.name(),
             };
@@ -181,8 +204,7 @@ fn first_solve<const D: usize>(
                 prices: None,
                 sink_price: 0.0,
             };
-            let why = format!("{who} solver failed ({e}); particles keep their cells");
-            (stay, Some(why))
+            (stay, Some(Fallback { solver, why }))
         }
     }
 }
@@ -248,7 +270,7 @@ pub fn objective<const D: usize>(pos: &[Vector<D>], x_hat: &[Vector<D>]) -> f64 
 pub fn solve_full<const D: usize>(
     p: &CorrectionProblem<D>,
     alpha: i64,
-) -> Result<Vec<u32>, String> {
+) -> Result<Vec<u32>, SolveError> {
     let terms = (0..p.band_sign.len())
         .filter(|&k| p.band_sign[k] != 0)
         .map(|k| (k, p.band_sign[k] as f64))
@@ -258,7 +280,7 @@ pub fn solve_full<const D: usize>(
         min: 0.0,
         max: alpha as f64,
     };
-    lp::solve_with(&p.assignment, &[side]).map_err(|e| e.to_string())
+    Ok(lp::solve_with(&p.assignment, &[side])?)
 }
 
 /// `one-way`, second step (sec. band_con2). Given `b*` with `s_in < 0`: keep the moves out of
@@ -270,7 +292,7 @@ pub fn solve_one_way<const D: usize>(
     p: &CorrectionProblem<D>,
     b_star: &[u32],
     alpha: i64,
-) -> Result<Vec<u32>, String> {
+) -> Result<Vec<u32>, SolveError> {
     let (n_in, n_out) = flows(p, b_star);
     let (s_in, s_out) = (
         n_out as i64 - n_in as i64 + alpha,
@@ -304,7 +326,7 @@ pub fn solve_one_way<const D: usize>(
         min: count as f64,
         max: count as f64,
     };
-    let choice = lp::solve_with(&reduced, &[side]).map_err(|e| e.to_string())?;
+    let choice = lp::solve_with(&reduced, &[side])?;
     Ok(choice.iter().map(|&k| original[k as usize]).collect())
 }
 
@@ -317,7 +339,7 @@ pub struct BandOutcome<const D: usize> {
     /// solver failed and every particle kept its cell, why.
     pub solve_time: Duration,
     pub augmentations: usize,
-    pub fallback: Option<String>,
+    pub fallback: Option<Fallback>,
     /// Eq. problem3's objective (`sigma_solid_obj` included) at the first solve's choice: the
     /// value an LP solver finds for the exported problem (but for `full`).
     pub first_cost: f64,
@@ -352,16 +374,15 @@ pub fn correct_band<const D: usize>(
         _ if rep.n_move == 0 => {}
         BandVariant::Full => {}
         BandVariant::OneWay => {
-            match solve_one_way(p, choice, alpha).and_then(|c| p.assignment.check(&c).map(|()| c)) {
+            let checked = |c: Vec<u32>| Ok(p.assignment.check(&c).map(|()| c)?);
+            match solve_one_way(p, choice, alpha).and_then(checked) {
                 Ok(c) => pos = positions(grid, p, &c, x_hat),
-                Err(e) => {
+                Err(why) => {
                     // The paper says the second solve is always feasible; if it is not (or
                     // times out), correct b* along paths instead.
                     let o = PathSearch::new(sc, ctx.r, direction).push(&mut pos, rep.n_move);
-                    rep.failure = Some(format!(
-                        "one-way second solve failed ({e}); corrected along {} paths instead",
-                        o.applied
-                    ));
+                    let applied = o.applied;
+                    rep.failure = Some(BandFailure::OneWaySolve { why, applied });
                 }
             }
         }
@@ -372,10 +393,10 @@ pub fn correct_band<const D: usize>(
             rep.find_calls = o.find_calls;
             rep.paths = o.paths;
             if o.applied < rep.n_move {
-                rep.failure = Some(format!(
-                    "alg. find found only {} of the {} paths needed",
-                    o.applied, rep.n_move
-                ));
+                rep.failure = Some(BandFailure::TooFewPaths {
+                    applied: o.applied,
+                    needed: rep.n_move,
+                });
             }
         }
         BandVariant::ExactPaths => {
@@ -392,17 +413,17 @@ pub fn correct_band<const D: usize>(
                     rep.paths_applied = stats.augmentations;
                     second_step = Some((s, p.assignment.objective(&c)));
                 }
-                Err(e) => rep.failure = Some(format!("exact second step failed ({e}); b* kept")),
+                Err(e) => rep.failure = Some(BandFailure::ExactSecondStep(e)),
             }
         }
     }
     rep.second_time = t1.elapsed();
     rep.net_in = net_into_interface(grid, sc.x_bar, &pos, sc.previous, ctx.r);
     if rep.failure.is_none() && fallback.is_none() && !(0..=alpha).contains(&rep.net_in) {
-        rep.failure = Some(format!(
-            "the band constraint 0 <= n_in - n_out = {} <= alpha = {alpha} does not hold",
-            rep.net_in
-        ));
+        rep.failure = Some(BandFailure::ConstraintBroken {
+            net_in: rep.net_in,
+            alpha,
+        });
     }
     rep.objective = objective(&pos, x_hat);
     let (displacement, penalty) = sc.cost_parts(&pos);

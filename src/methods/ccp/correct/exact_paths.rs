@@ -33,6 +33,7 @@
 
 use super::paths::{BandPath, PathDirection};
 use super::problem::CorrectionProblem;
+use super::SolveError;
 use crate::grid::Grid;
 use crate::sim::markings::Markings;
 use crate::solvers::min_cost_flow::{self, BoundedAssignment, FlowStats, Solution};
@@ -67,7 +68,7 @@ impl SecondStep {
         (r, mu): (u32, u32),
         direction: PathDirection,
         n_move: usize,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, SolveError> {
         let a = &p.assignment;
         let mut load = vec![0u32; a.bins()];
         for &k in b_star {
@@ -109,9 +110,10 @@ impl SecondStep {
         }
         let ghosts = problem.items() - a.items();
         if ghosts < n_move {
-            return Err(format!(
-                "the sources hold {ghosts} particles, fewer than the {n_move} to move"
-            ));
+            return Err(SolveError::TooFewAtSources {
+                held: ghosts,
+                needed: n_move,
+            });
         }
         let unused = (ghosts - n_move) as u32;
         problem.lower.push(unused);
@@ -130,7 +132,7 @@ impl SecondStep {
         &self,
         b_star: &[u32],
         prices: Option<&[f64]>,
-    ) -> Result<(Vec<u32>, FlowStats), String> {
+    ) -> Result<(Vec<u32>, FlowStats), SolveError> {
         let q = &self.problem;
         let solved = match prices {
             Some(prices) => {
@@ -150,8 +152,7 @@ impl SecondStep {
                 min_cost_flow::solve_from(q, start)
             }
             None => min_cost_flow::solve_priced(q),
-        }
-        .map_err(|e| e.to_string())?;
+        }?;
         let mut choice = solved.choice;
         choice.truncate(self.particles);
         Ok((choice, solved.stats))

@@ -17,7 +17,7 @@ use crate::grid::{Grid, Vector};
 use crate::sim::markings::Markings;
 use crate::solvers::min_cost_flow::{self, FlowStats};
 use crate::solvers::{lp, mps};
-use band::{BandContext, BandCorrection, BandVariant, ILP_CROSS_CHECK_CANDIDATES};
+use band::{BandContext, BandCorrection, BandVariant, VariantFailure, ILP_CROSS_CHECK_CANDIDATES};
 use paths::BandScene;
 use problem::{BuildError, CorrectionProblem, Directions};
 use rayon::prelude::*;
@@ -61,7 +61,7 @@ impl Solver {
         self,
         p: &min_cost_flow::BoundedAssignment,
         warm: Option<&[f64]>,
-    ) -> Result<Solved, String> {
+    ) -> Result<Solved, SolveError> {
         match self {
             Solver::Flow => {
                 let cold;
@@ -80,7 +80,7 @@ impl Solver {
                 prices: Some(s.prices),
                 sink_price: s.sink_price,
             })
-            .map_err(|e| e.to_string()),
+            .map_err(SolveError::from),
             Solver::Simplex => lp::solve(p)
                 .map(|choice| Solved {
                     choice,
@@ -88,9 +88,33 @@ impl Solver {
                     prices: None,
                     sink_price: 0.0,
                 })
-                .map_err(|e| e.to_string()),
+                .map_err(SolveError::from),
         }
     }
+}
+
+/// Why a solve of the correction gave no usable assignment.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum SolveError {
+    #[error(transparent)]
+    Flow(#[from] min_cost_flow::Infeasible),
+    #[error(transparent)]
+    Simplex(#[from] lp::LpError),
+    /// The solver's answer breaks a constraint.
+    #[error(transparent)]
+    Invalid(#[from] min_cost_flow::InvalidChoice),
+    /// `exact-paths`' second step: its sources cannot supply the particles to move.
+    #[error("the sources hold {held} particles, fewer than the {needed} to move")]
+    TooFewAtSources { held: usize, needed: usize },
+}
+
+/// A correction whose (first) solve failed: every particle kept its previous cell.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("{solver} solver failed ({why}); particles keep their cells")]
+pub struct Fallback {
+    /// The solver, as the log names it.
+    pub solver: &'static str,
+    pub why: SolveError,
 }
 
 /// What a solver found: the chosen candidate of every item, the flow solver's work (augmenting
@@ -165,7 +189,7 @@ fn relative_gap(
     p: &min_cost_flow::BoundedAssignment,
     choice: &[u32],
     reference: f64,
-) -> Result<f64, String> {
+) -> Result<f64, SolveError> {
     p.check(choice)?;
     Ok((p.objective(choice) - reference).abs() / reference.abs().max(1.0))
 }
@@ -204,10 +228,10 @@ pub struct CorrectionReport<const D: usize> {
     /// Augmenting paths of the flow solver.
     pub augmentations: usize,
     /// Set when the solver failed and every particle stayed in its previous cell.
-    pub fallback: Option<String>,
+    pub fallback: Option<Fallback>,
     /// `|objective(other solver) - objective| / max(1, |objective|)`, with `cross_check`; with
     /// `exact-paths`, of its second step (on small problems, when it had particles to move).
-    pub cross_check: Option<Result<f64, String>>,
+    pub cross_check: Option<Result<f64, SolveError>>,
     /// Time the other solver took on the same problem, with `cross_check`.
     pub cross_check_time: Option<Duration>,
     /// `(x_hat, x)` of the particles that end in another cell than the one their advected
@@ -283,7 +307,8 @@ pub fn correct<const D: usize>(
             let choice = solve(&problem, settings, penalty, &mut rep, memory);
             if want_mps {
                 let cost = problem.assignment.objective(&choice);
-                let comment = objective_comment(cost, settings.solver, rep.fallback.as_deref());
+                let why = rep.fallback.as_ref().map(Fallback::to_string);
+                let comment = objective_comment(cost, settings.solver, why.as_deref());
                 rep.mps = Some(mps::write(
                     &problem.assignment,
                     "cellflip-correction",
@@ -312,7 +337,7 @@ fn solve<const D: usize>(
     let solved = settings
         .solver
         .solve(&problem.assignment, warm.as_deref())
-        .and_then(|s| problem.assignment.check(&s.choice).map(|()| s));
+        .and_then(|s| Ok(problem.assignment.check(&s.choice).map(|()| s)?));
     rep.solver_time = t0.elapsed();
     memory.remember(&problem.bin_cell, solved.as_ref().ok());
     let choice = match solved {
@@ -320,11 +345,11 @@ fn solve<const D: usize>(
             rep.augmentations = s.work.augmentations;
             s.choice
         }
-        Err(e) => {
-            rep.fallback = Some(format!(
-                "{} solver failed ({e}); particles keep their cells",
-                settings.solver.name()
-            ));
+        Err(why) => {
+            rep.fallback = Some(Fallback {
+                solver: settings.solver.name(),
+                why,
+            });
             problem.stay.clone()
         }
     };
@@ -392,8 +417,12 @@ fn band_mps<const D: usize>(
         b.alpha
     )];
     if variant != BandVariant::Full || rep.fallback.is_some() {
-        let fallback = rep.fallback.as_deref();
-        comment.push(objective_comment(first_cost, settings.solver, fallback));
+        let fallback = rep.fallback.as_ref().map(Fallback::to_string);
+        comment.push(objective_comment(
+            first_cost,
+            settings.solver,
+            fallback.as_deref(),
+        ));
     }
     mps::write(&problem.assignment, "cellflip-correction", &comment)
 }
@@ -433,14 +462,15 @@ fn correct_band<const D: usize>(
         for v in others.filter(|v| small || !v.needs_ilp()) {
             let o = run(v);
             let result = match (o.fallback, o.report.failure) {
-                (Some(e), _) | (None, Some(e)) => Err(e),
+                (Some(e), _) => Err(VariantFailure::from(e)),
+                (None, Some(e)) => Err(VariantFailure::from(e)),
                 (None, None) => Ok(o.report.cost),
             };
             report.other_costs.push((v, result));
         }
         if let Some((step, optimum)) = out.second_step.as_ref().filter(|_| small) {
             let t0 = Instant::now();
-            let simplex = lp::solve(&step.problem).map_err(|e| e.to_string());
+            let simplex = lp::solve(&step.problem).map_err(SolveError::from);
             rep.cross_check_time = Some(t0.elapsed());
             rep.cross_check = Some(simplex.and_then(|c| relative_gap(&step.problem, &c, *optimum)));
         }
