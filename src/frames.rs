@@ -1,6 +1,6 @@
 //! A drawn frame's heavy outputs, made on a thread of their own while the simulation goes on:
 //! the liquid's surface in 3D ([`crate::surface`], drawn in the recording) and the files
-//! `--export-frames` writes ([`crate::export`]).
+//! `--export-frames` writes ([`crate::cmd::export`]).
 //!
 //! **Why a thread.** Reconstructing a surface takes about a third of a second at dam-3d 64^3,
 //! a fifth of a run's wall time when done between the steps. The simulation keeps the two

@@ -1,8 +1,9 @@
 //! `cellflip`: parse the command line, load the scene, run it in its dimension.
 
 use anyhow::Result;
-use cellflip::cli::{Cli, Command, ValidateArgs};
-use cellflip::{bench, compare, interrupt, report, run, scene, solve, validation, view};
+use cellflip::cmd::cli::{Cli, Command, ValidateArgs};
+use cellflip::cmd::{bench, compare, report, run, solve, view};
+use cellflip::{interrupt, scene, validation};
 use clap::Parser;
 use std::io::Write;
 

@@ -3,7 +3,7 @@
 //! carry the file's data or survive a viewer that is not there.
 
 use crate::common::{self, cellflip_in, ok, scratch_dir};
-use cellflip::compare::{step_frames, Frames, Status};
+use cellflip::cmd::compare::{step_frames, Frames, Status};
 use cellflip::methods::MethodKind;
 use cellflip::record::{ComparedRun, Comparison, Sink};
 use cellflip::runner::Runner;

@@ -2,9 +2,9 @@
 //! code they describe. The entity paths of recordings are checked in `cli_process.rs` (they need
 //! runs) and the report's columns in `report.rs`; the rest is here.
 
-use cellflip::cli::Cli;
+use cellflip::cmd::cli::Cli;
+use cellflip::cmd::report::docs::{BEGIN, END};
 use cellflip::methods::MethodKind;
-use cellflip::report::docs::{BEGIN, END};
 use cellflip::scene::{SceneFile, BUILT_IN};
 use clap::CommandFactory;
 use std::collections::BTreeSet;

@@ -3,8 +3,8 @@
 //! that fail (a scene that does not load, one that breaks an invariant) as rows, not aborts.
 
 use crate::common;
+use cellflip::cmd::report::measure::{figure_columns, COLUMNS};
 use cellflip::methods::MethodKind;
-use cellflip::report::measure::{figure_columns, COLUMNS};
 use cellflip::scene::Overrides;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -437,9 +437,9 @@ fn a_report_stopped_and_started_again_goes_on_where_it_stopped() {
 /// and resumed from its newest checkpoint, the same again.
 #[test]
 fn checkpoints_during_a_report_run_change_none_of_its_figures() {
-    use cellflip::report::{matrix, measure, measure::Measured, saved::RunFiles};
+    use cellflip::cmd::report::{matrix, measure, measure::Measured, saved::RunFiles};
     use clap::Parser;
-    let cli = cellflip::cli::Cli::parse_from([
+    let cli = cellflip::cmd::cli::Cli::parse_from([
         "cellflip",
         "report",
         "--scenes",
@@ -450,7 +450,7 @@ fn checkpoints_during_a_report_run_change_none_of_its_figures() {
         "0.3",
         "--no-stability",
     ]);
-    let cellflip::cli::Command::Report(args) = cli.command else {
+    let cellflip::cmd::cli::Command::Report(args) = cli.command else {
         unreachable!("a report command")
     };
     let spec = &matrix(&args).unwrap()[0];

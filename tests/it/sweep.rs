@@ -196,18 +196,18 @@ fn the_cost_model_is_within_2x_of_the_default_matrix_as_measured() {
     let col = |name: &str| header.iter().position(|c| *c == name).unwrap();
     let (per_s, method) = (col("ms_per_sim_s"), col("method"));
     use clap::Parser;
-    let cli = cellflip::cli::Cli::parse_from(["cellflip", "report", "--budget", "90"]);
-    let cellflip::cli::Command::Report(args) = cli.command else {
+    let cli = cellflip::cmd::cli::Cli::parse_from(["cellflip", "report", "--budget", "90"]);
+    let cellflip::cmd::cli::Command::Report(args) = cli.command else {
         unreachable!("a report command")
     };
-    let specs = cellflip::report::matrix(&args).unwrap();
-    let jobs = cellflip::report::sweep::plan(&specs).unwrap();
+    let specs = cellflip::cmd::report::matrix(&args).unwrap();
+    let jobs = cellflip::cmd::report::sweep::plan(&specs).unwrap();
     let rows: Vec<Vec<&str>> = lines.map(|l| split_quoted(l)).collect();
     assert_eq!(rows.len(), jobs.len());
     for (job, row) in jobs.iter().zip(&rows) {
         assert_eq!(row[method], job.spec.method.name());
         let measured = row[per_s].parse::<f64>().unwrap() / 1e3 * job.sim_secs;
-        let estimated = job.cpu_secs / cellflip::report::sweep::FITTED_THREADS;
+        let estimated = job.cpu_secs / cellflip::cmd::report::sweep::FITTED_THREADS;
         let ratio = estimated / measured;
         assert!(
             (0.5..=2.0).contains(&ratio),
@@ -222,12 +222,12 @@ fn the_cost_model_is_within_2x_of_the_default_matrix_as_measured() {
 #[test]
 fn the_paper_matrix_has_the_papers_scenes_at_the_papers_sizes() {
     use clap::Parser;
-    let cli = cellflip::cli::Cli::parse_from(["cellflip", "report", "--matrix", "paper"]);
-    let cellflip::cli::Command::Report(args) = cli.command else {
+    let cli = cellflip::cmd::cli::Cli::parse_from(["cellflip", "report", "--matrix", "paper"]);
+    let cellflip::cmd::cli::Command::Report(args) = cli.command else {
         unreachable!("a report command")
     };
-    let specs = cellflip::report::matrix(&args).unwrap();
-    let jobs = cellflip::report::sweep::plan(&specs).unwrap();
+    let specs = cellflip::cmd::report::matrix(&args).unwrap();
+    let jobs = cellflip::cmd::report::sweep::plan(&specs).unwrap();
     let methods = cellflip::methods::MethodKind::ALL.len();
     let mut scenes: Vec<(&str, usize)> = jobs.iter().map(|j| (&*j.spec.label, j.cells)).collect();
     scenes.dedup();

@@ -3,7 +3,7 @@
 //! change, anything else would make the continuation another run), and with what checkpointing.
 
 use crate::checkpoint::{self, Checkpoints, Opened, Origin, Saver};
-use crate::cli::RunArgs;
+use crate::cmd::cli::RunArgs;
 use crate::record::{Resumed, Sink};
 use crate::scene::{Overrides, Scene};
 use anyhow::{anyhow, bail, Result};

@@ -16,7 +16,7 @@ pub mod plots;
 pub mod saved;
 pub mod sweep;
 
-use crate::cli::{Matrix, ReportArgs};
+use crate::cmd::cli::{Matrix, ReportArgs};
 use crate::methods::MethodKind;
 use crate::scene::{Overrides, Scene, SceneFile};
 use crate::validation::MartinMoyceProbe;
@@ -83,7 +83,7 @@ impl Entry {
 /// the paper-scale benchmarks).
 const FALLING_OBSTACLE_PAPER: (&str, &str) = (
     "falling-obstacle-200x300x200",
-    include_str!("../../tools/paper-scale/falling-obstacle-200x300x200.toml"),
+    include_str!("../../../tools/paper-scale/falling-obstacle-200x300x200.toml"),
 );
 
 /// The paper's matrix (docs/cluster.md, "The paper's matrix"): every built-in scene of sec. 8

@@ -2,8 +2,8 @@
 //! signal handling and the summary at the end; or the run a checkpoint holds, going on.
 
 use crate::checkpoint::{self, Saver};
-use crate::cli::{RunArgs, ServeArgs, SinkArgs};
-use crate::export;
+use crate::cmd::cli::{RunArgs, ServeArgs, SinkArgs};
+use crate::cmd::export;
 use crate::frames::FrameWorker;
 use crate::interrupt::{self, Watchdog};
 use crate::methods::MethodOption;

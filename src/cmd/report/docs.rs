@@ -11,7 +11,7 @@
 
 use super::measure::Measured;
 use super::output::cell;
-use crate::cli::Matrix;
+use crate::cmd::cli::Matrix;
 use crate::methods::MethodKind;
 use anyhow::{bail, Context, Result};
 use std::fmt::Write;

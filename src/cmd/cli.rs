@@ -280,7 +280,7 @@ pub struct ReportArgs {
     pub quiet: bool,
 }
 
-/// The scenes a report runs when `--scenes` does not name them (`crate::report`'s entries).
+/// The scenes a report runs when `--scenes` does not name them (`crate::cmd::report`'s entries).
 #[derive(clap::ValueEnum, Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Matrix {
     /// The paper's scenes at small sizes for accuracy, its hard cases for stability.

@@ -2,7 +2,7 @@
 //! resolutions (and band settings), through the one runner. A measurement to read, never a
 //! pass/fail test.
 
-use crate::cli::BenchArgs;
+use crate::cmd::cli::BenchArgs;
 use crate::methods::ccp::BandMode;
 use crate::methods::MethodOption;
 use crate::metrics::{median, Stage};

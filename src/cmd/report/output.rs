@@ -386,7 +386,7 @@ fn stability_table(s: &mut String, results: &[Measured]) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::report::{RunSpec, Source};
+    use crate::cmd::report::{RunSpec, Source};
 
     fn run(n: f64, held: f64) -> Measured {
         Measured {

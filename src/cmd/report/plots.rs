@@ -13,7 +13,7 @@ use plotters::prelude::*;
 use std::path::Path;
 
 /// The bundled font (DejaVu Sans, Bitstream Vera licence: assets/DejaVuSans-LICENSE.txt).
-const FONT: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
+const FONT: &[u8] = include_bytes!("../../../assets/DejaVuSans.ttf");
 const SIZE: (u32, u32) = (900, 560);
 
 /// One line of a chart.

@@ -1,7 +1,7 @@
 //! `cellflip view`: saved recordings (a run's, a comparison's, the report's) in a browser,
 //! served by this program with Rerun's web viewer (`--serve-web`), or in the native viewer.
 
-use crate::cli::ViewArgs;
+use crate::cmd::cli::ViewArgs;
 use crate::{interrupt, record};
 use anyhow::{bail, Context, Result};
 use std::path::{Path, PathBuf};

@@ -8,8 +8,8 @@
 //! method and seed. A run that fails stops alone: its world says why and when, the others go
 //! on; a signal ends them all after the current step and finishes the recording.
 
-use crate::cli::CompareArgs;
-use crate::export;
+use crate::cmd::cli::CompareArgs;
+use crate::cmd::export;
 use crate::frames::FrameWorker;
 use crate::interrupt::{self, Watchdog};
 use crate::methods::MethodKind;

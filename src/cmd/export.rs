@@ -9,7 +9,7 @@
 //! vertices carry `x y z` (m) and the outward unit normal `nx ny nz`; faces are
 //! counter-clockwise seen from outside the liquid, as `uchar`-counted lists of `uint`.
 
-use crate::cli::ExportArgs;
+use crate::cmd::cli::ExportArgs;
 use crate::frames::{Frame, FrameNeeds, FrameSink};
 use crate::scene::Scene;
 use crate::surface::SurfaceMesh;

@@ -2,7 +2,7 @@
 //! so that they can be compared with any peer that reads the same MPS file, and their optimum
 //! checked against the one the file records.
 
-use crate::cli::SolveArgs;
+use crate::cmd::cli::SolveArgs;
 use crate::methods::ccp::Solver;
 use crate::metrics::median;
 use crate::outln;
