@@ -173,7 +173,7 @@ impl MethodKind {
     }
 }
 
-/// A method that has not an option given for it.
+/// A method asked for an option it does not have.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 #[error(
     "method '{}' has no such option (it is an option of {})",
@@ -186,7 +186,7 @@ pub struct NoSuchOption {
     pub having: Vec<&'static str>,
 }
 
-/// An option the user set for a method that has not it ([`MethodSettings::check_given`]).
+/// An option the user set that the method does not have ([`MethodSettings::check_given`]).
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 #[error("{}: {why}", .option.name())]
 pub struct OptionRefused {
