@@ -195,11 +195,7 @@ fn paper_time_table(s: &mut String, results: &[Measured]) {
             true => cell(m.get("held_mean"), 0),
             false => "-".into(),
         };
-        // A method that does not correct spends no time there: a dash, not zero.
-        let secs = |c: &str| match m.get(c) {
-            0.0 => "-".into(),
-            ms => cell(ms / 1e3, 3),
-        };
+        let secs = |c: &str| cell(m.get(c) / 1e3, 3);
         let _ = writeln!(
             s,
             "| {} | {} | {} | {} | {band} | {} | {} | {} | {} |",

@@ -180,7 +180,6 @@ fn first_solve<const D: usize>(
     alpha: i64,
     solver: super::Solver,
 ) -> (Solved, Option<Fallback>) {
-    let a = &p.assignment;
     let first = match variant {
         BandVariant::Full => solve_full(p, alpha).map(|choice| Solved {
             choice,
@@ -188,9 +187,8 @@ fn first_solve<const D: usize>(
             prices: None,
             sink_price: 0.0,
         }),
-        _ => solver.solve(a, None),
-    }
-    .and_then(|s| Ok(a.check(&s.choice).map(|()| s)?));
+        _ => solver.solve(&p.assignment, None),
+    };
     match first {
         Ok(s) => (s, None),
         Err(why) => {
@@ -280,7 +278,7 @@ pub fn solve_full<const D: usize>(
         min: 0.0,
         max: alpha as f64,
     };
-    Ok(lp::solve_with(&p.assignment, &[side])?)
+    super::valid(&p.assignment, lp::solve_with(&p.assignment, &[side])?)
 }
 
 /// `one-way`, second step (sec. band_con2). Given `b*` with `s_in < 0`: keep the moves out of
@@ -327,7 +325,7 @@ pub fn solve_one_way<const D: usize>(
         max: count as f64,
     };
     let choice = lp::solve_with(&reduced, &[side])?;
-    Ok(choice.iter().map(|&k| original[k as usize]).collect())
+    super::valid(a, choice.iter().map(|&k| original[k as usize]).collect())
 }
 
 /// The result of a band correction.
@@ -374,8 +372,7 @@ pub fn correct_band<const D: usize>(
         _ if rep.n_move == 0 => {}
         BandVariant::Full => {}
         BandVariant::OneWay => {
-            let checked = |c: Vec<u32>| Ok(p.assignment.check(&c).map(|()| c)?);
-            match solve_one_way(p, choice, alpha).and_then(checked) {
+            match solve_one_way(p, choice, alpha) {
                 Ok(c) => pos = positions(grid, p, &c, x_hat),
                 Err(why) => {
                     // The paper says the second solve is always feasible; if it is not (or

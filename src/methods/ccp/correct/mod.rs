@@ -56,13 +56,13 @@ impl Solver {
     }
 
     /// Solves `p`; the flow solver starts from `warm` prices (per bin, relative to the sink)
-    /// when given, the simplex ignores them.
+    /// when given, the simplex ignores them. An answer that breaks a constraint is a failure.
     pub(crate) fn solve(
         self,
         p: &min_cost_flow::BoundedAssignment,
         warm: Option<&[f64]>,
     ) -> Result<Solved, SolveError> {
-        match self {
+        let solved = match self {
             Solver::Flow => {
                 let cold;
                 let prices = match warm {
@@ -89,8 +89,20 @@ impl Solver {
                     sink_price: 0.0,
                 })
                 .map_err(SolveError::from),
-        }
+        }?;
+        p.check(&solved.choice)?;
+        Ok(solved)
     }
+}
+
+/// `choice` if it is an assignment of `p`: a solver's answer that breaks a constraint counts as
+/// the solver's failure.
+pub(crate) fn valid(
+    p: &min_cost_flow::BoundedAssignment,
+    choice: Vec<u32>,
+) -> Result<Vec<u32>, SolveError> {
+    p.check(&choice)?;
+    Ok(choice)
 }
 
 /// Why a solve of the correction gave no usable assignment.
@@ -184,14 +196,9 @@ impl PriceMemory {
     }
 }
 
-/// `|objective(choice) - reference| / max(1, |reference|)`, or why `choice` breaks `p`.
-fn relative_gap(
-    p: &min_cost_flow::BoundedAssignment,
-    choice: &[u32],
-    reference: f64,
-) -> Result<f64, SolveError> {
-    p.check(choice)?;
-    Ok((p.objective(choice) - reference).abs() / reference.abs().max(1.0))
+/// `|objective(choice) - reference| / max(1, |reference|)` for a valid `choice` of `p`.
+fn relative_gap(p: &min_cost_flow::BoundedAssignment, choice: &[u32], reference: f64) -> f64 {
+    (p.objective(choice) - reference).abs() / reference.abs().max(1.0)
 }
 
 /// How the correction is set up.
@@ -333,11 +340,7 @@ fn solve<const D: usize>(
 ) -> Vec<u32> {
     let t0 = Instant::now();
     let warm = memory.prices_of(&problem.bin_cell);
-    // An answer that breaks a constraint counts as a failure of the solver.
-    let solved = settings
-        .solver
-        .solve(&problem.assignment, warm.as_deref())
-        .and_then(|s| Ok(problem.assignment.check(&s.choice).map(|()| s)?));
+    let solved = settings.solver.solve(&problem.assignment, warm.as_deref());
     rep.solver_time = t0.elapsed();
     memory.remember(&problem.bin_cell, solved.as_ref().ok());
     let choice = match solved {
@@ -369,7 +372,7 @@ fn solve<const D: usize>(
         rep.cross_check_time = Some(t1.elapsed());
         let total = rep.total();
         rep.cross_check =
-            Some(other_result.and_then(|s| relative_gap(&problem.assignment, &s.choice, total)));
+            Some(other_result.map(|s| relative_gap(&problem.assignment, &s.choice, total)));
     }
     choice
 }
@@ -472,7 +475,8 @@ fn correct_band<const D: usize>(
             let t0 = Instant::now();
             let simplex = lp::solve(&step.problem).map_err(SolveError::from);
             rep.cross_check_time = Some(t0.elapsed());
-            rep.cross_check = Some(simplex.and_then(|c| relative_gap(&step.problem, &c, *optimum)));
+            let gap = |c: Vec<u32>| relative_gap(&step.problem, &c, *optimum);
+            rep.cross_check = Some(simplex.and_then(|c| valid(&step.problem, c)).map(gap));
         }
     }
     pos.copy_from_slice(&out.pos);
