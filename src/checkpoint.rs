@@ -53,8 +53,6 @@ pub struct Origin {
     pub scene_toml: String,
     /// The command line that started the run (for the reader; nothing is parsed from it).
     pub command: String,
-    /// ccp's `--cross-check` (it draws more in the recording, and solves twice).
-    pub cross_check: bool,
     /// Frames drawn so far (3D surfaces, `--export-frames` files number on from it).
     pub frames: u64,
     /// The recording file, if the run wrote one.
@@ -77,7 +75,6 @@ impl Origin {
         w.meta("scene.source", &*self.scene_source);
         w.meta("scene.toml", &*self.scene_toml);
         w.meta("command", &*self.command);
-        w.meta("cross_check", self.cross_check.to_string());
         w.meta("frames", self.frames.to_string());
         if let Some(e) = self.every {
             w.meta("checkpoint_every", e.to_string());
@@ -117,7 +114,6 @@ impl Origin {
             scene_source: text("scene.source")?,
             scene_toml: text("scene.toml")?,
             command: text("command")?,
-            cross_check: r.meta("cross_check")? == "true",
             frames: number("frames")?,
             recording,
             every: match r.meta("checkpoint_every") {
@@ -411,7 +407,6 @@ mod tests {
             scene_source: scene.source.clone(),
             scene_toml: scene.resolved_toml(),
             command: "test".into(),
-            cross_check: false,
             frames: 0,
             recording: None,
             every: None,

@@ -4,7 +4,6 @@
 
 use crate::cmd::cli::BenchArgs;
 use crate::methods::ccp::BandMode;
-use crate::methods::MethodOption;
 use crate::metrics::{median, Stage};
 use crate::runner::{Limit, Runner};
 use crate::scene::{peak_memory_mib, MemoryEstimate, Overrides, Scene};
@@ -33,28 +32,27 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
     for &res in &args.res {
         let mut results: Vec<(&str, Measured)> = vec![];
         for band in &bands {
+            let mut flags = args.methods.clone();
+            if let Some(b) = band {
+                let value = toml::Value::try_from(b).expect("a band mode is a TOML value");
+                flags.0.push(("band", value));
+            }
             let overrides = Overrides {
                 cells: Some(res),
                 method: args.method,
-                band: *band,
-                pressure: args.pressure,
-                air: args.air,
+                pressure: args.pressure.preconditioner,
+                flags,
                 ..Default::default()
             };
             let scene = Scene::load(&args.scene, &overrides)?;
+            scene.method.check_flags(&overrides.flags)?;
             let estimate = scene.ensure_fits_in_memory(false)?;
-            let given = [
-                (MethodOption::Band, band.is_some()),
-                (MethodOption::CrossCheck, args.cross_check),
-                (MethodOption::PowerPicAir, args.air.is_some()),
-            ];
-            let given: Vec<_> = given.iter().filter(|g| g.1).map(|g| g.0).collect();
-            scene.method.check_given(&given)?;
             let m = match scene.dim() {
                 2 => bench_dim::<2>(&scene, &estimate, args)?,
                 _ => bench_dim::<3>(&scene, &estimate, args)?,
             };
-            results.push((scene.method.band().name(), m));
+            let band = scene.method.band().map_or("none", |b| b.variant);
+            results.push((band, m));
         }
         print_band_ratios(res, &results);
         scaling.extend(results.into_iter().next().map(|(_, m)| (res, m)));
@@ -79,9 +77,7 @@ fn bench_dim<const D: usize>(
     e: &MemoryEstimate,
     args: &BenchArgs,
 ) -> Result<Measured> {
-    let mut method = scene.method.clone();
-    method.ccp.cross_check = args.cross_check;
-    let mut runner = Runner::new(Simulation::<D>::new(scene.config::<D>(), &method));
+    let mut runner = Runner::new(Simulation::<D>::new(scene.config::<D>(), &scene.method));
     let started = peak_memory_mib();
     runner.run(Limit::Steps(args.warmup), || false, |_, _| Ok(()))?;
     runner.reset_summary();
@@ -124,7 +120,7 @@ fn bench_dim<const D: usize>(
         crate::outln!(
             "  correction stage: {:.1}% of the step (median of per-step shares{})",
             100.0 * median(&shares).unwrap_or(0.0),
-            if args.cross_check {
+            if scene.method.cross_checks() {
                 "; includes the cross-check"
             } else {
                 ""

@@ -1,8 +1,7 @@
 //! Command-line definitions (clap) and nothing else.
 
-use crate::methods::ccp::{BandMode, CcpArgs, Solver};
-use crate::methods::powerpic::AirForm;
-use crate::methods::MethodKind;
+use crate::methods::ccp::{BandMode, Solver};
+use crate::methods::{MethodFlags, MethodKind};
 use crate::record::{parse_memory_limit, Moves};
 use crate::sim::solids::ObstacleMode;
 use crate::solvers::pcg::Preconditioner;
@@ -315,26 +314,13 @@ pub struct RunArgs {
     /// Duration, resolution, particles per cell and seed.
     #[command(flatten)]
     pub scale: SceneArgs,
-    /// Band depth R: ccp's band interface lies R cells below the surface (the band is R + 1
-    /// cells thick); nbflip keeps particles down to R cells below its level set's zero
-    /// (overrides `simulation.band_r`).
-    #[arg(long, value_name = "R")]
-    pub band_r: Option<u32>,
     /// How obstacles pass particles (overrides `simulation.obstacle`): couple (ccp), or for
     /// the other methods naive (wait for free cells) or ignore (move regardless).
     #[arg(long, value_enum)]
     pub obstacle: Option<ObstacleMode>,
-    /// CG's preconditioner in the pressure solve (overrides
-    /// `simulation.pressure_preconditioner`): auto (multigrid from 10,000 unknown rows in 2D
-    /// and 100,000 in 3D, mic0 below), mic0
-    /// (modified incomplete Cholesky) or multigrid (a geometric V-cycle).
-    #[arg(long, value_enum, value_name = "PRECONDITIONER")]
-    pub pressure: Option<Preconditioner>,
-    /// Method powerpic: how the free surface's air is costed (overrides
-    /// `simulation.powerpic.air`): baseline (pulled towards the air baseline estimated from the
-    /// markings) or capacity (free).
-    #[arg(long, value_enum)]
-    pub air: Option<AirForm>,
+    /// The pressure solve.
+    #[command(flatten)]
+    pub pressure: PressureArgs,
     /// Where the recording goes.
     #[command(flatten)]
     pub sink: SinkArgs,
@@ -368,12 +354,23 @@ pub struct RunArgs {
     /// No progress bar and no summary.
     #[arg(long, short)]
     pub quiet: bool,
-    /// Method ccp's flags.
+    /// The methods' own flags (`crate::methods::options`).
     #[command(flatten)]
-    pub ccp: CcpArgs,
+    pub methods: MethodFlags,
     /// Checkpoints.
     #[command(flatten)]
     pub checkpoint: CheckpointArgs,
+}
+
+/// The pressure solve's options, for every method.
+#[derive(Args, Debug, Clone, Default)]
+pub struct PressureArgs {
+    /// CG's preconditioner in the pressure solve (overrides
+    /// `simulation.pressure_preconditioner`): auto (multigrid from 10,000 unknown rows in 2D
+    /// and 100,000 in 3D, mic0 below), mic0
+    /// (modified incomplete Cholesky) or multigrid (a geometric V-cycle).
+    #[arg(long = "pressure", value_enum, value_name = "PRECONDITIONER")]
+    pub preconditioner: Option<Preconditioner>,
 }
 
 /// Checkpoints of `run`: writing them, and going on from one (docs/checkpoints.md).
@@ -415,24 +412,15 @@ pub struct BenchArgs {
     /// The fluid method.
     #[arg(long, value_enum)]
     pub method: Option<MethodKind>,
-    /// CG's preconditioner in the pressure solve (overrides
-    /// `simulation.pressure_preconditioner`): auto (multigrid from 10,000 unknown rows in 2D
-    /// and 100,000 in 3D, mic0 below), mic0
-    /// (modified incomplete Cholesky) or multigrid (a geometric V-cycle).
-    #[arg(long, value_enum, value_name = "PRECONDITIONER")]
-    pub pressure: Option<Preconditioner>,
-    /// Method powerpic: how the free surface's air is costed (overrides
-    /// `simulation.powerpic.air`): baseline (pulled towards the air baseline estimated from the
-    /// markings) or capacity (free).
-    #[arg(long, value_enum)]
-    pub air: Option<AirForm>,
+    /// The pressure solve.
+    #[command(flatten)]
+    pub pressure: PressureArgs,
     /// Band methods of ccp to compare, comma-separated (none, paths, one-way, full); the
     /// step-time ratio to the first is printed [default: the scene's].
     #[arg(long, value_enum, value_delimiter = ',')]
     pub band: Vec<BandMode>,
-    /// Method ccp: also solve every correction with the other solver and compare their times;
-    /// with a band, run all band variants on each problem and compare their objectives (full
-    /// and one-way only up to 50,000 candidates).
-    #[arg(long)]
-    pub cross_check: bool,
+    /// The methods' own flags but `--band`, which is bench's list above (with
+    /// `--cross-check`, ccp's step times of both solvers are compared).
+    #[command(flatten)]
+    pub methods: MethodFlags,
 }

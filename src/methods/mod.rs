@@ -29,29 +29,43 @@
 //! [`MethodRecording`]) and its recording in `record.rs` (its panels, its [`MethodReport`] and
 //! [`MethodSummary`]); then one line in the [`methods!`] list below, which makes its settings
 //! a field of [`MethodSettings`] named after its folder. `flip` is the smallest example, `idp`
-//! a typical one. An option of the command line or the scene file that only some methods have
-//! is a [`MethodOption`], listed in their [`MethodInfo::options`]: the others refuse it in the
-//! same words on both input paths ([`MethodKind::refusal`]).
+//! a typical one. Its options are declared once, beside its settings: the keys of its scene
+//! table are its `Settings` as serde reads them, its flags are [`MethodType::FLAGS`]
+//! ([`options`]); the scene file, the command line and the refusal of options the run's method
+//! lacks ([`MethodKind::refusal`]) all come from there.
 
 pub mod ccp;
 mod cost;
 pub mod flip;
 pub mod idp;
 pub mod nbflip;
+pub mod options;
 pub mod powerpic;
 mod seam;
 
 pub use cost::{Footprint, Holds, StartPeak, StepCost};
+pub use options::{Flag, FlagValue, MethodFlags};
 pub use seam::{
-    FluidMethod, MethodInfo, MethodOption, MethodRecording, MethodReport, MethodSummary,
-    MethodType, NoReport, NoSummary, SettingContext, SettingError,
+    BandChoice, FluidMethod, MethodInfo, MethodRecording, MethodReport, MethodSummary, MethodType,
+    NoReport, NoSettings, NoSummary, SettingContext, SettingError, StepFile,
 };
 
 /// Registers the methods (each module declared above, where `cargo fmt` sees it): makes
 /// [`MethodKind`], the closed list of names that scene files (`simulation.method`) and the
-/// command line (`--method`) accept.
+/// command line (`--method`) accept, [`MethodSettings`], and `registry!`, which hands the list
+/// to code that needs a field per method elsewhere (the scene file's tables).
 macro_rules! methods {
     ($($module:ident :: $ty:ident),* $(,)?) => {
+        methods!(@ ($) $($module::$ty),*);
+    };
+    (@ ($d:tt) $($module:ident :: $ty:ident),*) => {
+        /// Calls `callback!(module::Type, ...)` with every registered method.
+        macro_rules! registry {
+            ($d callback:ident) => {
+                $d callback!($($module::$ty),*);
+            };
+        }
+
         /// The fluid methods a scene can run.
         #[derive(
             Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize,
@@ -96,6 +110,35 @@ macro_rules! methods {
                     $(MethodKind::$ty => $module::$ty::check(&self.$module, ctx),)*
                 }
             }
+
+            /// The band the method to run keeps ([`MethodType::band`]).
+            pub fn band(&self) -> Option<BandChoice> {
+                match self.kind {
+                    $(MethodKind::$ty => $module::$ty::band(&self.$module),)*
+                }
+            }
+
+            /// Whether the method to run cross-checks its solves ([`MethodType::cross_checks`]).
+            pub fn cross_checks(&self) -> bool {
+                match self.kind {
+                    $(MethodKind::$ty => $module::$ty::cross_checks(&self.$module),)*
+                }
+            }
+
+            /// The files the method to run writes, named after `stem` ([`MethodType::files`]).
+            pub fn files(&mut self, stem: &std::path::Path) -> Vec<StepFile> {
+                match self.kind {
+                    $(MethodKind::$ty => $module::$ty::files(&mut self.$module, stem),)*
+                }
+            }
+
+            /// Sets flag `name` of every method that declares it.
+            pub fn apply_flag(&mut self, name: &str, value: &toml::Value) {
+                $(for f in $module::$ty::FLAGS.iter().filter(|f| f.name == name) {
+                    (f.set)(&mut self.$module, value.clone())
+                        .expect("a flag's value has the type its setter takes");
+                })*
+            }
         }
 
         impl MethodKind {
@@ -112,6 +155,41 @@ macro_rules! methods {
             pub fn build<const D: usize>(self, s: &MethodSettings) -> Box<dyn FluidMethod<D>> {
                 match self {
                     $(MethodKind::$ty => $module::$ty::build::<D>(&s.$module),)*
+                }
+            }
+
+            /// Whether the method declares flag `name`.
+            pub fn declares_flag(self, name: &str) -> bool {
+                match self {
+                    $(MethodKind::$ty => $module::$ty::FLAGS.iter().any(|f| f.name == name),)*
+                }
+            }
+
+            /// Every method's flags, once each, in registry order.
+            pub fn flags() -> Vec<options::OfferedFlag> {
+                let mut all: Vec<options::OfferedFlag> = vec![];
+                $(for f in $module::$ty::FLAGS {
+                    let i = match all.iter().position(|o| o.name == f.name) {
+                        Some(i) => i,
+                        None => {
+                            all.push(options::OfferedFlag::new(f.name, f.value));
+                            all.len() - 1
+                        }
+                    };
+                    all[i].declared_by.push(($module::$ty::INFO.name, f.help));
+                })*
+                all
+            }
+
+            /// The keys of the method's scene table that its defaults write (an unset optional
+            /// key is not among them).
+            pub fn table_keys(self) -> Vec<String> {
+                fn keys<S: serde::Serialize + Default>() -> Vec<String> {
+                    let t = toml::Table::try_from(S::default()).expect("settings are a table");
+                    t.keys().cloned().collect()
+                }
+                match self {
+                    $(MethodKind::$ty => keys::<<$module::$ty as MethodType>::Settings>(),)*
                 }
             }
 
@@ -132,6 +210,7 @@ methods! {
     nbflip::Nbflip,
     powerpic::Powerpic,
 }
+pub(crate) use registry;
 
 impl MethodKind {
     pub fn name(self) -> &'static str {
@@ -155,20 +234,16 @@ impl MethodKind {
 }
 
 impl MethodKind {
-    /// Why this method refuses `option`, or `None` when it has it: the same words whether the
-    /// option came from the command line or the scene file.
-    pub fn refusal(self, option: MethodOption) -> Option<NoSuchOption> {
-        if self.info().options.contains(&option) {
+    /// Why this method refuses an option, or `None` when it has it (`has` tells which methods
+    /// have it): the same words whether the option came from the command line or the scene file.
+    pub fn refusal(self, has: impl Fn(MethodKind) -> bool) -> Option<NoSuchOption> {
+        if has(self) {
             return None;
         }
-        let having = MethodKind::ALL
-            .iter()
-            .filter(|k| k.info().options.contains(&option))
-            .map(|k| k.name())
-            .collect();
+        let having = MethodKind::ALL.iter().filter(|&&k| has(k));
         Some(NoSuchOption {
             method: self,
-            having,
+            having: having.map(|k| k.name()).collect(),
         })
     }
 }
@@ -186,32 +261,31 @@ pub struct NoSuchOption {
     pub having: Vec<&'static str>,
 }
 
-/// An option the user set that the method does not have ([`MethodSettings::check_given`]).
+/// A flag the user gave that the method does not have ([`MethodSettings::check_flags`]).
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
-#[error("{}: {why}", .option.name())]
+#[error("--{flag}: {why}")]
 pub struct OptionRefused {
-    pub option: MethodOption,
+    /// The flag, without its dashes.
+    pub flag: &'static str,
     pub why: NoSuchOption,
 }
 
 impl MethodSettings {
-    /// The band the run keeps: ccp's band mode when ccp runs, none for the other methods (whose
-    /// scene files may configure ccp's band for when ccp runs them).
-    pub fn band(&self) -> ccp::BandMode {
-        match self.kind {
-            MethodKind::Ccp => self.ccp.band,
-            _ => ccp::BandMode::None,
-        }
-    }
-
-    /// Refuses options the method does not have: `given` lists the ones the user set
-    /// explicitly. The error names the option and the method.
-    pub fn check_given(&self, given: &[MethodOption]) -> Result<(), OptionRefused> {
-        let refused = given.iter().find_map(|&option| {
-            let why = self.kind.refusal(option)?;
-            Some(OptionRefused { option, why })
+    /// Refuses flags the method to run does not declare. The error names the flag and the
+    /// method.
+    pub fn check_flags(&self, flags: &MethodFlags) -> Result<(), OptionRefused> {
+        let refused = flags.0.iter().find_map(|&(name, _)| {
+            let why = self.kind.refusal(|k| k.declares_flag(name))?;
+            Some(OptionRefused { flag: name, why })
         });
         refused.map_or(Ok(()), Err)
+    }
+
+    /// Sets every flag given, in order.
+    pub fn apply_flags(&mut self, flags: &MethodFlags) {
+        for (name, value) in &flags.0 {
+            self.apply_flag(name, value);
+        }
     }
 }
 
@@ -239,20 +313,33 @@ mod tests {
     }
 
     #[test]
-    fn an_option_the_method_lacks_is_refused_naming_both() {
+    fn a_flag_the_method_lacks_is_refused_naming_both() {
         let s = MethodSettings::new(MethodKind::Flip);
-        let e = s.check_given(&[MethodOption::Band]).unwrap_err();
-        assert_eq!(e.option, MethodOption::Band);
+        let band = MethodFlags(vec![("band", toml::Value::String("paths".into()))]);
+        let e = s.check_flags(&band).unwrap_err();
+        assert_eq!(e.flag, "band");
         assert_eq!(e.why.method, MethodKind::Flip);
         assert_eq!(e.why.having, ["ccp"]);
         let said = e.to_string();
         assert!(said.contains("--band") && said.contains("'flip'") && said.contains("ccp"));
-        let ccp = MethodSettings {
+        let mut ccp = MethodSettings {
             kind: MethodKind::Ccp,
             ..s
         };
-        assert!(ccp
-            .check_given(&[MethodOption::Band, MethodOption::ExportLp])
-            .is_ok());
+        assert!(ccp.check_flags(&band).is_ok());
+        ccp.apply_flags(&band);
+        assert_eq!(ccp.band().map(|b| b.variant), Some("paths"));
+    }
+
+    #[test]
+    fn a_flag_two_methods_declare_is_offered_once_and_sets_both() {
+        let flags = MethodKind::flags();
+        let band_r: Vec<_> = flags.iter().filter(|f| f.name == "band-r").collect();
+        assert_eq!(band_r.len(), 1);
+        let by: Vec<&str> = band_r[0].declared_by.iter().map(|d| d.0).collect();
+        assert_eq!(by, ["ccp", "nbflip"]);
+        let mut s = MethodSettings::new(MethodKind::Nbflip);
+        s.apply_flags(&MethodFlags(vec![("band-r", toml::Value::Integer(5))]));
+        assert_eq!((s.ccp.band_r, s.nbflip.band_r), (5, 5));
     }
 }

@@ -6,6 +6,7 @@
 //! module doc of `crate::methods`.
 
 use super::cost::{Footprint, StepCost};
+use super::options::Flag;
 use crate::draw::{LayerView, Log, Panel};
 use crate::grid::{MacField, Vector};
 use crate::metrics::InvariantViolation;
@@ -14,64 +15,11 @@ use crate::sim::solids::ObstacleMode;
 use crate::sim::transfer::{self, Known};
 use crate::sim::State;
 use crate::snapshot::{Reader, SnapshotError, Writer};
+use serde::de::DeserializeOwned;
+use serde::{Deserialize, Serialize};
 use std::any::Any;
 use std::fmt::Debug;
-
-/// The options of the command line and the scene file that only some methods have. A method
-/// that has none of them refuses it, on either input path, with the same reason
-/// (`MethodKind::refusal`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum MethodOption {
-    Band,
-    BandR,
-    Solver,
-    Directions,
-    CrossCheck,
-    ExportLp,
-    IdpResample,
-    PowerPic,
-    PowerPicAir,
-}
-
-impl MethodOption {
-    /// How the user gave it: the command-line flag, else the scene file's key.
-    pub fn name(self) -> String {
-        match (self.flag(), self.key()) {
-            (Some(flag), _) => flag.to_string(),
-            (None, Some(key)) => format!("simulation.{key}"),
-            (None, None) => unreachable!("every option has a flag or a key"),
-        }
-    }
-
-    /// The option as the command line spells it, if it has a flag.
-    pub fn flag(self) -> Option<&'static str> {
-        Some(match self {
-            MethodOption::Band => "--band",
-            MethodOption::BandR => "--band-r",
-            MethodOption::Solver => "--solver",
-            MethodOption::Directions => "--directions",
-            MethodOption::CrossCheck => "--cross-check",
-            MethodOption::ExportLp => "--export-lp",
-            MethodOption::PowerPicAir => "--air",
-            MethodOption::IdpResample | MethodOption::PowerPic => return None,
-        })
-    }
-
-    /// Its key in the scene file's `[simulation]` table, if it has one.
-    pub fn key(self) -> Option<&'static str> {
-        Some(match self {
-            MethodOption::Band => "band",
-            MethodOption::BandR => "band_r",
-            MethodOption::Solver => "solver",
-            MethodOption::Directions => "directions",
-            MethodOption::IdpResample => "idp_resample",
-            MethodOption::PowerPic => "powerpic",
-            MethodOption::CrossCheck | MethodOption::ExportLp | MethodOption::PowerPicAir => {
-                return None
-            }
-        })
-    }
-}
+use std::path::{Path, PathBuf};
 
 /// A method's setting out of its range or at odds with another: its key under the scene file's
 /// `[simulation]` table (e.g. `band_r`, `powerpic.eta`), whether it is a conflict between
@@ -94,6 +42,28 @@ impl SettingError {
     }
 }
 
+/// The band a run keeps (sec. band_method): how it keeps its count, and its depth `R`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BandChoice {
+    /// The variant's name, e.g. `paths`.
+    pub variant: &'static str,
+    pub r: u32,
+}
+
+/// A file a method writes at the end of a step, because the command line asked for it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StepFile {
+    /// The flag that asked for it, without its dashes.
+    pub flag: &'static str,
+    pub step: u64,
+    pub path: PathBuf,
+}
+
+/// A method without settings of its own: its scene table, if given, must be empty.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NoSettings {}
+
 /// What a method's settings are checked with besides themselves.
 #[derive(Clone, Copy, Debug)]
 pub struct SettingContext {
@@ -109,8 +79,6 @@ pub struct MethodInfo {
     pub name: &'static str,
     /// One line: the method and its paper.
     pub about: &'static str,
-    /// The method-specific options it takes.
-    pub options: &'static [MethodOption],
     /// The obstacle modes it supports; the first is its default.
     pub obstacle_modes: &'static [ObstacleMode],
     /// Time-series panels of its metrics in the recording's layout, one quantity family each.
@@ -123,15 +91,33 @@ pub struct MethodInfo {
     pub figures: &'static [&'static str],
 }
 
-/// Registration of a method type: its description, how to build its step and its summary.
+/// Registration of a method type: its description, its options, how to build its step and its
+/// summary.
 pub trait MethodType {
     const INFO: MethodInfo;
-    /// Its own settings, from the scene file and the command line.
-    type Settings: Clone + Debug + PartialEq + Default;
+    /// Its own settings: as serde reads them, its scene table `[simulation.<name>]` (the keys of
+    /// that table which a file of this method may also give directly in `[simulation]` are
+    /// listed in `crate::scene`); the command line sets them through [`Self::FLAGS`].
+    type Settings: Clone + Debug + PartialEq + Default + Serialize + DeserializeOwned + 'static;
+    /// Its command-line flags (`crate::methods::options`).
+    const FLAGS: &'static [Flag<Self::Settings>] = &[];
     /// Refuses settings out of range or at odds with each other (the scene file's check calls it
     /// for the method a scene runs).
     fn check(_settings: &Self::Settings, _ctx: SettingContext) -> Result<(), SettingError> {
         Ok(())
+    }
+    /// The band (sec. band_method) these settings keep, if any.
+    fn band(_settings: &Self::Settings) -> Option<BandChoice> {
+        None
+    }
+    /// Whether these settings solve each step twice and compare ([`crate::draw::Needs::CrossCheck`]).
+    fn cross_checks(_settings: &Self::Settings) -> bool {
+        false
+    }
+    /// The files these settings ask the method to write, named after `stem` (the recording's path
+    /// without its extension), which it records in its settings for [`Self::build`].
+    fn files(_settings: &mut Self::Settings, _stem: &Path) -> Vec<StepFile> {
+        vec![]
     }
     fn build<const D: usize>(settings: &Self::Settings) -> Box<dyn FluidMethod<D>>;
     fn summary<const D: usize>(settings: &Self::Settings) -> Box<dyn MethodSummary<D>>;

@@ -165,7 +165,7 @@ fn compared<'a>(r: &ComparedRun<'a>) -> Compared<'a> {
     Compared {
         label: r.label.clone(),
         title: r.title.clone(),
-        facts: RunFacts::of(r.scene, false, &r.drawing()),
+        facts: RunFacts::of(r.scene, &r.drawing()),
     }
 }
 

@@ -13,7 +13,6 @@
 
 use super::{Drawing, Plane};
 use crate::draw::{LayerView, Needs, Panel};
-use crate::methods::ccp::BandMode;
 use crate::methods::MethodInfo;
 use crate::scene::Scene;
 
@@ -32,13 +31,13 @@ pub struct RunFacts<'a> {
 }
 
 impl<'a> RunFacts<'a> {
-    /// What a run of `scene` drawn as `drawing` has (`cross_check`: `--cross-check`).
-    pub fn of(scene: &'a Scene, cross_check: bool, drawing: &Drawing) -> Self {
+    /// What a run of `scene` drawn as `drawing` has.
+    pub fn of(scene: &'a Scene, drawing: &Drawing) -> Self {
         Self {
             dims: scene.dims.clone(),
             method: scene.method.kind.info(),
-            band: scene.method.band() != BandMode::None,
-            cross_check,
+            band: scene.method.band().is_some(),
+            cross_check: scene.method.cross_checks(),
             obstacles: scene.file.obstacle.iter().map(|o| o.name.clone()).collect(),
             slice_axis: drawing.slice.0,
             surface: drawing.surface,

@@ -65,19 +65,18 @@ pub struct Recorder {
 
 impl Recorder {
     /// Opens the recording with the run's identity, layout and scene; fails (naming the file
-    /// or the viewer) before anything is simulated. `cross_check` is `--cross-check`; a run
-    /// resumed from a checkpoint goes on with its recording as `resumed` says.
+    /// or the viewer) before anything is simulated; a run resumed from a checkpoint goes on
+    /// with its recording as `resumed` says.
     pub fn create(
         sink: &Sink,
         scene: &Scene,
-        cross_check: bool,
         drawing: Drawing,
         resumed: Option<&Resumed>,
     ) -> Result<Self> {
         let output = Output::open(sink, &recording_name(scene), resumed)?;
         let rec = &output.rec;
         let cannot = |e| anyhow!("cannot write the recording to {}: {e}", sink.describe());
-        let facts = RunFacts::of(scene, cross_check, &drawing);
+        let facts = RunFacts::of(scene, &drawing);
         let run = RunLog::new(Stream::new(rec.clone(), ""), scene, drawing, false);
         // A recording that goes on in its own file has its layout and static data already: sent
         // again (a second blueprint, new chunks of the same static data), the viewer drew the
@@ -194,7 +193,10 @@ fn run_properties(scene: &Scene) -> rerun::AnyValues {
     [
         ("scene", scene.name().to_string()),
         ("method", scene.method.kind.name().to_string()),
-        ("band", scene.method.band().name().to_string()),
+        (
+            "band",
+            scene.method.band().map_or("none", |b| b.variant).into(),
+        ),
         ("cells", cells.join("x")),
         ("ppc", sim.ppc.to_string()),
         ("seed", sim.seed.to_string()),

@@ -2,11 +2,12 @@
 //! emitter, obstacle). Every error is a [`SceneError`]: the file, the key, a kind that tests
 //! match, and the reason in words.
 
+use super::simulation::BadValue;
 use super::{
     EmitterFile, MotionKind, ObstacleFile, RegionFile, Scene, SceneFile, Shape, SimulationFile,
 };
 use crate::grid::Grid;
-use crate::methods::{MethodKind, MethodSettings, SettingContext};
+use crate::methods::{MethodFlags, MethodSettings, SettingContext, SettingError};
 use crate::particles;
 use std::collections::BTreeSet;
 
@@ -272,8 +273,9 @@ impl Checker<'_> {
     }
 }
 
-/// Checks a scene file (with overrides applied) and makes the [`Scene`].
-pub(super) fn check(source: &str, file: SceneFile) -> Checked<Scene> {
+/// Checks a scene file (with overrides applied) and the methods' settings with `flags` set, and
+/// makes the [`Scene`].
+pub(super) fn check(source: &str, file: SceneFile, flags: &MethodFlags) -> Checked<Scene> {
     let dim = file.dim;
     if dim != 2 && dim != 3 {
         return Err(SceneError {
@@ -293,7 +295,7 @@ pub(super) fn check(source: &str, file: SceneFile) -> Checked<Scene> {
     name(&ch, &file.name)?;
     let (dims, h) = domain(&ch, file.domain.cells)?;
     ch.h = h;
-    let method = simulation(&ch, &file.simulation)?;
+    let method = simulation(&ch, &file.simulation, flags)?;
     regions(&ch, &file)?;
     file.emitter.iter().enumerate().try_for_each(|(i, e)| {
         emitter(&ch, &format!("emitter[{i}]"), e, file.simulation.max_speed)
@@ -391,7 +393,7 @@ pub const MAX_STEPS: f64 = 1e7;
 const MIN_PRESSURE_TOLERANCE: f64 = 1e-14;
 
 /// Section `simulation`: the ranges of its numbers, and the method's settings.
-fn simulation(ch: &Checker, s: &SimulationFile) -> Checked<MethodSettings> {
+fn simulation(ch: &Checker, s: &SimulationFile, flags: &MethodFlags) -> Checked<MethodSettings> {
     let range = |key: &str, ok: bool, why: String| -> Checked<()> {
         match ok {
             true => Ok(()),
@@ -465,67 +467,48 @@ fn simulation(ch: &Checker, s: &SimulationFile) -> Checked<MethodSettings> {
         ),
     )?;
     step_count(ch, s)?;
-    let m = method_settings(s);
+    let setting_error = |e: SettingError| SceneError {
+        file: ch.source.into(),
+        key: format!("simulation.{}", e.key),
+        kind: match e.conflict {
+            true => ErrorKind::Conflict,
+            false => ErrorKind::Range,
+        },
+        reason: e.reason,
+    };
+    let bad_value = |e: BadValue| SceneError {
+        file: ch.source.into(),
+        key: format!("simulation.{}", e.key),
+        kind: ErrorKind::Syntax,
+        reason: e.reason,
+    };
+    let mut m = s.method_settings().map_err(bad_value)?;
+    m.apply_flags(flags);
     let ctx = SettingContext {
         dim,
         per_axis: ppc_per_axis(s.ppc, dim).unwrap_or(1),
     };
-    m.check(ctx).or_else(|e| {
-        let kind = match e.conflict {
-            true => ErrorKind::Conflict,
-            false => ErrorKind::Range,
-        };
-        ch.err(&format!("simulation.{}", e.key), kind, e.reason)
-    })?;
+    m.check(ctx).map_err(setting_error)?;
     Ok(m)
-}
-
-/// Each method's settings from the keys the file sets (defaults for the others).
-fn method_settings(s: &SimulationFile) -> MethodSettings {
-    let mut m = MethodSettings::new(s.method);
-    let ccp = &mut m.ccp;
-    ccp.solver = s.solver.unwrap_or(ccp.solver);
-    ccp.directions = s.directions.unwrap_or(ccp.directions);
-    ccp.band = s.band.unwrap_or(ccp.band);
-    ccp.band_r = s.band_r.unwrap_or(ccp.band_r);
-    m.nbflip.band_r = s.band_r.unwrap_or(m.nbflip.band_r);
-    m.idp.resample = s.idp_resample.unwrap_or(m.idp.resample);
-    // A method's table gives all its settings.
-    m.ccp = s.ccp.clone().unwrap_or(m.ccp);
-    m.idp = s.idp.clone().unwrap_or(m.idp);
-    m.nbflip = s.nbflip.clone().unwrap_or(m.nbflip);
-    m.powerpic = s.powerpic.unwrap_or(m.powerpic);
-    m
-}
-
-/// Whether the file has a table for method `kind`.
-fn has_table(s: &SimulationFile, kind: MethodKind) -> bool {
-    match kind {
-        MethodKind::Ccp => s.ccp.is_some(),
-        MethodKind::Idp => s.idp.is_some(),
-        MethodKind::Nbflip => s.nbflip.is_some(),
-        MethodKind::Powerpic => s.powerpic.is_some(),
-        MethodKind::Flip => false,
-    }
 }
 
 /// Refuses a method key (`simulation.band`, ...) that the file's own method does not have,
 /// with the words the command line's flags are refused with, and one the method has when the
 /// file also has the method's table (each setting has one place).
 pub(super) fn method_keys(source: &str, s: &SimulationFile) -> Checked<()> {
-    let table = has_table(s, s.method).then_some(s.method.name());
-    let refused = s.options_set().into_iter().find_map(|o| {
-        let why = match (s.method.refusal(o), table) {
+    let table = s.has_table(s.method).then_some(s.method.name());
+    let refused = s.scene_keys().into_iter().find_map(|k| {
+        let has = |m: crate::methods::MethodKind| m.table_keys().iter().any(|t| t == k.table_key);
+        let why = match (s.method.refusal(has), table) {
             (Some(why), _) => format!("{why}; remove the key or set simulation.method"),
             (None, Some(m)) => format!("the file has [simulation.{m}]: set the key there"),
             (None, None) => return None,
         };
-        Some((o, why))
+        Some((k.name, why))
     });
-    let Some((o, reason)) = refused else {
+    let Some((key, reason)) = refused else {
         return Ok(());
     };
-    let key = o.key().expect("a file sets options by key");
     Err(SceneError {
         file: source.into(),
         key: format!("simulation.{key}"),
@@ -761,7 +744,12 @@ fn regions_cover_cells<const D: usize>(ch: &Checker, scene: &Scene) -> Checked<(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::methods::ccp::{BandMode, Solver};
+    use crate::methods::ccp::Solver;
+    use crate::methods::MethodFlags;
+
+    fn band_of(s: &Scene) -> Option<&'static str> {
+        s.method.band().map(|b| b.variant)
+    }
 
     #[test]
     fn a_toml_error_names_the_key_it_points_at() {
@@ -789,7 +777,7 @@ mod tests {
         method_keys("x.toml", &file.simulation)?;
         let mut file = file;
         overrides.apply(&mut file);
-        check("x.toml", file)
+        check("x.toml", file, &overrides.flags)
     }
 
     #[test]
@@ -812,6 +800,15 @@ mod tests {
         assert!(scene_with("ccp", "band = \"paths\"\nband_r = 2", &none).is_ok());
         let nb = scene_with("nbflip", "band_r = 2", &none).unwrap();
         assert_eq!(nb.method.nbflip.band_r, 2);
+        // A value its table refuses is refused naming the key as the file spelt it.
+        let e = scene_with("ccp", "band = \"wide\"", &none).unwrap_err();
+        assert_eq!(e.key, "simulation.band");
+        assert!(
+            e.reason.contains("wide") && e.reason.contains("paths"),
+            "{e}"
+        );
+        let e = scene_with("idp", "idp_resample = 3", &none).unwrap_err();
+        assert_eq!(e.key, "simulation.idp_resample");
     }
 
     #[test]
@@ -822,7 +819,7 @@ mod tests {
         };
         let s = scene_with("ccp", "band = \"paths\"", &flip).unwrap();
         assert_eq!(s.method.kind, crate::methods::MethodKind::Flip);
-        assert_eq!(s.method.band(), crate::methods::ccp::BandMode::None);
+        assert_eq!(band_of(&s), None);
         assert!(!s.run_tags().iter().any(|t| t.starts_with("band-")));
     }
 
@@ -865,18 +862,13 @@ mod tests {
         // The table's unset keys take their defaults; the flags reach the table.
         let table = "[simulation.ccp]\nsolver = \"simplex\"";
         let s = scene_with("ccp", table, &none).unwrap();
-        assert_eq!(
-            (s.method.ccp.solver, s.method.band()),
-            (Solver::Simplex, BandMode::None)
-        );
+        assert_eq!((s.method.ccp.solver, band_of(&s)), (Solver::Simplex, None));
         let band = super::super::Overrides {
-            band: Some(BandMode::Paths),
+            flags: MethodFlags(vec![("band", toml::Value::String("paths".into()))]),
             ..Default::default()
         };
-        assert_eq!(
-            scene_with("ccp", table, &band).unwrap().method.band(),
-            BandMode::Paths
-        );
+        let s = scene_with("ccp", table, &band).unwrap();
+        assert_eq!(band_of(&s), Some("paths"));
         // An unknown key in a table is refused naming it.
         let text_err = toml::from_str::<SceneFile>(
             "name = \"x\"\ndim = 2\n[domain]\nsize = [1.0, 1.0]\ncells = 8\n[simulation.idp]\nresampel = true\n",

@@ -7,16 +7,14 @@
 mod check;
 mod limits;
 mod memory;
+mod simulation;
 
 pub use check::{ErrorKind, SceneError};
 pub use memory::{ensure_fit, peak_memory_mib, MemoryEstimate};
+pub use simulation::SimulationFile;
 
 use crate::grid::Vector;
-use crate::methods::ccp::{BandMode, CcpSettings, Directions, Solver};
-use crate::methods::idp::IdpSettings;
-use crate::methods::nbflip::NbflipSettings;
-use crate::methods::powerpic::{AirForm, PowerPicSettings};
-use crate::methods::{MethodKind, MethodOption, MethodSettings};
+use crate::methods::{MethodFlags, MethodKind, MethodSettings};
 use crate::particles::{Region, SpiralBlock};
 use crate::sim::emit::Emitter;
 use crate::sim::solids::{Motion, Obstacle, ObstacleMode};
@@ -173,128 +171,6 @@ pub struct DomainFile {
     pub cells: usize,
 }
 
-#[derive(Clone, Debug, Deserialize, Serialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct SimulationFile {
-    pub method: MethodKind,
-    /// Simulated time in seconds.
-    pub duration: f64,
-    /// Particles per cell, `mu`; must be `k^dim` for a whole `k`.
-    pub ppc: usize,
-    /// Seeding jitter, a fraction of the sub-cell spacing in [0, 0.5).
-    pub jitter: f64,
-    /// m/s^2 per axis; defaults to 9.81 down axis 1 (y is up, as in the paper).
-    pub gravity: Option<Vec<f64>>,
-    /// FLIP share of the FLIP/PIC velocity blend, in [0, 1].
-    pub flip_ratio: f64,
-    /// Largest motion per step in cells, in (0, 1].
-    pub cfl: f64,
-    /// Largest time step in seconds.
-    pub max_dt: f64,
-    /// Bound on the fluid speed, m/s.
-    pub max_speed: f64,
-    /// Relative tolerance of the pressure solve.
-    pub pressure_tolerance: f64,
-    /// CG's preconditioner in the pressure solve and idp's second solve, for every method:
-    /// auto (the default: multigrid from 10,000 unknown rows in 2D and 100,000 in 3D, where
-    /// it was measured faster, mic0 below; `Preconditioner::AUTO_ROWS`), mic0 (modified
-    /// incomplete Cholesky) or multigrid (a geometric V-cycle, McAdams, Sifakis and Teran
-    /// 2010: an iteration count nearly independent of the grid, and parallel). All stop at
-    /// `pressure_tolerance`; results differ within it.
-    pub pressure_preconditioner: Preconditioner,
-    pub seed: u64,
-    /// The keys below belong to some methods only (`MethodInfo::options`) and configure the
-    /// file's own method (`band_r` both band methods): a file that sets one its method does not
-    /// have is refused, naming the key, as the command line refuses the flag. Other methods run
-    /// on the file take their settings from their table (`[simulation.idp]`, below) or their
-    /// defaults. Unset, each takes its method's default.
-    ///
-    /// Solver of the correction step (method ccp; default flow).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub solver: Option<Solver>,
-    /// Candidate moves of the correction (method ccp): von Neumann (5 in 2D, 7 in 3D, the
-    /// default) or Moore (9, 27).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub directions: Option<Directions>,
-    /// The band method of method ccp (sec. band_method): none (the default), or how the band's
-    /// count is kept: paths (sec. push_part, the paper's choice), one-way (sec. band_con2) or
-    /// full (sec. band_con, small problems only).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub band: Option<BandMode>,
-    /// `R` (methods ccp and nbflip): depth of the band interface; the band is `R + 1` cells
-    /// thick (default 3; the paper: 3, and 6 for the dam scenes).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub band_r: Option<u32>,
-    /// How obstacles get through particles: couple (method ccp, sec. 7), or for the other
-    /// methods naive (wait until the way is free) or ignore (move regardless). Default: the
-    /// method's first mode ([`crate::methods::MethodInfo::obstacle_modes`]).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub obstacle: Option<ObstacleMode>,
-    /// Method idp: resample cells over twice the rest density (Kugelstadt et al.'s optional
-    /// step; off by default, as in their 3D scene).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub idp_resample: Option<bool>,
-    /// A table per method, `[simulation.<method>]`: that method's settings whenever it runs
-    /// the scene (its own method, `--method`, `cellflip report`), unset keys at their defaults.
-    /// A file whose method has a table sets that method's keys there only.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub ccp: Option<CcpSettings>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub idp: Option<IdpSettings>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub nbflip: Option<NbflipSettings>,
-    /// Method powerpic's parameters (defaults: Levi's, sec. Evaluation).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub powerpic: Option<PowerPicSettings>,
-}
-
-impl SimulationFile {
-    /// The method-specific keys of `[simulation]` this file sets. A table named after its
-    /// method (`[simulation.powerpic]`) is not among them: it applies whenever that method runs
-    /// the scene (`--method`, `cellflip report`), whatever the file's own method.
-    pub fn options_set(&self) -> Vec<MethodOption> {
-        [
-            (MethodOption::Solver, self.solver.is_some()),
-            (MethodOption::Directions, self.directions.is_some()),
-            (MethodOption::Band, self.band.is_some()),
-            (MethodOption::BandR, self.band_r.is_some()),
-            (MethodOption::IdpResample, self.idp_resample.is_some()),
-        ]
-        .into_iter()
-        .filter_map(|(o, set)| set.then_some(o))
-        .collect()
-    }
-}
-
-impl Default for SimulationFile {
-    fn default() -> Self {
-        Self {
-            method: MethodKind::Flip,
-            duration: 2.0,
-            ppc: 4,
-            jitter: 0.1,
-            gravity: None,
-            flip_ratio: 0.9,
-            cfl: 1.0,
-            max_dt: 0.01,
-            max_speed: 10.0,
-            pressure_tolerance: 1e-9,
-            pressure_preconditioner: Preconditioner::Auto,
-            seed: 1,
-            solver: None,
-            directions: None,
-            band: None,
-            band_r: None,
-            obstacle: None,
-            idp_resample: None,
-            ccp: None,
-            idp: None,
-            nbflip: None,
-            powerpic: None,
-        }
-    }
-}
-
 /// A box (`min`, `max`) or a ball (`center`, `radius`), in metres.
 #[derive(Clone, Debug, Default, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
@@ -346,15 +222,11 @@ pub struct Overrides {
     pub cells: Option<usize>,
     pub ppc: Option<usize>,
     pub seed: Option<u64>,
-    pub solver: Option<Solver>,
-    pub directions: Option<Directions>,
-    pub band: Option<BandMode>,
-    pub band_r: Option<u32>,
     pub obstacle: Option<ObstacleMode>,
     /// `simulation.pressure_preconditioner`.
     pub pressure: Option<Preconditioner>,
-    /// `simulation.powerpic.air`.
-    pub air: Option<AirForm>,
+    /// The methods' flags, applied to their settings after the file's.
+    pub flags: MethodFlags,
 }
 
 /// A scene ready to run: its source, the file with overrides applied, and its checked values.
@@ -371,7 +243,8 @@ pub struct Scene {
 }
 
 impl Overrides {
-    /// Writes the overrides into the scene file, and the default gravity where it has none.
+    /// Writes the overrides but the methods' flags into the scene file, and the default gravity
+    /// where it has none.
     pub(crate) fn apply(&self, file: &mut SceneFile) {
         let sim = &mut file.simulation;
         macro_rules! set {
@@ -382,32 +255,11 @@ impl Overrides {
             };
         }
         set!(method, duration, ppc, seed);
-        macro_rules! set_option {
-            ($($field:ident),*) => {
-                $(if let Some(v) = &self.$field {
-                    sim.$field = Some(*v);
-                })*
-            };
-        }
-        set_option!(solver, directions, band, band_r);
-        // The flags reach the tables too, which take precedence over the keys above.
-        if let Some(ccp) = &mut sim.ccp {
-            ccp.solver = self.solver.unwrap_or(ccp.solver);
-            ccp.directions = self.directions.unwrap_or(ccp.directions);
-            ccp.band = self.band.unwrap_or(ccp.band);
-            ccp.band_r = self.band_r.unwrap_or(ccp.band_r);
-        }
-        if let Some(nbflip) = &mut sim.nbflip {
-            nbflip.band_r = self.band_r.unwrap_or(nbflip.band_r);
-        }
         if let Some(m) = self.obstacle {
             sim.obstacle = Some(m);
         }
         if let Some(p) = self.pressure {
             sim.pressure_preconditioner = p;
-        }
-        if let Some(air) = self.air {
-            sim.powerpic.get_or_insert_with(Default::default).air = air;
         }
         if let Some(c) = self.cells {
             file.domain.cells = c;
@@ -437,9 +289,9 @@ impl Scene {
     /// 50x50x50 ppc8 seed1`. Names recordings and exported problems.
     pub fn run_tags(&self) -> Vec<String> {
         let mut tags = vec![self.name().to_string(), self.method.kind.name().to_string()];
-        if self.method.band() != BandMode::None {
-            tags.push(format!("band-{}", self.method.band().name()));
-            tags.push(format!("r{}", self.method.ccp.band_r));
+        if let Some(band) = self.method.band() {
+            tags.push(format!("band-{}", band.variant));
+            tags.push(format!("r{}", band.r));
         }
         let cells: Vec<String> = self.dims.iter().map(usize::to_string).collect();
         tags.push(cells.join("x"));
@@ -478,23 +330,29 @@ impl Scene {
 
     /// Parses and checks scene text; `source` names it in errors. The method keys the file
     /// sets are checked against the file's own method, before the command line's overrides
-    /// (whose options the commands check against the method run).
+    /// (whose flags the commands check against the method run).
     pub fn parse(source: &str, text: &str, overrides: &Overrides) -> Result<Scene> {
-        let mut file: SceneFile =
+        let file: SceneFile =
             toml::from_str(text).map_err(|e| check::toml_error(source, text, &e))?;
         check::method_keys(source, &file.simulation)?;
-        overrides.apply(&mut file);
-        Ok(check::check(source, file)?)
+        Self::checked(source, file, overrides)
     }
 
-    /// The scene as run, from its [`Scene::resolved_toml`] (a checkpoint's): checked as any
-    /// scene, but not for keys of methods other than its own, which a file run with another
-    /// method (`--method`) keeps beside the one it ran.
-    pub fn parse_resolved(source: &str, text: &str) -> Result<Scene> {
-        let mut file: SceneFile =
+    /// The scene as run, from its [`Scene::resolved_toml`] (a checkpoint's) with `overrides`:
+    /// checked as any scene.
+    pub fn parse_resolved(source: &str, text: &str, overrides: &Overrides) -> Result<Scene> {
+        let file: SceneFile =
             toml::from_str(text).map_err(|e| check::toml_error(source, text, &e))?;
-        Overrides::default().apply(&mut file);
-        Ok(check::check(source, file)?)
+        Self::checked(source, file, overrides)
+    }
+
+    /// The file with `overrides` applied, checked; its `[simulation]` then holds every method's
+    /// table as it runs ([`SimulationFile::with_tables`]).
+    fn checked(source: &str, mut file: SceneFile, overrides: &Overrides) -> Result<Scene> {
+        overrides.apply(&mut file);
+        let mut scene = check::check(source, file, &overrides.flags)?;
+        scene.file.simulation = scene.file.simulation.with_tables(&scene.method);
+        Ok(scene)
     }
 
     /// The configuration in grid units.

@@ -8,6 +8,7 @@ use cellflip::methods::ccp::correct::band::{BandContext, BandVariant};
 use cellflip::methods::ccp::correct::guarantees::check_cell_counts;
 use cellflip::methods::ccp::correct::{correct, CorrectionSettings};
 use cellflip::methods::ccp::BandMode;
+use cellflip::methods::MethodFlags;
 use cellflip::methods::MethodKind;
 use cellflip::runner::Limit;
 use cellflip::scene::Overrides;
@@ -44,7 +45,7 @@ fn run_band_counted<const D: usize>(
     let (mut second_steps_checked, mut crossed) = (0, 0);
     let overrides = Overrides {
         method: Some(MethodKind::Ccp),
-        band: Some(band),
+        flags: overrides.flags.clone().with("band", band),
         ..overrides
     };
     let scene = load(name, &overrides);
@@ -159,7 +160,7 @@ fn band_conserves_volume_over_a_long_3d_run() {
         BandMode::Paths,
         Overrides {
             cells: Some(32),
-            band_r: Some(3),
+            flags: MethodFlags::default().with("band-r", 3),
             ..Default::default()
         },
         200,
@@ -185,7 +186,7 @@ fn all_band_variants_stay_feasible_and_full_is_the_optimum_2d() {
     // Every step runs all variants on the same problem (cross-check).
     let small = Overrides {
         cells: Some(24),
-        band_r: Some(2),
+        flags: MethodFlags::default().with("band-r", 2),
         ..Default::default()
     };
     for band in [BandMode::Paths, BandMode::OneWay, BandMode::Full] {
@@ -207,7 +208,7 @@ fn all_band_variants_stay_feasible_and_full_is_the_optimum_2d() {
 fn all_band_variants_stay_feasible_3d() {
     let small = Overrides {
         cells: Some(12),
-        band_r: Some(1),
+        flags: MethodFlags::default().with("band-r", 1),
         ..Default::default()
     };
     for band in [BandMode::Paths, BandMode::OneWay, BandMode::Full] {
@@ -232,7 +233,7 @@ fn exact_paths_is_the_optimum_of_the_second_step<const D: usize>(
 ) {
     let small = Overrides {
         cells: Some(cells),
-        band_r: Some(band_r),
+        flags: MethodFlags::default().with("band-r", band_r),
         ..Default::default()
     };
     let (v, _, checked, _) = run_band_counted::<D>(name, BandMode::ExactPaths, small, steps, true);
@@ -256,7 +257,7 @@ fn the_band_holds_fewer_particles_than_the_fluid_on_dam_3d() {
     let at = |band| {
         let o = Overrides {
             cells: Some(100),
-            band: Some(band),
+            flags: MethodFlags::default().with("band", band),
             ..Default::default()
         };
         let sim = simulation::<3>(&load("dam-3d", &o), false);

@@ -4,7 +4,7 @@
 //! every method in 2D and 3D, ccp's band variants, the obstacle modes, an emitter mid-pour,
 //! and a run that continues on another number of threads.
 
-use crate::common::{digest_report, digest_state, load, Digest};
+use crate::common::{band_flags, digest_report, digest_state, load, Digest};
 use cellflip::methods::ccp::BandMode;
 use cellflip::methods::MethodKind;
 use cellflip::runner::{Limit, Runner};
@@ -121,7 +121,7 @@ fn scene(
 ) -> Scene {
     let o = Overrides {
         method: Some(method),
-        band,
+        flags: band_flags(band),
         obstacle,
         ..Default::default()
     };
@@ -690,7 +690,7 @@ fn the_scene_as_run_reads_back_as_the_same_scene() {
             let Ok(s) = Scene::load(name, &o) else {
                 continue;
             };
-            let back = Scene::parse_resolved(&s.source, &s.resolved_toml())
+            let back = Scene::parse_resolved(&s.source, &s.resolved_toml(), &Overrides::default())
                 .unwrap_or_else(|e| panic!("{name} {}: {e:#}", m.name()));
             assert_eq!(
                 back.resolved_toml(),

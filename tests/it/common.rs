@@ -7,7 +7,7 @@
 use cellflip::methods::ccp::BandMode;
 use cellflip::methods::ccp::CcpReport;
 use cellflip::methods::idp::IdpReport;
-use cellflip::methods::MethodKind;
+use cellflip::methods::{MethodFlags, MethodKind};
 use cellflip::runner::{Limit, Runner};
 use cellflip::scene::{Overrides, Scene};
 use cellflip::simulation::{Simulation, StepReport};
@@ -23,9 +23,15 @@ pub fn load(name: &str, o: &Overrides) -> Scene {
 pub fn with(method: MethodKind, band: Option<BandMode>) -> Overrides {
     Overrides {
         method: Some(method),
-        band,
+        flags: band_flags(band),
         ..Default::default()
     }
+}
+
+/// `--band` when `band` is given.
+pub fn band_flags(band: Option<BandMode>) -> MethodFlags {
+    let flags = MethodFlags::default();
+    band.map_or(flags.clone(), |b| flags.with("band", b))
 }
 
 /// A new simulation of `scene` with its method, and ccp's `--cross-check` when `cross_check`.

@@ -6,6 +6,7 @@ use crate::common::{ccp, load, run_sim, simulation};
 use cellflip::grid::{Grid, Vector};
 use cellflip::methods::ccp::correct::problem;
 use cellflip::methods::ccp::{BandMode, Directions};
+use cellflip::methods::MethodFlags;
 use cellflip::methods::MethodKind;
 use cellflip::runner::Limit;
 use cellflip::scene::Overrides;
@@ -424,7 +425,7 @@ fn volume_never_drops_below_100_percent_3d() {
         "drop-3d",
         Overrides {
             cells: Some(12),
-            band: Some(BandMode::None),
+            flags: MethodFlags::default().with("band", BandMode::None),
             ..small
         },
         10,

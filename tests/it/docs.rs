@@ -69,6 +69,9 @@ fn parser_keys(path: &str) -> BTreeSet<String> {
     let err = toml::from_str::<SceneFile>(&text)
         .expect_err("an unknown key is refused")
         .to_string();
+    if err.contains("there are no fields") {
+        return BTreeSet::new();
+    }
     let expected = err
         .split("expected ")
         .nth(1)
@@ -97,19 +100,17 @@ fn every_scene_key_is_documented_and_every_documented_key_exists() {
     while let Some(t) = tables.pop() {
         for key in parser_keys(&t) {
             // A key that names a table of its own is a table when the parser asks for its keys.
-            let is_table = matches!(
-                key.as_str(),
-                "domain"
-                    | "simulation"
-                    | "fluid"
-                    | "solid"
-                    | "emitter"
-                    | "obstacle"
-                    | "simulation.ccp"
-                    | "simulation.idp"
-                    | "simulation.nbflip"
-                    | "simulation.powerpic"
-            );
+            let sections = [
+                "domain",
+                "simulation",
+                "fluid",
+                "solid",
+                "emitter",
+                "obstacle",
+            ];
+            let method_table = |k: &MethodKind| key == format!("simulation.{}", k.name());
+            let is_table =
+                sections.contains(&key.as_str()) || MethodKind::ALL.iter().any(method_table);
             if is_table {
                 tables.push(key.clone());
             }

@@ -7,7 +7,7 @@
 //! `tests/it/golden_digests.txt`; after a change that must alter results, regenerate them with
 //! `CELLFLIP_BLESS=1 cargo test --release --test it golden::` and say why in the commit.
 
-use crate::common::{digest_run, load};
+use crate::common::{band_flags, digest_run, load};
 use cellflip::methods::ccp::BandMode;
 use cellflip::methods::MethodKind;
 use cellflip::scene::{Overrides, BUILT_IN};
@@ -67,7 +67,7 @@ fn digest(
 ) -> (String, usize) {
     let mut o = Overrides {
         method,
-        band,
+        flags: band_flags(band),
         pressure,
         ..Default::default()
     };

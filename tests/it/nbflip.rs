@@ -6,7 +6,6 @@
 
 use crate::common::{load, run, run_at_rest, with};
 use cellflip::grid::{Grid, MacField, Vector};
-use cellflip::methods::ccp::BandMode;
 use cellflip::methods::nbflip::levelset::{particle_radius, LevelSet};
 use cellflip::methods::nbflip::region::Region;
 use cellflip::methods::nbflip::{combine, NbflipReport, Resampling};
@@ -258,8 +257,8 @@ fn the_readme_s_comparison_scene_runs_ccp_with_the_band_and_nbflip_at_the_same_d
     let ccp = load(path, &Overrides::default());
     let m = &ccp.method;
     assert_eq!(
-        (m.kind, m.band(), m.ccp.band_r),
-        (MethodKind::Ccp, BandMode::Paths, 6)
+        (m.kind, m.band().map(|b| (b.variant, b.r))),
+        (MethodKind::Ccp, Some(("paths", 6)))
     );
     let nb = load(path, &with(MethodKind::Nbflip, None));
     run::<2>(&nb, Some(3), |_, rep| assert_eq!(nbflip(rep).band_r, 6));

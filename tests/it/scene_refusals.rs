@@ -101,9 +101,16 @@ fn bad_band_settings_are_rejected() {
     let with = |extra: &str| GOOD.replace("duration = 0.05", &format!("duration = 0.05\n{extra}"));
     rejects(
         "band-name",
-        &with("band = \"wide\""),
+        &with("method = \"ccp\"\nband = \"wide\""),
         "simulation.band",
         ErrorKind::Syntax,
+    );
+    // In a file whose method has no band, the key itself is refused first.
+    rejects(
+        "band-of-flip",
+        &with("band = \"wide\""),
+        "simulation.band",
+        ErrorKind::Conflict,
     );
     let zero = with("method = \"ccp\"\nband = \"paths\"\nband_r = 0");
     rejects("band-r", &zero, "simulation.band_r", ErrorKind::Range);

@@ -7,6 +7,7 @@ use crate::common::{self, load};
 use cellflip::grid::Vector;
 use cellflip::methods::ccp::BandMode;
 use cellflip::methods::ccp::CcpReport;
+use cellflip::methods::MethodFlags;
 use cellflip::methods::MethodKind;
 use cellflip::runner::Limit;
 use cellflip::scene::{Overrides, Scene};
@@ -362,7 +363,7 @@ fn falling_obstacles_reach_the_floor_in_3d_with_the_band() {
             ..Default::default()
         };
         let s = load(name, &o);
-        assert_ne!(s.method.band(), BandMode::None);
+        assert!(s.method.band().is_some());
         reaches_the_floor(name, 3, &s);
     }
 }
@@ -418,7 +419,7 @@ fn objective_and_penalty_split_the_band_correction_alike() {
     // With the band: the displacement of the particles outside the cells the box wants, so the
     // band's objective (every particle's displacement) exactly when no particle is in them.
     let o = Overrides {
-        band: Some(BandMode::Paths),
+        flags: MethodFlags::default().with("band", BandMode::Paths),
         ..Default::default()
     };
     let large = load("large-obstacle-2d", &o);

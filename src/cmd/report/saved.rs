@@ -189,7 +189,6 @@ impl RunCheckpoints {
             scene_source: scene.source.clone(),
             scene_toml: scene.resolved_toml(),
             command: std::env::args().collect::<Vec<_>>().join(" "),
-            cross_check: false,
             frames: 0,
             recording: None,
             every: None,

@@ -6,7 +6,7 @@ use crate::cmd::cli::{RunArgs, ServeArgs, SinkArgs};
 use crate::cmd::export;
 use crate::frames::FrameWorker;
 use crate::interrupt::{self, Watchdog};
-use crate::methods::MethodOption;
+use crate::methods::StepFile;
 use crate::record::{Drawing, Recorder, Sink, WebServe};
 use crate::runner::{Limit, Runner};
 use crate::scene::{peak_memory_mib, MemoryEstimate, Overrides, Scene};
@@ -28,26 +28,10 @@ impl RunArgs {
             cells: self.scale.res,
             ppc: self.scale.ppc,
             seed: self.scale.seed,
-            solver: self.ccp.solver,
-            directions: self.ccp.directions,
-            band: self.ccp.band,
-            band_r: self.band_r,
             obstacle: self.obstacle,
-            pressure: self.pressure,
-            air: self.air,
+            pressure: self.pressure.preconditioner,
+            flags: self.methods.clone(),
         }
-    }
-
-    /// The method-specific options given on the command line.
-    fn method_options(&self) -> Vec<MethodOption> {
-        let mut given = self.ccp.given();
-        if self.band_r.is_some() {
-            given.push(MethodOption::BandR);
-        }
-        if self.air.is_some() {
-            given.push(MethodOption::PowerPicAir);
-        }
-        given
     }
 }
 
@@ -73,19 +57,23 @@ pub fn run(args: &RunArgs) -> Result<()> {
         }
     };
     let estimate = scene.ensure_fits_in_memory(!args.sink.no_record)?;
-    scene.method.check_given(&args.method_options())?;
+    scene.method.check_flags(&args.methods)?;
     let limit = match args.steps {
         Some(0) => bail!("--steps: must be at least 1"),
         Some(n) => Limit::Steps(n),
         None => Limit::SimSeconds(scene.duration_secs()),
     };
-    check_export_step(args.ccp.export_lp, limit)?;
     parse_slice(args.slice.as_deref(), scene.dim())?;
     let (sink, continued) = recording_of(args, &scene, resumed.as_ref())?;
+    let mut method = scene.method.clone();
+    let files = method.files(&files_stem(&scene, sink.as_ref().and_then(Sink::file))?);
+    files.iter().try_for_each(|f| check_file_step(f, limit))?;
     if let (Some(s), false) = (&sink, args.no_viewer_check) {
         s.check_reachable()?;
     }
     let start = Start {
+        method,
+        files,
         checkpoints: checkpoints_of(args, every, &scene, sink.as_ref(), resumed.as_ref())?,
         continued,
         resumed,
@@ -107,19 +95,17 @@ fn run_dim<const D: usize>(
     args: &RunArgs,
     start: Start,
 ) -> Result<()> {
-    let out = sink.and_then(Sink::file);
     let drawing = Drawing {
         surface: !args.no_surface,
         moves: args.moves,
         slice: parse_slice(args.slice.as_deref(), D)?,
     };
-    let cross_check =
-        args.ccp.cross_check || start.resumed.as_ref().is_some_and(|c| c.origin.cross_check);
     let recorder = sink
-        .map(|s| Recorder::create(s, scene, cross_check, drawing, start.continued.as_ref()))
+        .map(|s| Recorder::create(s, scene, drawing, start.continued.as_ref()))
         .transpose()?;
-    match simulate::<D>(scene, limit, recorder.as_ref(), out, args, start) {
-        Ok(ran) => finish(scene, estimate, ran, recorder, sink, args),
+    let files = start.files.clone();
+    match simulate::<D>(scene, limit, recorder.as_ref(), args, start) {
+        Ok(ran) => finish(scene, estimate, ran, recorder, sink, args, &files),
         Err(e) => {
             if let Some(r) = recorder {
                 r.abandon();
@@ -134,27 +120,20 @@ fn run_dim<const D: usize>(
 fn begin<const D: usize>(
     scene: &Scene,
     recorder: Option<&Recorder>,
-    out: Option<&Path>,
     args: &RunArgs,
     start: &mut Start,
 ) -> Result<Simulation<D>> {
-    let mut method = scene.method.clone();
-    method.ccp.export_lp = match args.ccp.export_lp {
-        Some(n) => Some((n, mps_path(scene, out, n)?)),
-        None => None,
-    };
-    let cross_check = start.resumed.as_ref().is_some_and(|c| c.origin.cross_check);
-    method.ccp.cross_check = args.ccp.cross_check || cross_check;
+    let method = &start.method;
     let t0 = Instant::now();
     let sim = match start.resumed.as_mut() {
         Some(c) => {
-            let sim = Simulation::<D>::restore(scene.config::<D>(), &method, &c.reader)
+            let sim = Simulation::<D>::restore(scene.config::<D>(), method, &c.reader)
                 .map_err(|e| anyhow!("checkpoint '{}': {e}", c.path.display()))?;
             // The file's copy of the state is not kept for the whole run.
             c.reader.release();
             sim
         }
-        None => Simulation::<D>::new(scene.config::<D>(), &method),
+        None => Simulation::<D>::new(scene.config::<D>(), method),
     };
     let resumed = start.resumed.as_ref();
     if let (Some(c), false) = (resumed, args.quiet) {
@@ -191,11 +170,10 @@ fn simulate<const D: usize>(
     scene: &Scene,
     limit: Limit,
     recorder: Option<&Recorder>,
-    out: Option<&Path>,
     args: &RunArgs,
     mut start: Start,
 ) -> Result<Ran<D>> {
-    let sim = begin::<D>(scene, recorder, out, args, &mut start)?;
+    let sim = begin::<D>(scene, recorder, args, &mut start)?;
     let resumed = start.resumed.as_ref();
     let sinks = [
         recorder.and_then(Recorder::surface_sink),
@@ -320,6 +298,7 @@ fn finish<const D: usize>(
     recorder: Option<Recorder>,
     sink: Option<&Sink>,
     args: &RunArgs,
+    files: &[StepFile],
 ) -> Result<()> {
     let Ran {
         runner,
@@ -345,7 +324,8 @@ fn finish<const D: usize>(
     if !args.quiet {
         summarise(scene, estimate, &runner, sink, saver.as_ref(), args);
     }
-    result.and_then(|()| check_export_written(args.ccp.export_lp, runner.sim.state.steps))?;
+    let steps = runner.sim.state.steps;
+    result.and_then(|()| files.iter().try_for_each(|f| check_file_written(f, steps)))?;
     if let Some(s) = served {
         s.hold_until_signal();
     }
@@ -526,37 +506,39 @@ fn parse_slice(arg: Option<&str>, dim: usize) -> Result<(usize, f64)> {
     Ok((axis, at))
 }
 
-/// `--export-lp N` must name a step the run can reach: steps count from 1 and, with
-/// `--steps M`, end at M. Checked before anything is written.
-fn check_export_step(export: Option<u64>, limit: Limit) -> Result<()> {
-    match (export, limit) {
-        (Some(0), _) => bail!("--export-lp 0: steps are numbered from 1"),
-        (Some(n), Limit::Steps(m)) if n > m => bail!(
-            "--export-lp {n}: the run has only {m} steps (--steps {m}), so step {n} is never \
-             reached"
+/// A file a flag asked for (`--export-lp N`) must be of a step the run can reach.
+fn check_file_step(f: &StepFile, limit: Limit) -> Result<()> {
+    match limit {
+        Limit::Steps(m) if f.step > m => bail!(
+            "--{} {n}: the run has only {m} steps (--steps {m}), so step {n} is never reached",
+            f.flag,
+            n = f.step
         ),
         _ => Ok(()),
     }
 }
 
-/// A run limited by time (or stopped by a signal) may end before the step `--export-lp` asked
-/// for; then no problem was written, and the run fails saying so (its recording is finished).
-fn check_export_written(export: Option<u64>, steps: u64) -> Result<()> {
-    match export {
-        Some(n) if steps < n => bail!(
-            "--export-lp {n}: the run ended after {steps} steps, so step {n} was never reached \
-             and no problem was written"
+/// A run limited by time (or stopped by a signal) may end before the step a file was asked
+/// for; then it was not written, and the run fails saying so (its recording is finished).
+fn check_file_written(f: &StepFile, steps: u64) -> Result<()> {
+    match steps < f.step {
+        true => bail!(
+            "--{} {n}: the run ended after {steps} steps, so step {n} was never reached and \
+             '{}' was not written",
+            f.flag,
+            f.path.display(),
+            n = f.step
         ),
-        _ => Ok(()),
+        false => Ok(()),
     }
 }
 
-/// Where `--export-lp` writes step `step`'s problem: beside the recording, or without one in
-/// `recordings/` (created here, so that a missing folder fails before the run, not at step
-/// `step`). The name says what tells runs of a scene apart ([`Scene::run_tags`]), e.g.
-/// `dam-3d-ccp-band-paths-r6-50x50x50-ppc8-seed1-step3.mps`.
-fn mps_path(scene: &Scene, out: Option<&Path>, step: u64) -> Result<PathBuf> {
-    let name = format!("{}-step{step}.mps", scene.run_tags().join("-"));
+/// What files a method writes are named after ([`MethodSettings::files`]): the recording's
+/// path without its extension, or without one `recordings/` (created here, so that a missing
+/// folder fails before the run) and what tells runs of a scene apart ([`Scene::run_tags`]),
+/// e.g. `recordings/dam-3d-ccp-band-paths-r6-50x50x50-ppc8-seed1`.
+fn files_stem(scene: &Scene, out: Option<&Path>) -> Result<PathBuf> {
+    let name = scene.run_tags().join("-");
     match out {
         Some(p) => Ok(p.with_file_name(name)),
         None => {

@@ -4,6 +4,7 @@
 
 use crate::checkpoint::{self, Checkpoints, Opened, Origin, Saver};
 use crate::cmd::cli::RunArgs;
+use crate::methods::{MethodFlags, MethodSettings, StepFile};
 use crate::record::{Resumed, Sink};
 use crate::scene::{Overrides, Scene};
 use anyhow::{anyhow, bail, Result};
@@ -25,15 +26,21 @@ impl RunArgs {
                 }
             )*};
         }
-        each!(method "--method", cells "--res", ppc "--ppc", seed "--seed", solver "--solver",
-            directions "--directions", band "--band", band_r "--band-r", obstacle "--obstacle",
-            pressure "--pressure", air "--air");
+        each!(method "--method", cells "--res", ppc "--ppc", seed "--seed",
+            obstacle "--obstacle", pressure "--pressure");
+        for (name, value) in &o.flags.0 {
+            let flags = MethodFlags(vec![(*name, value.clone())]);
+            given.push((format!("--{name}"), Overrides { flags, ..none() }));
+        }
         given
     }
 }
 
 /// How a run starts: afresh or from a checkpoint, and its checkpointing.
 pub(super) struct Start {
+    /// The method's settings as it runs, with the files it writes ([`MethodSettings::files`]).
+    pub method: MethodSettings,
+    pub files: Vec<StepFile>,
     pub resumed: Option<Opened>,
     /// How the recording goes on from the checkpoint's.
     pub continued: Option<Resumed>,
@@ -55,13 +62,6 @@ pub(super) fn checkpoint_every(every: Option<f64>) -> Result<Option<f64>> {
 /// The scene of the checkpoint `--resume` names, the command line's other options checked
 /// against it.
 pub(super) fn resumed_scene(args: &RunArgs, c: &Opened) -> Result<Scene> {
-    if args.ccp.cross_check && !c.origin.cross_check {
-        bail!(
-            "--cross-check: checkpoint '{}' was written without it; a resumed run keeps the \
-             options it started with",
-            c.path.display()
-        );
-    }
     let given = args.given_overrides();
     checkpoint_scene(c, args.scene.as_deref(), args.scale.duration, &given)
 }
@@ -132,7 +132,6 @@ pub(super) fn checkpoints_of(
             scene_source: scene.source.clone(),
             scene_toml: scene.resolved_toml(),
             command: command_line(),
-            cross_check: args.ccp.cross_check,
             frames: 0,
             recording: None,
             every: None,
@@ -162,14 +161,10 @@ fn checkpoint_scene(
 ) -> Result<Scene> {
     let o = &c.origin;
     let file = c.path.display();
-    let base = Scene::parse_resolved(&o.scene_source, &o.scene_toml)
+    let base = Scene::parse_resolved(&o.scene_source, &o.scene_toml, &Overrides::default())
         .map_err(|e| anyhow!("checkpoint '{file}': its scene does not load: {e:#}"))?;
     // The scene as run with `over` applied as the command line would.
-    let parse = |over: &Overrides| {
-        let mut file = base.file.clone();
-        over.apply(&mut file);
-        Scene::parse_resolved(&o.scene_source, &toml::to_string(&file)?)
-    };
+    let parse = |over: &Overrides| Scene::parse_resolved(&o.scene_source, &o.scene_toml, over);
     if let Some(a) = scene_arg.filter(|a| *a != o.scene_arg && *a != base.name()) {
         bail!(
             "{a}: checkpoint '{file}' is of scene '{}' (started as `{}`); leave the scene out \

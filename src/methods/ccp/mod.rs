@@ -16,11 +16,13 @@ mod record;
 mod settings;
 
 pub use record::CcpReport;
-pub use settings::{BandMode, CcpArgs, CcpSettings, Directions, Solver};
+pub use settings::{BandMode, CcpSettings, Directions, Solver};
 
 use super::cost::{Footprint, StepCost};
+use super::options::Flag;
 use super::seam::{
-    FluidMethod, MethodInfo, MethodOption, MethodSummary, MethodType, SettingContext, SettingError,
+    BandChoice, FluidMethod, MethodInfo, MethodSummary, MethodType, SettingContext, SettingError,
+    StepFile,
 };
 use crate::draw::{LayerView, Needs};
 use crate::sim::solids::ObstacleMode;
@@ -35,14 +37,6 @@ impl MethodType for Ccp {
     const INFO: MethodInfo = MethodInfo {
         name: "ccp",
         about: "cell-constrained particles: FLIP plus the paper's correction (sec. 4-7)",
-        options: &[
-            MethodOption::Band,
-            MethodOption::BandR,
-            MethodOption::Solver,
-            MethodOption::Directions,
-            MethodOption::CrossCheck,
-            MethodOption::ExportLp,
-        ],
         obstacle_modes: &[ObstacleMode::Couple],
         panels: PANELS,
         layer_views: &[LayerView {
@@ -61,9 +55,26 @@ impl MethodType for Ccp {
     };
 
     type Settings = CcpSettings;
+    const FLAGS: &'static [Flag<CcpSettings>] = settings::FLAGS;
 
     fn check(s: &CcpSettings, _ctx: SettingContext) -> Result<(), SettingError> {
         s.check()
+    }
+
+    fn band(s: &CcpSettings) -> Option<BandChoice> {
+        let variant = s.band.variant()?;
+        Some(BandChoice {
+            variant: variant.name(),
+            r: s.band_r,
+        })
+    }
+
+    fn cross_checks(s: &CcpSettings) -> bool {
+        s.cross_check
+    }
+
+    fn files(s: &mut CcpSettings, stem: &std::path::Path) -> Vec<StepFile> {
+        s.files(stem)
     }
 
     fn build<const D: usize>(s: &CcpSettings) -> Box<dyn FluidMethod<D>> {

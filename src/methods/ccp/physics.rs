@@ -45,7 +45,7 @@ impl<const D: usize> CcpSim<D> {
             band: s.band.variant().map(|v| (Band { r: s.band_r }, v)),
             n_deep: 0,
             x_bar: vec![],
-            export_lp: s.export_lp.clone(),
+            export_lp: s.export_lp.zip(s.export_path.clone()),
             step: CcpReport::default(),
             prices: Default::default(),
         }

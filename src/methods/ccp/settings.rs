@@ -5,9 +5,10 @@ use super::correct::band::BandVariant;
 
 pub use super::correct::problem::Directions;
 pub use super::correct::Solver;
-use crate::methods::seam::{MethodOption, SettingError};
+use crate::methods::options::{Flag, FlagValue};
+use crate::methods::seam::{SettingError, StepFile};
 use crate::sim::band::{check_band_r, DEFAULT_BAND_R};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Method ccp's settings: `[simulation.ccp]` in a scene file (or, for a file whose method is
 /// ccp, the same keys directly in `[simulation]`).
@@ -25,13 +26,14 @@ pub struct CcpSettings {
     /// `--band-r`).
     pub band_r: u32,
     /// Solve every correction twice (other solver, other band variants) and compare
-    /// (`--cross-check`; not a scene key).
-    #[serde(skip)]
+    /// (`simulation.ccp.cross_check`, `--cross-check`).
     pub cross_check: bool,
-    /// Write the correction problem of this step as MPS to this path (`--export-lp`; not a
-    /// scene key).
+    /// Write the correction problem of this step as MPS (`--export-lp`; not a scene key) ...
     #[serde(skip)]
-    pub export_lp: Option<(u64, PathBuf)>,
+    pub export_lp: Option<u64>,
+    /// ... to this path, beside the recording ([`CcpSettings::files`]).
+    #[serde(skip)]
+    pub export_path: Option<PathBuf>,
 }
 
 impl CcpSettings {
@@ -47,9 +49,75 @@ impl CcpSettings {
                 reason: why.into(),
             });
         }
+        if self.export_lp == Some(0) {
+            let why = "--export-lp 0: steps are numbered from 1";
+            return Err(SettingError::range("export_lp", why.into()));
+        }
         check_band_r(self.band_r).map_err(|why| SettingError::range("band_r", why.to_string()))
     }
+
+    /// `--export-lp N` writes step N's problem beside the recording, named after it:
+    /// `<stem>-step<N>.mps`.
+    pub fn files(&mut self, stem: &Path) -> Vec<StepFile> {
+        let Some(step) = self.export_lp else {
+            return vec![];
+        };
+        let mut name = stem.file_name().unwrap_or_default().to_os_string();
+        name.push(format!("-step{step}.mps"));
+        let path = stem.with_file_name(name);
+        self.export_path = Some(path.clone());
+        let flag = "export-lp";
+        vec![StepFile { flag, step, path }]
+    }
 }
+
+/// Method ccp's command-line flags.
+pub const FLAGS: &[Flag<CcpSettings>] = &[
+    Flag {
+        name: "solver",
+        help: "Solver of the correction: flow (exact min-cost flow) or simplex (the LP \
+               reference) (overrides `simulation.solver`).",
+        value: FlagValue::choice::<Solver>(),
+        set: |s, v| v.try_into().map(|x| s.solver = x),
+    },
+    Flag {
+        name: "directions",
+        help: "Candidate moves of the correction: von-neumann (the paper's) or moore.",
+        value: FlagValue::choice::<Directions>(),
+        set: |s, v| v.try_into().map(|x| s.directions = x),
+    },
+    Flag {
+        name: "band",
+        help: "The band method (overrides `simulation.band`): none, paths (the paper's), \
+               one-way or full (an integer program: small grids only), or exact-paths (ours).",
+        value: FlagValue::choice::<BandMode>(),
+        set: |s, v| v.try_into().map(|x| s.band = x),
+    },
+    Flag {
+        name: "band-r",
+        help: "Depth R of the band interface below the surface; the band is R + 1 cells thick \
+               (overrides `simulation.band_r`).",
+        value: FlagValue::number::<u32>(),
+        set: |s, v| v.try_into().map(|x| s.band_r = x),
+    },
+    Flag {
+        name: "cross-check",
+        help: "Solve every correction with both solvers and report their largest objective \
+               difference; with a band, run every band variant on each step's problem and \
+               record their objectives (full and one-way, integer programs, only up to 50,000 \
+               candidates), and check exact-paths' second step against the simplex.",
+        value: FlagValue::SWITCH,
+        set: |s, v| v.try_into().map(|x| s.cross_check = x),
+    },
+    Flag {
+        name: "export-lp",
+        help: "Write the correction problem of step N as free-format MPS next to the \
+               recording (in recordings/ with --no-record), as \
+               <scene>-<method>[-band-<band>-r<R>]-<cells>-ppc<ppc>-seed<seed>-step<N>.mps.",
+        value: FlagValue::number::<u64>(),
+        set: |s, v| v.try_into().map(|n| s.export_lp = Some(n)),
+    },
+];
 
 impl Default for CcpSettings {
     /// The paper's choices: the exact flow solver, von Neumann moves, no band.
@@ -61,6 +129,7 @@ impl Default for CcpSettings {
             band_r: DEFAULT_BAND_R,
             cross_check: false,
             export_lp: None,
+            export_path: None,
         }
     }
 }
@@ -99,48 +168,5 @@ impl BandMode {
 
     pub fn name(self) -> &'static str {
         self.variant().map_or("none", BandVariant::name)
-    }
-}
-
-/// Method ccp's flags on `cellflip run` (`--band-r`, which nbflip shares, is the run's own).
-#[derive(clap::Args, Debug, Clone, Default)]
-#[command(next_help_heading = "Method ccp")]
-pub struct CcpArgs {
-    /// Solver of the ccp correction: flow (exact min-cost flow) or simplex (the LP reference).
-    #[arg(long, value_enum)]
-    pub solver: Option<Solver>,
-    /// Candidate moves of the ccp correction: von-neumann (paper) or moore.
-    #[arg(long, value_enum)]
-    pub directions: Option<Directions>,
-    /// Band method of ccp (overrides `simulation.band`): none, paths (the paper's), one-way or
-    /// full (an integer program: small grids only).
-    #[arg(long, value_enum)]
-    pub band: Option<BandMode>,
-    /// Solve every correction with both solvers and report their largest objective difference;
-    /// with a band, run every band variant on each step's problem and record their objectives
-    /// (full and one-way, integer programs, only up to 50,000 candidates), and check
-    /// exact-paths' second step against the simplex.
-    #[arg(long)]
-    pub cross_check: bool,
-    /// Write the correction problem of step N as free-format MPS next to the recording (in
-    /// recordings/ with --no-record), as
-    /// <scene>-<method>[-band-<band>-r<R>]-<cells>-ppc<ppc>-seed<seed>-step<N>.mps.
-    #[arg(long, value_name = "N")]
-    pub export_lp: Option<u64>,
-}
-
-impl CcpArgs {
-    /// The flags given, for the run's method to refuse those it lacks.
-    pub fn given(&self) -> Vec<MethodOption> {
-        [
-            (MethodOption::Band, self.band.is_some()),
-            (MethodOption::Solver, self.solver.is_some()),
-            (MethodOption::Directions, self.directions.is_some()),
-            (MethodOption::CrossCheck, self.cross_check),
-            (MethodOption::ExportLp, self.export_lp.is_some()),
-        ]
-        .into_iter()
-        .filter_map(|(o, given)| given.then_some(o))
-        .collect()
     }
 }

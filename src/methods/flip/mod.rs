@@ -4,7 +4,9 @@
 //! registration.
 
 use super::cost::{Footprint, StepCost};
-use super::seam::{FluidMethod, MethodInfo, MethodRecording, MethodSummary, MethodType, NoSummary};
+use super::seam::{
+    FluidMethod, MethodInfo, MethodRecording, MethodSummary, MethodType, NoSettings, NoSummary,
+};
 use crate::sim::solids::ObstacleMode;
 
 /// Plain FLIP.
@@ -14,7 +16,6 @@ impl MethodType for Flip {
     const INFO: MethodInfo = MethodInfo {
         name: "flip",
         about: "PIC/FLIP with no position correction (Zhu and Bridson 2005)",
-        options: &[],
         obstacle_modes: &[ObstacleMode::Naive, ObstacleMode::Ignore],
         panels: &[],
         layer_views: &[],
@@ -22,22 +23,22 @@ impl MethodType for Flip {
     };
 
     /// Flip has no settings of its own.
-    type Settings = ();
+    type Settings = NoSettings;
 
-    fn build<const D: usize>(_settings: &()) -> Box<dyn FluidMethod<D>> {
+    fn build<const D: usize>(_settings: &NoSettings) -> Box<dyn FluidMethod<D>> {
         Box::new(Flip)
     }
 
-    fn summary<const D: usize>(_settings: &()) -> Box<dyn MethodSummary<D>> {
+    fn summary<const D: usize>(_settings: &NoSettings) -> Box<dyn MethodSummary<D>> {
         Box::new(NoSummary)
     }
 
     /// Measured peak memory over a run ([`Footprint`]; docs/benchmarks/memory.md).
-    fn footprint(_settings: &(), dim: usize) -> Footprint {
+    fn footprint(_settings: &NoSettings, dim: usize) -> Footprint {
         Footprint::of(dim, [(111.0, 115.0), (165.0, 100.0)])
     }
 
-    fn step_cost(_settings: &(), dim: usize) -> StepCost {
+    fn step_cost(_settings: &NoSettings, dim: usize) -> StepCost {
         // ns per particle held and per cell, [2D, 3D], fitted to the default matrix's whole
         // runs (2026-11-26, `2271d263a7`, docs/results/report.csv; docs/cluster.md).
         StepCost::of(dim, [(138.0, 158.0), (302.0, 115.0)])

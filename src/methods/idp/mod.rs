@@ -67,7 +67,7 @@ pub use physics::{
 };
 
 use super::cost::{Footprint, StepCost};
-use super::seam::{FluidMethod, MethodInfo, MethodOption, MethodSummary, MethodType};
+use super::seam::{FluidMethod, MethodInfo, MethodSummary, MethodType};
 use crate::sim::solids::ObstacleMode;
 use physics::IdpSim;
 use record::{Totals, LAYER_VIEWS, PANELS};
@@ -89,7 +89,6 @@ impl MethodType for Idp {
     const INFO: MethodInfo = MethodInfo {
         name: "idp",
         about: "FLIP plus implicit density projection: a second Poisson solve moves particles out of over-dense cells (Kugelstadt et al. 2021)",
-        options: &[MethodOption::IdpResample],
         obstacle_modes: &[ObstacleMode::Naive, ObstacleMode::Ignore],
         panels: PANELS,
         layer_views: LAYER_VIEWS,

@@ -36,8 +36,9 @@ pub mod region;
 pub use physics::{combine, level, NbflipReport, Resampling};
 
 use super::cost::{Footprint, StepCost};
+use super::options::{Flag, FlagValue};
 use super::seam::{
-    FluidMethod, MethodInfo, MethodOption, MethodSummary, MethodType, SettingContext, SettingError,
+    FluidMethod, MethodInfo, MethodSummary, MethodType, SettingContext, SettingError,
 };
 use crate::sim::band::{check_band_r, DEFAULT_BAND_R};
 use crate::sim::solids::ObstacleMode;
@@ -73,7 +74,6 @@ impl MethodType for Nbflip {
     const INFO: MethodInfo = MethodInfo {
         name: "nbflip",
         about: "narrow-band FLIP: particles only in a band below a level set surface (Ferstl et al. 2016)",
-        options: &[MethodOption::BandR],
         obstacle_modes: &[ObstacleMode::Naive, ObstacleMode::Ignore],
         panels: PANELS,
         layer_views: LAYER_VIEWS,
@@ -81,6 +81,12 @@ impl MethodType for Nbflip {
     };
 
     type Settings = NbflipSettings;
+    const FLAGS: &'static [Flag<NbflipSettings>] = &[Flag {
+        name: "band-r",
+        help: "Depth R in cells of the band of particles kept below the level set's zero.",
+        value: FlagValue::number::<u32>(),
+        set: |s, v| v.try_into().map(|x| s.band_r = x),
+    }];
 
     fn check(s: &NbflipSettings, _ctx: SettingContext) -> Result<(), SettingError> {
         check_band_r(s.band_r).map_err(|why| SettingError::range("band_r", why.to_string()))

@@ -72,8 +72,9 @@ pub use physics::PowerPicReport;
 pub use settings::{AirForm, PowerPicSettings};
 
 use super::cost::{Footprint, StepCost};
+use super::options::{Flag, FlagValue};
 use super::seam::{
-    FluidMethod, MethodInfo, MethodOption, MethodSummary, MethodType, SettingContext, SettingError,
+    FluidMethod, MethodInfo, MethodSummary, MethodType, SettingContext, SettingError,
 };
 use crate::sim::solids::ObstacleMode;
 use physics::PowerPicSim;
@@ -88,7 +89,6 @@ impl MethodType for Powerpic {
         about: "Power PIC (Qu et al. 2022): transfers through volume-constrained kernels, an \
                 entropic transport to a finer grid solved by Sinkhorn, with air slack pulled \
                 towards an air baseline at the free surface",
-        options: &[MethodOption::PowerPic, MethodOption::PowerPicAir],
         obstacle_modes: &[ObstacleMode::Naive, ObstacleMode::Ignore],
         panels: PANELS,
         layer_views: LAYER_VIEWS,
@@ -100,6 +100,14 @@ impl MethodType for Powerpic {
     };
 
     type Settings = PowerPicSettings;
+    const FLAGS: &'static [Flag<PowerPicSettings>] = &[Flag {
+        name: "air",
+        help: "How the free surface's air is costed (overrides `simulation.powerpic.air`): \
+               baseline (pulled towards the air baseline estimated from the markings) or \
+               capacity (free).",
+        value: FlagValue::choice::<AirForm>(),
+        set: |s, v| v.try_into().map(|x| s.air = x),
+    }];
 
     fn check(s: &PowerPicSettings, ctx: SettingContext) -> Result<(), SettingError> {
         s.check(ctx)
