@@ -146,7 +146,7 @@ impl<const D: usize> Simulation<D> {
         (dt, rep.dt_shortened) = timestep::shortened(dt, rep.max_speed, s.config.cfl);
         // Line 4: grid to particles.
         let have_at = rep.times.time(Stage::GridToParticles, || {
-            m.grid_to_particles(s, &u, &u_old, u_at_particles)
+            m.grid_to_particles(s.particles_mut(), &u, &u_old, u_at_particles)
         });
         metrics::check_speed_bound(&s.particles.vel, s.config.max_speed)?;
         // Line 5: advection (and, with the band, of the grid velocity).
@@ -160,7 +160,7 @@ impl<const D: usize> Simulation<D> {
         // Line 6: the correction, with the cells obstacles want this step (sec. 7).
         let plan = s.solids.plan(&s.grid, dt);
         rep.times.time(Stage::Correct, || {
-            m.correct_positions(s, plan.penalty.as_deref())
+            m.correct_positions(s.particles_mut(), plan.penalty.as_deref())
         })?;
         rep.blocked = s.solids.advance(
             &s.grid,
@@ -209,7 +209,7 @@ impl<const D: usize> Simulation<D> {
 /// New markings from the current positions; the method may keep cells fluid without
 /// particles, and acts on the new markings (the band's exchange with the deep).
 fn refresh_markings<const D: usize>(s: &mut State<D>, m: &mut dyn FluidMethod<D>) {
-    let keep = m.before_markings(s);
+    let keep = m.before_markings(s.particles_mut());
     let previous = s.remark(keep.as_deref());
     m.after_markings(s, &previous);
 }

@@ -17,6 +17,11 @@
 //! | [`FluidMethod::check_invariants`] | after the step | what the method guarantees |
 //! | [`FluidMethod::finish_step`] | after the step | what the method did, as a [`MethodReport`] |
 //!
+//! The hooks that change only the particles (lines 4 and 6, and the resampling before line 7)
+//! get a [`crate::sim::ParticlesMut`]: the particles and the random stream mutable, the grid,
+//! markings, solids and velocity read-only; `start` and `after_markings` may change the
+//! markings too (the band's exchange with the deep), so they get the whole state.
+//!
 //! What a method records and sums up is apart from its step: [`MethodRecording`]
 //! ([`MethodRecording::record_setup`]: its layers' classes; [`MethodRecording::is_deep`]: the
 //! cells it holds no particles in), [`MethodReport::record`] (one step's scalars and drawings,

@@ -13,7 +13,7 @@ use crate::metrics::InvariantViolation;
 use crate::sim::markings::Markings;
 use crate::sim::solids::ObstacleMode;
 use crate::sim::transfer::{self, Known};
-use crate::sim::State;
+use crate::sim::{ParticlesMut, State};
 use crate::snapshot::{Reader, SnapshotError, Writer};
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
@@ -164,7 +164,7 @@ pub trait FluidMethod<const D: usize>: MethodRecording<D> + Send {
     /// 5) to use instead of interpolating `u` again at the same points.
     fn grid_to_particles(
         &mut self,
-        s: &mut State<D>,
+        s: ParticlesMut<'_, D>,
         u: &MacField<D>,
         u_old: &MacField<D>,
         at: &mut Vec<Vector<D>>,
@@ -173,7 +173,7 @@ pub trait FluidMethod<const D: usize>: MethodRecording<D> + Send {
             flip_ratio: s.config.flip_ratio,
             max_speed: s.config.max_speed,
         };
-        transfer::grid_to_particles(&s.grid, u, u_old, blend, &mut s.particles, at);
+        transfer::grid_to_particles(s.grid, u, u_old, blend, s.particles, at);
         true
     }
 
@@ -190,7 +190,7 @@ pub trait FluidMethod<const D: usize>: MethodRecording<D> + Send {
     /// coupled.
     fn correct_positions(
         &mut self,
-        _s: &mut State<D>,
+        _s: ParticlesMut<'_, D>,
         _penalty: Option<&[f64]>,
     ) -> anyhow::Result<()> {
         Ok(())
@@ -199,7 +199,7 @@ pub trait FluidMethod<const D: usize>: MethodRecording<D> + Send {
     /// Just before new markings are computed from the particles (`s.markings` are still the
     /// previous ones): the method may resample its particles (nbflip) and returns the cells
     /// that stay fluid even without particles.
-    fn before_markings(&mut self, _s: &mut State<D>) -> Option<Vec<bool>> {
+    fn before_markings(&mut self, _s: ParticlesMut<'_, D>) -> Option<Vec<bool>> {
         None
     }
 

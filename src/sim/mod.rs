@@ -85,7 +85,37 @@ pub struct State<const D: usize> {
     pub rng: SimRng,
 }
 
+/// The state as a hook that changes only the particles sees it (a method's transfer to the
+/// particles, its correction, its resampling before the markings): the particles and the random
+/// stream that seeds them may change, the rest is read-only.
+pub struct ParticlesMut<'a, const D: usize> {
+    pub config: &'a SimConfig<D>,
+    pub grid: &'a Grid<D>,
+    pub solids: &'a Solids<D>,
+    pub markings: &'a Markings,
+    /// The grid velocity the step started from.
+    pub velocity: &'a MacField<D>,
+    /// Steps done before this one.
+    pub steps: u64,
+    pub particles: &'a mut Particles<D>,
+    pub rng: &'a mut SimRng,
+}
+
 impl<const D: usize> State<D> {
+    /// The state for a hook that changes only the particles ([`ParticlesMut`]).
+    pub fn particles_mut(&mut self) -> ParticlesMut<'_, D> {
+        ParticlesMut {
+            config: &self.config,
+            grid: &self.grid,
+            solids: &self.solids,
+            markings: &self.markings,
+            velocity: &self.velocity,
+            steps: self.steps,
+            particles: &mut self.particles,
+            rng: &mut self.rng,
+        }
+    }
+
     /// The state at the start: the fluid seeded, its first markings, the fluid at rest.
     pub fn new(config: SimConfig<D>) -> Self {
         let grid = Grid::new(config.dims);

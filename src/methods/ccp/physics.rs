@@ -12,7 +12,7 @@ use crate::metrics::InvariantViolation;
 use crate::sim::band::Band;
 use crate::sim::markings::{DepthLevel, Markings};
 use crate::sim::transfer::{self, Known};
-use crate::sim::State;
+use crate::sim::{ParticlesMut, State};
 use crate::snapshot::{Reader, SnapshotError, Writer};
 use anyhow::Context;
 use std::path::{Path, PathBuf};
@@ -121,7 +121,7 @@ impl<const D: usize> FluidMethod<D> for CcpSim<D> {
 
     fn correct_positions(
         &mut self,
-        s: &mut State<D>,
+        s: ParticlesMut<'_, D>,
         penalty: Option<&[f64]>,
     ) -> anyhow::Result<()> {
         let export = self.export_lp.as_ref().filter(|(n, _)| *n == s.steps + 1);
@@ -134,10 +134,10 @@ impl<const D: usize> FluidMethod<D> for CcpSim<D> {
         let solid = &s.solids.solid;
         let pos = &mut s.particles.pos;
         let mut rep = correct::correct(
-            &s.grid,
+            s.grid,
             &self.x_bar,
             pos,
-            &s.markings,
+            s.markings,
             solid,
             mu,
             &self.correction,
@@ -148,9 +148,9 @@ impl<const D: usize> FluidMethod<D> for CcpSim<D> {
         )
         .map_err(|e| InvariantViolation(format!("correction problem: {e}")))?;
         correct::guarantees::check_cell_counts(
-            &s.grid,
+            s.grid,
             pos,
-            &s.markings,
+            s.markings,
             solid,
             mu,
             ctx.map(|b| b.r),
@@ -170,8 +170,8 @@ impl<const D: usize> FluidMethod<D> for CcpSim<D> {
         Ok(())
     }
 
-    fn before_markings(&mut self, s: &mut State<D>) -> Option<Vec<bool>> {
-        self.band().map(|_| Band::kept_cells(&s.markings))
+    fn before_markings(&mut self, s: ParticlesMut<'_, D>) -> Option<Vec<bool>> {
+        self.band().map(|_| Band::kept_cells(s.markings))
     }
 
     fn after_markings(&mut self, s: &mut State<D>, previous: &Markings) {

@@ -6,7 +6,7 @@ use crate::methods::seam::{FluidMethod, MethodRecording, MethodReport};
 use crate::sim::advect::{displace, CELL_MARGIN};
 use crate::sim::pressure::Poisson;
 use crate::sim::solids::clearing_distance;
-use crate::sim::State;
+use crate::sim::{ParticlesMut, State};
 use crate::solvers::pcg::{PcgSettings, PcgStats};
 use rand::seq::SliceRandom;
 use rand::Rng;
@@ -46,7 +46,7 @@ impl<const D: usize> IdpSim<D> {
 impl<const D: usize> FluidMethod<D> for IdpSim<D> {
     fn correct_positions(
         &mut self,
-        s: &mut State<D>,
+        s: ParticlesMut<'_, D>,
         _penalty: Option<&[f64]>,
     ) -> anyhow::Result<()> {
         let settings = PcgSettings {
@@ -55,17 +55,17 @@ impl<const D: usize> FluidMethod<D> for IdpSim<D> {
             ..Default::default()
         };
         let inputs = Inputs {
-            grid: &s.grid,
+            grid: s.grid,
             solid: &s.solids.solid,
             particle_free: s.solids.particle_free(),
             per_axis: s.config.per_axis,
             pcg: &settings,
         };
         let resample = self.resample.then_some(Resample {
-            velocity: &s.velocity,
-            rng: &mut s.rng,
+            velocity: s.velocity,
+            rng: s.rng,
         });
-        let p = &mut s.particles;
+        let p = s.particles;
         let rep = project_density(&inputs, &mut p.pos, &mut p.vel, resample);
         self.step = Some(rep);
         Ok(())

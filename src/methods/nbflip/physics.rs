@@ -10,7 +10,7 @@ use crate::particles::Particles;
 use crate::sim::band::{combine_velocities, counts_with_full_deep, Band};
 use crate::sim::markings::{DepthLevel, Markings};
 use crate::sim::transfer::{self, Known};
-use crate::sim::State;
+use crate::sim::{ParticlesMut, State};
 use crate::snapshot::{Reader, SnapshotError, Writer};
 use rand::Rng;
 use rayon::prelude::*;
@@ -103,18 +103,18 @@ impl<const D: usize> NbflipSim<D> {
 
     /// The region within the margin of `seeds`, with the level set's liquid and the solid
     /// cells (which the inward re-march passes through) on the inner side.
-    fn around(&self, s: &State<D>, seeds: impl Iterator<Item = Cell<D>>) -> Region {
+    fn around(&self, s: &ParticlesMut<'_, D>, seeds: impl Iterator<Item = Cell<D>>) -> Region {
         let (phi, solid) = (&self.phi.phi, &s.solids.solid);
         let inner = |c: usize| solid[c] || phi[c] < 0.0;
-        Region::around(&s.grid, seeds, self.margin(s.config.cfl), inner)
+        Region::around(s.grid, seeds, self.margin(s.config.cfl), inner)
     }
 
     /// The cells around the particles, and around the obstacles, which change the solid cells
     /// the re-march reads; sided by the level set before the rebuild (a particle's sphere makes
     /// liquid within the outer margin, and the inward re-march from there reaches only liquid
     /// that was liquid before or lies within that margin).
-    fn around_particles(&self, s: &State<D>) -> Region {
-        let g = &s.grid;
+    fn around_particles(&self, s: &ParticlesMut<'_, D>) -> Region {
+        let g = s.grid;
         let obstacles = s.solids.obstacles.iter();
         let cells = s.particles.pos.iter();
         let cells = cells.map(|x| g.cell_of(x).expect("particle inside the domain"));
@@ -125,8 +125,8 @@ impl<const D: usize> NbflipSim<D> {
     /// Step 4: the level set from the advected one (if any) and the particles, on the cells
     /// advected and those around the particles (new ones from an emitter); the cells to
     /// advect next.
-    fn rebuild_level_set(&mut self, s: &State<D>) {
-        let (g, solid, pos) = (&s.grid, &s.solids.solid, &s.particles.pos);
+    fn rebuild_level_set(&mut self, s: &ParticlesMut<'_, D>) {
+        let (g, solid, pos) = (s.grid, &s.solids.solid, &s.particles.pos);
         let marches = self.marches();
         if self.advected.is_none() {
             // The first rebuild: the particles' level set, on every cell.
@@ -223,7 +223,7 @@ fn surface_layer(dim: usize) -> f64 {
 
 impl<const D: usize> FluidMethod<D> for NbflipSim<D> {
     fn start(&mut self, s: &mut State<D>) {
-        let keep = self.before_markings(s);
+        let keep = self.before_markings(s.particles_mut());
         s.remark(keep.as_deref());
         // The first resampling thins the seeded liquid to the band: not part of step 1.
         self.step = NbflipReport::default();
@@ -299,11 +299,11 @@ impl<const D: usize> FluidMethod<D> for NbflipSim<D> {
     }
 
     /// Steps 4 and 5; the level set's inside stays fluid.
-    fn before_markings(&mut self, s: &mut State<D>) -> Option<Vec<bool>> {
-        self.rebuild_level_set(s);
+    fn before_markings(&mut self, s: ParticlesMut<'_, D>) -> Option<Vec<bool>> {
+        self.rebuild_level_set(&s);
         let mu = s.config.mu();
-        let resampling = self.resampling(&s.grid, &s.solids.solid, mu);
-        let rep = resampling.run(&mut s.particles, &s.velocity, &mut s.rng);
+        let resampling = self.resampling(s.grid, &s.solids.solid, mu);
+        let rep = resampling.run(s.particles, s.velocity, s.rng);
         self.not_held += rep.deleted() as isize - rep.seeded as isize;
         self.first_seed = s.particles.len() - rep.seeded;
         self.step.add(&rep);

@@ -8,7 +8,7 @@ use crate::methods::seam::{FluidMethod, MethodRecording, MethodReport};
 use crate::metrics::InvariantViolation;
 use crate::sim::advect::displace;
 use crate::sim::transfer::{self, Known};
-use crate::sim::State;
+use crate::sim::{ParticlesMut, State};
 use crate::snapshot::{Reader, SnapshotError, Writer};
 use crate::solvers::sinkhorn::{Air, SinkhornError, Transport, TransportGrid};
 use rayon::prelude::*;
@@ -171,13 +171,13 @@ impl<const D: usize> FluidMethod<D> for PowerPicSim<D> {
     /// Step 4: velocities from the kernels (FLIP/PIC blend), positions to their barycentres.
     fn grid_to_particles(
         &mut self,
-        s: &mut State<D>,
+        s: ParticlesMut<'_, D>,
         u: &MacField<D>,
         u_old: &MacField<D>,
         _at: &mut Vec<Vector<D>>,
     ) -> bool {
         let plan = self.plan();
-        let (tg, g) = (&self.tg, &s.grid);
+        let (tg, g) = (&self.tg, s.grid);
         let at_cells: Vec<(Vector<D>, Vector<D>)> = (plan.active_cells().par_iter())
             .map(|&j| {
                 let x = tg.center(j as usize);
