@@ -3,8 +3,8 @@
 //! happened from one [`Summary`], printed in one place ([`Summary::print`]).
 
 use crate::metrics::{median, Stage, StageTimes};
+use crate::sim::StepError;
 use crate::simulation::{Simulation, StepReport};
-use anyhow::Result;
 use std::time::{Duration, Instant};
 
 /// When a run ends.
@@ -178,6 +178,15 @@ pub struct Runner<const D: usize> {
     pub summary: Summary,
 }
 
+/// A step that failed: which, and why.
+#[derive(Debug, thiserror::Error)]
+#[error("step {step}")]
+pub struct StepFailed {
+    pub step: u64,
+    #[source]
+    pub error: StepError,
+}
+
 impl<const D: usize> Runner<D> {
     pub fn new(sim: Simulation<D>) -> Self {
         let summary = Summary::new(&sim);
@@ -186,13 +195,14 @@ impl<const D: usize> Runner<D> {
 
     /// Steps until `limit`, until `stop()` says so (the summary then says interrupted), or
     /// until a step or the observer fails; `observe` sees the simulation after each step and
-    /// its report. The summary covers every step run so far. A failed step's error names it.
-    pub fn run(
+    /// its report. The summary covers every step run so far. A failed step's error names it
+    /// ([`StepFailed`]).
+    pub fn run<E: From<StepFailed>>(
         &mut self,
         limit: Limit,
         stop: impl Fn() -> bool,
-        mut observe: impl FnMut(&Simulation<D>, &StepReport<D>) -> Result<()>,
-    ) -> Result<()> {
+        mut observe: impl FnMut(&Simulation<D>, &StepReport<D>) -> Result<(), E>,
+    ) -> Result<(), E> {
         let t0 = Instant::now();
         let result = loop {
             if limit.reached(&self.sim) {
@@ -204,7 +214,10 @@ impl<const D: usize> Runner<D> {
             }
             let rep = match self.sim.step() {
                 Ok(rep) => rep,
-                Err(e) => break Err(e.context(format!("step {}", self.sim.state.steps + 1))),
+                Err(error) => {
+                    let step = self.sim.state.steps + 1;
+                    break Err(StepFailed { step, error }.into());
+                }
             };
             self.summary.add(&self.sim, &rep);
             if let Err(e) = observe(&self.sim, &rep) {
@@ -214,6 +227,11 @@ impl<const D: usize> Runner<D> {
         self.summary.wall += t0.elapsed();
         self.summary.finish(&self.sim);
         result
+    }
+
+    /// Steps until `limit`, observing nothing.
+    pub fn run_to(&mut self, limit: Limit) -> Result<(), StepFailed> {
+        self.run(limit, || false, |_, _| Ok(()))
     }
 
     /// Forgets what was measured so far, the method's totals too (after a warm-up).

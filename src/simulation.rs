@@ -9,7 +9,7 @@
 use crate::grid::Vector;
 use crate::methods::{FluidMethod, MethodReport, MethodSettings, MethodSummary, NoReport};
 use crate::metrics::{self, InvariantViolation, Stage, StageTimes};
-use crate::sim::{advect, emit, forces, pressure, timestep, transfer, SimConfig, State};
+use crate::sim::{advect, emit, forces, pressure, timestep, transfer, SimConfig, State, StepError};
 use crate::snapshot::{Reader, SnapshotError, Writer};
 use crate::solvers::pcg::PcgStats;
 
@@ -113,7 +113,7 @@ impl<const D: usize> Simulation<D> {
     }
 
     /// Advances the simulation by one step (alg. flip; alg. band with the band).
-    pub fn step(&mut self) -> anyhow::Result<StepReport<D>> {
+    pub fn step(&mut self) -> Result<StepReport<D>, StepError> {
         let Simulation {
             state: s,
             method: m,
@@ -133,7 +133,7 @@ impl<const D: usize> Simulation<D> {
         let mut u = rep.times.time(Stage::ParticlesToGrid, || {
             let (mut u, mut known) = m.particles_to_grid(s)?;
             transfer::extrapolate(&s.grid, &mut u, &mut known, 2);
-            anyhow::Ok(u)
+            Ok::<_, StepError>(u)
         })?;
         let u_old = u.clone();
         // Lines 2-3: forces and the pressure projection.

@@ -452,7 +452,7 @@ fn parse_header(header: &[u8], end: usize) -> Result<Header, SnapshotError> {
         Some(_) => return Err(bad(&"`array` is not a list of tables")),
     };
     for a in list {
-        let (name, located) = parse_array(a).map_err(|e| bad(&e))?;
+        let (name, located) = parse_array(a)?;
         let size = dtype_size(&located.dtype)
             .ok_or_else(|| bad(&format!("{name}: unknown dtype {}", located.dtype)))?;
         let bytes = size * located.shape.iter().product::<usize>();
@@ -467,15 +467,20 @@ fn parse_header(header: &[u8], end: usize) -> Result<Header, SnapshotError> {
 }
 
 /// One `[[array]]` entry.
-fn parse_array(a: &toml::Value) -> Result<(String, Located), String> {
-    let get = |k: &str| a.get(k).ok_or(format!("an array has no `{k}`"));
-    let name = get("name")?.as_str().ok_or("a name is not a string")?;
-    let dtype = get("dtype")?.as_str().ok_or(format!("{name}: dtype"))?;
+fn parse_array(a: &toml::Value) -> Result<(String, Located), SnapshotError> {
+    let bad = |what: String| SnapshotError::Header(what);
+    let get = |k: &str| {
+        a.get(k)
+            .ok_or_else(|| bad(format!("an array has no `{k}`")))
+    };
+    let name = (get("name")?.as_str()).ok_or_else(|| bad("a name is not a string".into()))?;
+    let field = |k: &str| bad(format!("{name}: {k}"));
+    let dtype = get("dtype")?.as_str().ok_or_else(|| field("dtype"))?;
     let uint = |v: &toml::Value| v.as_integer().and_then(|i| usize::try_from(i).ok());
     let shape = (get("shape")?.as_array())
         .and_then(|s| s.iter().map(uint).collect::<Option<Vec<usize>>>())
-        .ok_or(format!("{name}: shape"))?;
-    let offset = uint(get("offset")?).ok_or(format!("{name}: offset"))?;
+        .ok_or_else(|| field("shape"))?;
+    let offset = uint(get("offset")?).ok_or_else(|| field("offset"))?;
     let located = Located {
         dtype: dtype.into(),
         shape,

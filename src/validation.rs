@@ -2,7 +2,7 @@
 //! (surge front and residual column height) and water at rest. Used by the tests and by
 //! `cellflip validate`, so the docs' figures and the tests come from the same code.
 
-use crate::runner::{Limit, Runner};
+use crate::runner::{Limit, Runner, StepFailed};
 use crate::scene::{Overrides, Scene};
 use crate::simulation::Simulation;
 use anyhow::{anyhow, Context, Result};
@@ -175,7 +175,7 @@ pub fn martin_moyce(overrides: &Overrides, shift_t: f64) -> Result<MartinMoyce> 
             || false,
             |sim, _| {
                 probe.observe(sim);
-                Ok(())
+                Ok::<_, StepFailed>(())
             },
         )
         .context("martin-moyce-2d")?;
@@ -199,7 +199,7 @@ pub fn hydrostatic(steps: u64) -> Result<Hydrostatic> {
     let top = s.particles.pos.iter().map(|x| x[1]).fold(0.0, f64::max);
     let depth_m = top.ceil() * s.config.cell_size_m;
     runner
-        .run(Limit::Steps(steps), || false, |_, _| Ok(()))
+        .run_to(Limit::Steps(steps))
         .context("hydrostatic-2d")?;
     let s = &runner.sim.state;
     let speed = s.particles.vel.iter().map(|v| v.norm()).fold(0.0, f64::max);

@@ -79,13 +79,9 @@ fn bench_dim<const D: usize>(
 ) -> Result<Measured> {
     let mut runner = Runner::new(Simulation::<D>::new(scene.config::<D>(), &scene.method));
     let started = peak_memory_mib();
-    runner.run(Limit::Steps(args.warmup), || false, |_, _| Ok(()))?;
+    runner.run_to(Limit::Steps(args.warmup))?;
     runner.reset_summary();
-    runner.run(
-        Limit::Steps(args.warmup + args.steps),
-        || false,
-        |_, _| Ok(()),
-    )?;
+    runner.run_to(Limit::Steps(args.warmup + args.steps))?;
     let (sim, s) = (&runner.sim.state, &runner.summary);
     crate::outln!(
         "\n{} at {:?} cells ({}), {} particles, {} fluid cells, median PCG iterations {} ({})",

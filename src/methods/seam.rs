@@ -13,7 +13,7 @@ use crate::metrics::InvariantViolation;
 use crate::sim::markings::Markings;
 use crate::sim::solids::ObstacleMode;
 use crate::sim::transfer::{self, Known};
-use crate::sim::{ParticlesMut, State};
+use crate::sim::{ParticlesMut, State, StepError};
 use crate::snapshot::{Reader, SnapshotError, Writer};
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
@@ -149,7 +149,7 @@ pub trait FluidMethod<const D: usize>: MethodRecording<D> + Send {
     }
 
     /// Alg. flip line 1: particle velocities to the grid's faces, and which faces got one.
-    fn particles_to_grid(&mut self, s: &State<D>) -> anyhow::Result<(MacField<D>, Known<D>)> {
+    fn particles_to_grid(&mut self, s: &State<D>) -> Result<(MacField<D>, Known<D>), StepError> {
         Ok(transfer::particles_to_grid(
             &s.grid,
             &s.particles.pos,
@@ -192,7 +192,7 @@ pub trait FluidMethod<const D: usize>: MethodRecording<D> + Send {
         &mut self,
         _s: ParticlesMut<'_, D>,
         _penalty: Option<&[f64]>,
-    ) -> anyhow::Result<()> {
+    ) -> Result<(), StepError> {
         Ok(())
     }
 

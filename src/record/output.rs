@@ -261,9 +261,9 @@ impl Output {
 /// series missing). Only dropping the sink waits for the viewer to take the stream's end, and
 /// rerun does that in `disconnect`, which blocks without a limit; it runs on a thread of its
 /// own so that a viewer that stops reading cannot hang the end of the run.
-fn end_live(rec: &RecordingStream) -> Result<(), String> {
+fn end_live(rec: &RecordingStream) -> Result<(), StreamLost> {
     rec.flush_with_timeout(LIVE_FLUSH_TIMEOUT)
-        .map_err(|e| e.to_string())?;
+        .map_err(StreamLost::Flush)?;
     let (done, ended) = std::sync::mpsc::channel();
     let rec = rec.clone();
     std::thread::spawn(move || {
@@ -272,5 +272,14 @@ fn end_live(rec: &RecordingStream) -> Result<(), String> {
     });
     ended
         .recv_timeout(LIVE_FLUSH_TIMEOUT)
-        .map_err(|_| "the viewer did not take the end of the stream".to_string())
+        .map_err(|_| StreamLost::End)
+}
+
+/// Why a live stream's end may not have reached the viewer.
+#[derive(Debug, thiserror::Error)]
+enum StreamLost {
+    #[error(transparent)]
+    Flush(rerun::sink::SinkFlushError),
+    #[error("the viewer did not take the end of the stream")]
+    End,
 }

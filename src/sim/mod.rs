@@ -85,6 +85,30 @@ pub struct State<const D: usize> {
     pub rng: SimRng,
 }
 
+/// Why a step failed.
+#[derive(Debug, thiserror::Error)]
+pub enum StepError {
+    /// A guarantee broke: a bug, or a state the method cannot go on from.
+    #[error(transparent)]
+    Invariant(#[from] metrics::InvariantViolation),
+    /// A file the run was asked to write (ccp's `--export-lp`).
+    #[error("cannot write '{}'", .path.display())]
+    Write {
+        path: std::path::PathBuf,
+        #[source]
+        error: std::io::Error,
+    },
+    /// A method's solver failed: the setting that causes it (e.g.
+    /// `simulation.powerpic.epsilon`), the solver, and why.
+    #[error("{setting}: {solver} failed")]
+    Solver {
+        setting: &'static str,
+        solver: &'static str,
+        #[source]
+        error: Box<dyn std::error::Error + Send + Sync>,
+    },
+}
+
 /// The state as a hook that changes only the particles sees it (a method's transfer to the
 /// particles, its correction, its resampling before the markings): the particles and the random
 /// stream that seeds them may change, the rest is read-only.

@@ -35,7 +35,7 @@ fn steps<const D: usize>(runner: &mut Runner<D>, limit: Limit) -> Vec<String> {
             || false,
             |sim, rep| {
                 out.push(digest_of(sim, Some(rep)));
-                Ok(())
+                Ok::<_, anyhow::Error>(())
             },
         )
         .unwrap_or_else(|e| panic!("{e:#}"));

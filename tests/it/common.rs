@@ -56,7 +56,7 @@ pub fn run_sim<const D: usize>(
             || false,
             |sim, rep| {
                 check(sim, rep);
-                Ok(())
+                Ok::<_, anyhow::Error>(())
             },
         )
         .unwrap_or_else(|e| panic!("{e:#}"));

@@ -8,9 +8,11 @@ use cellflip::methods::ccp::correct::problem;
 use cellflip::methods::ccp::{BandMode, Directions};
 use cellflip::methods::MethodFlags;
 use cellflip::methods::MethodKind;
-use cellflip::runner::Limit;
+use cellflip::runner::{Limit, Runner};
 use cellflip::scene::Overrides;
 use cellflip::sim::markings::Markings;
+use cellflip::sim::StepError;
+use cellflip::simulation::Simulation;
 use cellflip::solvers::{lp, min_cost_flow, mps};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
@@ -430,5 +432,33 @@ fn volume_never_drops_below_100_percent_3d() {
         },
         10,
         true,
+    );
+}
+
+/// A file the step was asked to write and cannot: the step fails, naming the step and the file
+/// (`StepError::Write`), instead of going on without it.
+#[test]
+fn an_export_that_cannot_be_written_fails_its_step_naming_the_file() {
+    let o = Overrides {
+        method: Some(MethodKind::Ccp),
+        cells: Some(24),
+        flags: MethodFlags::default().with("export-lp", 2u64),
+        ..Default::default()
+    };
+    let scene = load("dam-2d", &o);
+    let mut method = scene.method.clone();
+    let files = method.files(std::path::Path::new("/nonexistent-cellflip-dir/dam"));
+    let path = std::path::PathBuf::from("/nonexistent-cellflip-dir/dam-step2.mps");
+    assert_eq!(files.len(), 1);
+    assert_eq!(
+        (files[0].flag, files[0].step, &files[0].path),
+        ("export-lp", 2, &path)
+    );
+    let sim = Simulation::<2>::new(scene.config::<2>(), &method);
+    let e = Runner::new(sim).run_to(Limit::Steps(3)).unwrap_err();
+    assert_eq!(e.step, 2, "{e:?}");
+    assert!(
+        matches!(&e.error, StepError::Write { path: p, .. } if *p == path),
+        "{e:?}"
     );
 }

@@ -416,7 +416,7 @@ pub fn run_all(jobs: &[&RunSpec], quiet: bool, stop: &dyn Fn() -> bool, out: &Pa
                 continue;
             }
             Ok(None) => {}
-            Err(e) => bar.suspend(|| eprintln!("warning: {e}; running it again")),
+            Err(e) => bar.suspend(|| eprintln!("warning: {e:#}; running it again")),
         }
         let resumed = measure::resumable(&files.checkpoints);
         if let (Some(c), false) = (&resumed, quiet) {

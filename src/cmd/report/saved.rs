@@ -14,7 +14,7 @@ use crate::runner::Summary;
 use crate::scene::Scene;
 use crate::simulation::Simulation;
 use crate::snapshot::{Reader, SnapshotError, Writer};
-use anyhow::{anyhow, Result};
+use anyhow::{anyhow, Context, Result};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -83,7 +83,7 @@ pub fn save_result(path: &Path, m: &Measured) -> Result<()> {
 
 /// A run kept by [`save_result`], for `spec`: `None` when there is none, an error (why) when
 /// the file is there but cannot be taken (damaged, or kept by another build).
-pub fn load_result(path: &Path, spec: &RunSpec) -> Result<Option<Measured>, String> {
+pub fn load_result(path: &Path, spec: &RunSpec) -> Result<Option<Measured>> {
     let Ok(bytes) = std::fs::read(path) else {
         return Ok(None);
     };
@@ -117,7 +117,7 @@ pub fn load_result(path: &Path, spec: &RunSpec) -> Result<Option<Measured>, Stri
     };
     read()
         .map(Some)
-        .map_err(|e| format!("'{}': {e}", path.display()))
+        .with_context(|| format!("'{}'", path.display()))
 }
 
 fn pairs(w: &mut Writer<'_>, name: &str, series: &[(f64, f64)]) {

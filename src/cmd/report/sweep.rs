@@ -190,7 +190,7 @@ pub fn gather<'a>(dir: &Path, specs: &'a [RunSpec]) -> Result<(Vec<Measured>, Ve
         match saved::load_result(&files.result, spec) {
             Ok(Some(m)) => results.push(m),
             Ok(None) => missing.push((spec, "not run".to_string())),
-            Err(e) => missing.push((spec, e)),
+            Err(e) => missing.push((spec, format!("{e:#}"))),
         }
     }
     if results.is_empty() {

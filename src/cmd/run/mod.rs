@@ -506,9 +506,11 @@ fn parse_slice(arg: Option<&str>, dim: usize) -> Result<(usize, f64)> {
     Ok((axis, at))
 }
 
-/// A file a flag asked for (`--export-lp N`) must be of a step the run can reach.
+/// A file a flag asked for (`--export-lp N`) must be of a step the run can reach: steps
+/// count from 1 and, with `--steps M`, end at M.
 fn check_file_step(f: &StepFile, limit: Limit) -> Result<()> {
     match limit {
+        _ if f.step == 0 => bail!("--{} 0: steps are numbered from 1", f.flag),
         Limit::Steps(m) if f.step > m => bail!(
             "--{} {n}: the run has only {m} steps (--steps {m}), so step {n} is never reached",
             f.flag,

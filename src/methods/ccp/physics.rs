@@ -12,9 +12,8 @@ use crate::metrics::InvariantViolation;
 use crate::sim::band::Band;
 use crate::sim::markings::{DepthLevel, Markings};
 use crate::sim::transfer::{self, Known};
-use crate::sim::{ParticlesMut, State};
+use crate::sim::{ParticlesMut, State, StepError};
 use crate::snapshot::{Reader, SnapshotError, Writer};
-use anyhow::Context;
 use std::path::{Path, PathBuf};
 
 /// The paper's method in a running simulation.
@@ -99,7 +98,7 @@ impl<const D: usize> FluidMethod<D> for CcpSim<D> {
         Ok(())
     }
 
-    fn particles_to_grid(&mut self, s: &State<D>) -> anyhow::Result<(MacField<D>, Known<D>)> {
+    fn particles_to_grid(&mut self, s: &State<D>) -> Result<(MacField<D>, Known<D>), StepError> {
         let (mut u, mut known) =
             transfer::particles_to_grid(&s.grid, &s.particles.pos, &s.particles.vel);
         if let Some(b) = self.band() {
@@ -123,7 +122,7 @@ impl<const D: usize> FluidMethod<D> for CcpSim<D> {
         &mut self,
         s: ParticlesMut<'_, D>,
         penalty: Option<&[f64]>,
-    ) -> anyhow::Result<()> {
+    ) -> Result<(), StepError> {
         let export = self.export_lp.as_ref().filter(|(n, _)| *n == s.steps + 1);
         let mu = s.config.mu();
         let ctx = self.band.map(|(b, variant)| BandContext {
@@ -156,14 +155,18 @@ impl<const D: usize> FluidMethod<D> for CcpSim<D> {
             ctx.map(|b| b.r),
         )?;
         if let (Some(mps), Some((step, path))) = (rep.mps.take(), export) {
-            std::fs::write(path, mps)
-                .with_context(|| format!("cannot write '{}'", path.display()))?;
+            std::fs::write(path, mps).map_err(|error| StepError::Write {
+                path: path.clone(),
+                error,
+            })?;
             self.step.exported = Some((*step, path.clone()));
         }
         if let (Some(mps), Some((_, path))) = (rep.second_mps.take(), export) {
             let second = second_step_path(path);
-            std::fs::write(&second, mps)
-                .with_context(|| format!("cannot write '{}'", second.display()))?;
+            std::fs::write(&second, mps).map_err(|error| StepError::Write {
+                path: second.clone(),
+                error,
+            })?;
             self.step.exported_second = Some(second);
         }
         self.step.correction = rep;

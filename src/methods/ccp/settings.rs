@@ -49,10 +49,6 @@ impl CcpSettings {
                 reason: why.into(),
             });
         }
-        if self.export_lp == Some(0) {
-            let why = "--export-lp 0: steps are numbered from 1";
-            return Err(SettingError::range("export_lp", why.into()));
-        }
         check_band_r(self.band_r).map_err(|why| SettingError::range("band_r", why.to_string()))
     }
 

@@ -6,7 +6,7 @@ use crate::methods::seam::{FluidMethod, MethodRecording, MethodReport};
 use crate::sim::advect::{displace, CELL_MARGIN};
 use crate::sim::pressure::Poisson;
 use crate::sim::solids::clearing_distance;
-use crate::sim::{ParticlesMut, State};
+use crate::sim::{ParticlesMut, State, StepError};
 use crate::solvers::pcg::{PcgSettings, PcgStats};
 use rand::seq::SliceRandom;
 use rand::Rng;
@@ -48,7 +48,7 @@ impl<const D: usize> FluidMethod<D> for IdpSim<D> {
         &mut self,
         s: ParticlesMut<'_, D>,
         _penalty: Option<&[f64]>,
-    ) -> anyhow::Result<()> {
+    ) -> Result<(), StepError> {
         let settings = PcgSettings {
             tolerance: s.config.pressure_tolerance,
             preconditioner: s.config.pressure_preconditioner,

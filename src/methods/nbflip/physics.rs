@@ -10,7 +10,7 @@ use crate::particles::Particles;
 use crate::sim::band::{combine_velocities, counts_with_full_deep, Band};
 use crate::sim::markings::{DepthLevel, Markings};
 use crate::sim::transfer::{self, Known};
-use crate::sim::{ParticlesMut, State};
+use crate::sim::{ParticlesMut, State, StepError};
 use crate::snapshot::{Reader, SnapshotError, Writer};
 use rand::Rng;
 use rayon::prelude::*;
@@ -273,7 +273,7 @@ impl<const D: usize> FluidMethod<D> for NbflipSim<D> {
     }
 
     /// Step 1: particle velocities to the grid, combined with the grid's ([`combine`]).
-    fn particles_to_grid(&mut self, s: &State<D>) -> anyhow::Result<(MacField<D>, Known<D>)> {
+    fn particles_to_grid(&mut self, s: &State<D>) -> Result<(MacField<D>, Known<D>), StepError> {
         let (mut u, mut known) =
             transfer::particles_to_grid(&s.grid, &s.particles.pos, &s.particles.vel);
         combine(

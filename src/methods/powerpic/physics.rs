@@ -8,7 +8,7 @@ use crate::methods::seam::{FluidMethod, MethodRecording, MethodReport};
 use crate::metrics::InvariantViolation;
 use crate::sim::advect::displace;
 use crate::sim::transfer::{self, Known};
-use crate::sim::{ParticlesMut, State};
+use crate::sim::{ParticlesMut, State, StepError};
 use crate::snapshot::{Reader, SnapshotError, Writer};
 use crate::solvers::sinkhorn::{Air, SinkhornError, Transport, TransportGrid};
 use rayon::prelude::*;
@@ -85,13 +85,17 @@ impl<const D: usize> PowerPicSim<D> {
     }
 
     /// A solver failure as an error naming the setting that causes it.
-    fn explain(&self, e: SinkhornError) -> anyhow::Error {
+    fn explain(&self, e: SinkhornError) -> StepError {
         let key = match e {
             SinkhornError::KernelVanishes { .. } => "simulation.powerpic.epsilon",
             SinkhornError::Overfull { .. } => "simulation.powerpic.tau",
             SinkhornError::Diverged { .. } => "simulation.powerpic",
         };
-        anyhow::anyhow!("{key}: Sinkhorn failed: {e}")
+        StepError::Solver {
+            setting: key,
+            solver: "Sinkhorn",
+            error: Box::new(e),
+        }
     }
 
     fn plan(&self) -> &Transport<D> {
@@ -138,7 +142,7 @@ impl<const D: usize> FluidMethod<D> for PowerPicSim<D> {
     }
 
     /// Steps 1 and 2: the plan, then each transport cell's mass and momentum to the faces.
-    fn particles_to_grid(&mut self, s: &State<D>) -> anyhow::Result<(MacField<D>, Known<D>)> {
+    fn particles_to_grid(&mut self, s: &State<D>) -> Result<(MacField<D>, Known<D>), StepError> {
         self.update_cells(s);
         let (pos, vel) = (&s.particles.pos, &s.particles.vel);
         let warm = self.plan.take();
