@@ -32,7 +32,8 @@ pub struct Grid<const D: usize> {
     layers: [[LayerRange; 2]; D],
 }
 
-fn strides<const D: usize>(dims: &[usize; D]) -> [usize; D] {
+/// The linear index strides of an array of `dims` cells, the first axis fastest.
+pub fn strides<const D: usize>(dims: &[usize; D]) -> [usize; D] {
     let mut s = [1; D];
     for k in 1..D {
         s[k] = s[k - 1] * dims[k - 1];

@@ -10,7 +10,8 @@ use crate::grid::{Grid, MacField, Vector};
 use crate::sim::markings::CellKind;
 use crate::sim::{transfer, State};
 use crate::solvers::multigrid::{CellClass, Multigrid};
-use crate::solvers::pcg::{self, PcgSettings, PcgStats, Preconditioner, StencilMatrix, NONE};
+use crate::solvers::pcg::{self, PcgSettings, PcgStats, Preconditioner, StencilMatrix};
+use crate::solvers::NONE;
 use crate::PAR_GRAIN;
 use rayon::prelude::*;
 

@@ -22,9 +22,10 @@
 
 mod halving;
 
+use super::cheapest::Cheapest;
+use super::NONE;
 pub use halving::{solve_halved, Halving, HALVING};
 use rayon::prelude::*;
-use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 use std::ops::Range;
 
@@ -158,29 +159,6 @@ pub struct FlowStats {
 pub struct Infeasible {
     pub bin: usize,
 }
-
-/// Heap entry ordered by smallest distance, then smallest node.
-#[derive(Clone, Copy, Debug, PartialEq)]
-struct Entry(f64, u32);
-
-impl Eq for Entry {}
-
-impl Ord for Entry {
-    fn cmp(&self, other: &Self) -> Ordering {
-        other
-            .0
-            .total_cmp(&self.0)
-            .then_with(|| other.1.cmp(&self.1))
-    }
-}
-
-impl PartialOrd for Entry {
-    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
-        Some(self.cmp(other))
-    }
-}
-
-const NONE: u32 = u32::MAX;
 
 /// Prices this close count as equal when a start's sink flows are set: the rounding of the
 /// potential updates, far below any cost difference that matters (costs are squared distances
@@ -330,7 +308,8 @@ struct Network<'a> {
     arc_of: Vec<u32>,
     /// The current search's stamp (see [`Node::stamp`]).
     search: u32,
-    heap: BinaryHeap<Entry>,
+    /// Nodes by smallest distance, then smallest node.
+    heap: BinaryHeap<Cheapest<u32>>,
     visited: Vec<u32>,
     /// Smallest tentative distance of a target in the current search: nothing farther can lead
     /// to a nearer target (costs are non-negative), so nothing farther is queued.
@@ -536,12 +515,12 @@ impl<'a> Network<'a> {
         }
         n.dist = d;
         self.link[i] = Link { node, cand };
-        self.heap.push(Entry(d, v));
+        self.heap.push(Cheapest { cost: d, tie: v });
     }
 
     /// Pops the nearest unsettled node and settles it.
     fn pop(&mut self) -> Option<(f64, u32)> {
-        while let Some(Entry(d, v)) = self.heap.pop() {
+        while let Some(Cheapest { cost: d, tie: v }) = self.heap.pop() {
             let n = &mut self.node[v as usize];
             if n.settled || d > n.dist {
                 continue;

@@ -86,7 +86,8 @@
 //! inverse of a positive definite matrix. So the V-cycle is symmetric positive definite even
 //! for singular (closed) systems, and CG stays valid.
 
-use crate::solvers::pcg::{Precondition, NONE};
+use crate::solvers::pcg::Precondition;
+use crate::solvers::NONE;
 use crate::PAR_GRAIN;
 use rayon::prelude::*;
 
@@ -158,10 +159,7 @@ struct Shape<const D: usize> {
 
 impl<const D: usize> Shape<D> {
     fn new(dims: [usize; D]) -> Self {
-        let mut stride = [1; D];
-        for a in 1..D {
-            stride[a] = stride[a - 1] * dims[a - 1];
-        }
+        let stride = crate::grid::strides(&dims);
         Shape { dims, stride }
     }
 

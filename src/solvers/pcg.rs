@@ -10,8 +10,7 @@
 use crate::PAR_GRAIN;
 use rayon::prelude::*;
 
-/// Marker for "no neighbour".
-pub const NONE: u32 = u32::MAX;
+use super::NONE;
 
 /// A sparse symmetric matrix whose rows are grid cells in ascending linear order and whose
 /// off-diagonal entries connect a row to its neighbour one step up (`plus`) or down (`minus`)

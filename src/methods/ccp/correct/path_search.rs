@@ -6,7 +6,8 @@
 use super::paths::{BandPath, BandScene, PathDirection};
 use crate::grid::{Cell, Vector};
 use crate::sim::advect::CELL_MARGIN;
-use std::cmp::Ordering;
+use crate::solvers::cheapest::Cheapest;
+use crate::solvers::NONE;
 use std::collections::BinaryHeap;
 
 /// What pushing particles along paths did.
@@ -18,34 +19,15 @@ pub struct PathOutcome<const D: usize> {
     pub paths: Vec<BandPath<D>>,
 }
 
-const NONE: u32 = u32::MAX;
 const ROOT: u32 = u32::MAX - 1;
 
-/// A node of alg. find's priority queue: lowest cost first, ties by cell, root and edge.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// A node of alg. find's priority queue (lowest cost first: [`Cheapest`]), ties broken by
+/// cell, root and edge, in that order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
 struct Node {
-    cost: f64,
     cell: u32,
-    edge: u32,
     root: u32,
-}
-
-impl Eq for Node {}
-
-impl Ord for Node {
-    fn cmp(&self, o: &Self) -> Ordering {
-        o.cost
-            .total_cmp(&self.cost)
-            .then_with(|| o.cell.cmp(&self.cell))
-            .then_with(|| o.root.cmp(&self.root))
-            .then_with(|| o.edge.cmp(&self.edge))
-    }
-}
-
-impl PartialOrd for Node {
-    fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
-        Some(self.cmp(o))
-    }
+    edge: u32,
 }
 
 /// A path found by alg. find: the edge into its sink and the sink.
@@ -170,16 +152,19 @@ impl<'a, const D: usize> PathSearch<'a, D> {
             if self.is_source(c) && !gamma(c).is_empty() {
                 parent[c] = ROOT;
                 sigma[c] = 0.0;
-                queue.push(Node {
-                    cost: 0.0,
+                let node = Node {
                     cell: c as u32,
-                    edge: ROOT,
                     root: c as u32,
+                    edge: ROOT,
+                };
+                queue.push(Cheapest {
+                    cost: 0.0,
+                    tie: node,
                 });
             }
         }
         let mut paths = vec![];
-        while let Some(a) = queue.pop() {
+        while let Some(Cheapest { cost, tie: a }) = queue.pop() {
             let c = a.cell as usize;
             if parent[c] != NONE && parent[c] != ROOT {
                 continue; // visited
@@ -188,13 +173,13 @@ impl<'a, const D: usize> PathSearch<'a, D> {
                 continue;
             }
             parent[c] = a.edge;
-            sigma[c] = a.cost;
+            sigma[c] = cost;
             if self.is_sink(c, allow_wanted) && (gamma(c).len() as u32) < self.sc.mu {
                 finished[a.root as usize] = true;
                 paths.push(FoundPath {
                     edge: a.edge,
                     sink: a.cell,
-                    cost: a.cost,
+                    cost,
                 });
                 if paths.len() == want {
                     break;
@@ -228,17 +213,17 @@ impl<'a, const D: usize> PathSearch<'a, D> {
                         continue;
                     };
                     debug_assert_eq!(cell_of[j as usize] as usize, c);
-                    let t = a.cost + e;
+                    let t = cost + e;
                     if t >= sigma[c2] {
                         continue;
                     }
                     sigma[c2] = t;
-                    queue.push(Node {
-                        cost: t,
+                    let node = Node {
                         cell: c2 as u32,
-                        edge: j,
                         root: a.root,
-                    });
+                        edge: j,
+                    };
+                    queue.push(Cheapest { cost: t, tie: node });
                 }
             }
         }
