@@ -7,13 +7,64 @@
 //! `step-NNNNNNNN.ckpt` and the folder synced; only then are older ones deleted, so the last
 //! two complete checkpoints survive a crash, a second signal or a full disk at any moment.
 
-use crate::frames::FrameWorker;
+use crate::frames::{FrameError, FrameWorker};
 use crate::record::Recorder;
 use crate::simulation::Simulation;
-use crate::snapshot::{Reader, Writer};
-use anyhow::{anyhow, bail, Context, Result};
+use crate::snapshot::{Reader, SnapshotError, Writer};
 use std::fs::File;
 use std::path::{Path, PathBuf};
+
+/// Why a checkpoint could not be read or written.
+#[derive(Debug, thiserror::Error)]
+pub enum CheckpointError {
+    #[error("cannot read checkpoint folder '{}'", .dir.display())]
+    ReadDir {
+        dir: PathBuf,
+        #[source]
+        error: std::io::Error,
+    },
+    #[error("cannot read checkpoint '{}'", .path.display())]
+    Read {
+        path: PathBuf,
+        #[source]
+        error: std::io::Error,
+    },
+    /// Read, but not a whole checkpoint of this format.
+    #[error("checkpoint '{}'", .path.display())]
+    Damaged {
+        path: PathBuf,
+        #[source]
+        error: SnapshotError,
+    },
+    /// A folder whose checkpoints are all damaged: the newest's error.
+    #[error("no complete checkpoint in '{}'", .dir.display())]
+    AllDamaged {
+        dir: PathBuf,
+        #[source]
+        newest: Box<CheckpointError>,
+    },
+    #[error(
+        "no complete checkpoint in '{}' (no step-*.ckpt file; a .partial file is one whose \
+         writing did not finish)",
+        .dir.display()
+    )]
+    Empty { dir: PathBuf },
+    #[error("--checkpoint-dir '{}': cannot write there", .dir.display())]
+    NotWritable {
+        dir: PathBuf,
+        #[source]
+        error: std::io::Error,
+    },
+    #[error("cannot write checkpoint '{}'", .path.display())]
+    Write {
+        path: PathBuf,
+        #[source]
+        error: std::io::Error,
+    },
+    /// The frames to note in it could not be drawn.
+    #[error(transparent)]
+    Frames(#[from] FrameError),
+}
 
 /// Complete checkpoints a run keeps in its folder: the newest and the one before it.
 pub const KEEP: usize = 2;
@@ -86,7 +137,7 @@ impl Origin {
         }
     }
 
-    fn read(r: &Reader) -> Result<Self> {
+    fn read(r: &Reader) -> Result<Self, SnapshotError> {
         let mut trails = vec![];
         while let Ok((v, _)) = r.array::<f64>(&format!("recording.trail.{}", trails.len())) {
             trails.push(
@@ -96,10 +147,12 @@ impl Origin {
             );
         }
         let text = |k: &str| r.meta(k).map(str::to_string);
-        let number = |k: &str| -> Result<u64> {
+        let number = |k: &str| -> Result<u64, SnapshotError> {
             let v = r.meta(k)?;
-            v.parse()
-                .map_err(|_| anyhow!("meta.{k} is '{v}', not a count"))
+            v.parse().map_err(|_| SnapshotError::Array {
+                name: format!("meta.{k}"),
+                reason: format!("'{v}', not a count"),
+            })
         };
         let recording = match r.meta("recording.path") {
             Ok(path) => Some(RecordingMark {
@@ -117,10 +170,10 @@ impl Origin {
             frames: number("frames")?,
             recording,
             every: match r.meta("checkpoint_every") {
-                Ok(v) => Some(
-                    v.parse()
-                        .map_err(|_| anyhow!("meta.checkpoint_every is '{v}'"))?,
-                ),
+                Ok(v) => Some(v.parse().map_err(|_| SnapshotError::Array {
+                    name: "meta.checkpoint_every".into(),
+                    reason: format!("'{v}', not a number"),
+                })?),
                 Err(_) => None,
             },
             trails,
@@ -152,9 +205,11 @@ fn step_of(name: &str) -> Option<u64> {
 }
 
 /// The complete checkpoints in `dir` by step, oldest first.
-fn complete(dir: &Path) -> Result<Vec<(u64, PathBuf)>> {
-    let entries = std::fs::read_dir(dir)
-        .with_context(|| format!("cannot read checkpoint folder '{}'", dir.display()))?;
+fn complete(dir: &Path) -> Result<Vec<(u64, PathBuf)>, CheckpointError> {
+    let entries = std::fs::read_dir(dir).map_err(|error| CheckpointError::ReadDir {
+        dir: dir.into(),
+        error,
+    })?;
     let mut found: Vec<(u64, PathBuf)> = entries
         .filter_map(|e| e.ok())
         .filter_map(|e| Some((step_of(e.file_name().to_str()?)?, e.path())))
@@ -165,7 +220,7 @@ fn complete(dir: &Path) -> Result<Vec<(u64, PathBuf)>> {
 
 /// Reads `path`, a checkpoint file or a checkpoint folder (its newest complete checkpoint:
 /// one that a later write damaged is passed over, with a warning, for the one before).
-pub fn open(path: &Path) -> Result<Opened> {
+pub fn open(path: &Path) -> Result<Opened, CheckpointError> {
     if !path.is_dir() {
         return open_file(path);
     }
@@ -175,34 +230,37 @@ pub fn open(path: &Path) -> Result<Opened> {
         match open_file(file) {
             Ok(c) => {
                 for e in damaged {
-                    eprintln!("warning: {e:#}; resuming from the checkpoint before it");
+                    let e = crate::out::chain(&e);
+                    eprintln!("warning: {e}; resuming from the checkpoint before it");
                 }
                 return Ok(c);
             }
             Err(e) => damaged.push(e),
         }
     }
-    match damaged.first() {
-        Some(e) => Err(anyhow!(
-            "no complete checkpoint in '{}': {e:#}",
-            path.display()
-        )),
-        None => bail!(
-            "no complete checkpoint in '{}' (no step-*.ckpt file; a .partial file is one whose \
-             writing did not finish)",
-            path.display()
-        ),
-    }
+    let dir = path.to_path_buf();
+    Err(match damaged.into_iter().next() {
+        Some(e) => CheckpointError::AllDamaged {
+            dir,
+            newest: Box::new(e),
+        },
+        None => CheckpointError::Empty { dir },
+    })
 }
 
 /// Reads and checks one checkpoint file.
-fn open_file(path: &Path) -> Result<Opened> {
-    let bytes = std::fs::read(path)
-        .with_context(|| format!("cannot read checkpoint '{}'", path.display()))?;
-    let bad = |e: &dyn std::fmt::Display| anyhow!("checkpoint '{}': {e}", path.display());
-    let reader = Reader::from_bytes(bytes).map_err(|e| bad(&e))?;
-    let origin = Origin::read(&reader).map_err(|e| bad(&e))?;
-    let step = reader.scalar::<u64>("steps").map_err(|e| bad(&e))?;
+fn open_file(path: &Path) -> Result<Opened, CheckpointError> {
+    let bytes = std::fs::read(path).map_err(|error| CheckpointError::Read {
+        path: path.into(),
+        error,
+    })?;
+    let bad = |error| CheckpointError::Damaged {
+        path: path.into(),
+        error,
+    };
+    let reader = Reader::from_bytes(bytes).map_err(bad)?;
+    let origin = Origin::read(&reader).map_err(bad)?;
+    let step = reader.scalar::<u64>("steps").map_err(bad)?;
     Ok(Opened {
         path: path.to_path_buf(),
         reader,
@@ -225,16 +283,14 @@ pub struct Checkpoints {
 impl Checkpoints {
     /// The folder `dir`, made if missing and checked writable before the run starts;
     /// `resumed` is the checkpoint the run resumed from.
-    pub fn new(dir: &Path, resumed: Option<&Opened>) -> Result<Self> {
-        let fail = |e: &dyn std::fmt::Display| {
-            anyhow!(
-                "--checkpoint-dir '{}': cannot write there: {e}",
-                dir.display()
-            )
+    pub fn new(dir: &Path, resumed: Option<&Opened>) -> Result<Self, CheckpointError> {
+        let fail = |error| CheckpointError::NotWritable {
+            dir: dir.into(),
+            error,
         };
-        std::fs::create_dir_all(dir).map_err(|e| fail(&e))?;
+        std::fs::create_dir_all(dir).map_err(fail)?;
         let probe = dir.join(".cellflip-write-test");
-        File::create(&probe).map_err(|e| fail(&e))?;
+        File::create(&probe).map_err(fail)?;
         let _ = std::fs::remove_file(&probe);
         let resumed_here = resumed.filter(|c| c.path.parent() == Some(dir));
         Ok(Self {
@@ -255,7 +311,7 @@ impl Checkpoints {
         &mut self,
         sim: &Simulation<D>,
         origin: &Origin,
-    ) -> Result<PathBuf> {
+    ) -> Result<PathBuf, CheckpointError> {
         self.write_with(sim, origin, |_| {})
     }
 
@@ -265,15 +321,15 @@ impl Checkpoints {
         sim: &Simulation<D>,
         origin: &Origin,
         more: impl FnOnce(&mut Writer<'_>),
-    ) -> Result<PathBuf> {
+    ) -> Result<PathBuf, CheckpointError> {
         let step = sim.state.steps;
         let path = self.dir.join(file_name(step));
         let mut w = Writer::default();
         origin.write(&mut w);
         sim.save(&mut w);
         more(&mut w);
-        if let Err(e) = w.write_file(&path) {
-            bail!("cannot write checkpoint '{}': {e}", path.display());
+        if let Err(error) = w.write_file(&path) {
+            return Err(CheckpointError::Write { path, error });
         }
         self.written.retain(|p| p != &path);
         self.written.push(path.clone());
@@ -346,7 +402,7 @@ impl Saver {
         sim: &Simulation<D>,
         recorder: Option<&Recorder>,
         frames: Option<&mut FrameWorker>,
-    ) -> Result<PathBuf> {
+    ) -> Result<PathBuf, CheckpointError> {
         if let Some(f) = frames {
             f.wait()?;
             self.origin.frames = f.submitted();

@@ -16,9 +16,9 @@
 //! **Errors.** A sink's error (an export file that cannot be written) stops the worker; the
 //! next [`FrameWorker::submit`] or [`FrameWorker::finish`] returns it, naming the file.
 
+use crate::out::BoxError;
 use crate::simulation::Simulation;
 use crate::surface::{Liquid, SurfaceMesh};
-use anyhow::{anyhow, Result};
 use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
 use std::thread::JoinHandle;
 
@@ -39,8 +39,22 @@ pub struct Frame {
     pub surface: Option<SurfaceMesh>,
 }
 
-/// What receives the frames, on the worker's thread.
-pub type FrameSink = Box<dyn FnMut(&Frame) -> Result<()> + Send>;
+/// What receives the frames, on the worker's thread, with the caller's error.
+pub type FrameSink = Box<dyn FnMut(&Frame) -> Result<(), BoxError> + Send>;
+
+/// Why the frame worker stopped, or could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum FrameError {
+    #[error("cannot start the frame worker")]
+    Start(#[source] BoxError),
+    /// A sink failed; nothing was written after it.
+    #[error(transparent)]
+    Sink(BoxError),
+    #[error("the frame worker panicked")]
+    Panicked,
+    #[error("the frame worker had already stopped")]
+    Stopped,
+}
 
 /// What the sinks need made for each frame.
 #[derive(Clone, Copy, Debug, Default)]
@@ -64,7 +78,7 @@ enum Work {
 /// The worker thread and its channel.
 pub struct FrameWorker {
     tx: Option<SyncSender<Work>>,
-    thread: Option<JoinHandle<Result<()>>>,
+    thread: Option<JoinHandle<Result<(), BoxError>>>,
     needs: FrameNeeds,
     submitted: u64,
 }
@@ -72,7 +86,10 @@ pub struct FrameWorker {
 impl FrameWorker {
     /// A worker feeding `sinks`, or `None` when there is none; its first frame is numbered
     /// `first` (a run resumed from a checkpoint numbers on).
-    pub fn start(sinks: Vec<(FrameSink, FrameNeeds)>, first: u64) -> Result<Option<Self>> {
+    pub fn start(
+        sinks: Vec<(FrameSink, FrameNeeds)>,
+        first: u64,
+    ) -> Result<Option<Self>, FrameError> {
         if sinks.is_empty() {
             return Ok(None);
         }
@@ -86,13 +103,13 @@ impl FrameWorker {
             .num_threads(THREADS)
             .thread_name(|i| format!("cellflip-frames-{i}"))
             .build()
-            .map_err(|e| anyhow!("cannot start the frame worker's threads: {e}"))?;
+            .map_err(|e| FrameError::Start(Box::new(e)))?;
         let (tx, rx) = sync_channel::<Work>(1);
         let sinks = sinks.into_iter().map(|(s, _)| s).collect();
         let thread = std::thread::Builder::new()
             .name("cellflip-frames".into())
             .spawn(move || work(rx, sinks, &pool))
-            .map_err(|e| anyhow!("cannot start the frame worker: {e}"))?;
+            .map_err(|e| FrameError::Start(Box::new(e)))?;
         Ok(Some(Self {
             tx: Some(tx),
             thread: Some(thread),
@@ -103,7 +120,7 @@ impl FrameWorker {
 
     /// Hands the simulation's current state over as the next frame. Fails with a sink's
     /// error from an earlier frame.
-    pub fn submit<const D: usize>(&mut self, sim: &Simulation<D>) -> Result<()> {
+    pub fn submit<const D: usize>(&mut self, sim: &Simulation<D>) -> Result<(), FrameError> {
         let s = &sim.state;
         let lift =
             |v: &crate::grid::Vector<D>| std::array::from_fn(|k| if k < D { v[k] } else { 0.0 });
@@ -136,7 +153,7 @@ impl FrameWorker {
 
     /// Waits until every frame handed over is done (a checkpoint notes the recording's length
     /// with them in it).
-    pub fn wait(&mut self) -> Result<()> {
+    pub fn wait(&mut self) -> Result<(), FrameError> {
         let (done, finished) = sync_channel(1);
         self.send(Work::Done(done))?;
         match finished.recv() {
@@ -145,7 +162,7 @@ impl FrameWorker {
         }
     }
 
-    fn send(&mut self, work: Work) -> Result<()> {
+    fn send(&mut self, work: Work) -> Result<(), FrameError> {
         match self.tx.as_ref().is_some_and(|tx| tx.send(work).is_ok()) {
             true => Ok(()),
             // The worker stopped on an error: say which.
@@ -154,16 +171,16 @@ impl FrameWorker {
     }
 
     /// Waits for the frames handed over to be done; a sink's error if there was one.
-    pub fn finish(mut self) -> Result<()> {
+    pub fn finish(mut self) -> Result<(), FrameError> {
         self.join()
     }
 
-    fn join(&mut self) -> Result<()> {
+    fn join(&mut self) -> Result<(), FrameError> {
         self.tx = None;
         match self.thread.take().map(JoinHandle::join) {
-            Some(Ok(r)) => r,
-            Some(Err(_)) => Err(anyhow!("the frame worker panicked")),
-            None => Err(anyhow!("the frame worker had already stopped")),
+            Some(Ok(r)) => r.map_err(FrameError::Sink),
+            Some(Err(_)) => Err(FrameError::Panicked),
+            None => Err(FrameError::Stopped),
         }
     }
 }
@@ -179,7 +196,11 @@ impl Drop for FrameWorker {
 
 /// The worker's loop: each frame's surface, then every sink, until the channel closes or a
 /// sink fails.
-fn work(rx: Receiver<Work>, mut sinks: Vec<FrameSink>, pool: &rayon::ThreadPool) -> Result<()> {
+fn work(
+    rx: Receiver<Work>,
+    mut sinks: Vec<FrameSink>,
+    pool: &rayon::ThreadPool,
+) -> Result<(), BoxError> {
     for work in rx {
         let mut job = match work {
             Work::Frame(job) => job,

@@ -8,7 +8,6 @@
 //! SIGUSR1, what a batch scheduler sends before a time limit (Slurm's `--signal=B:USR1@N`),
 //! asks for a checkpoint after the step under way; the run goes on.
 
-use anyhow::{Context, Result};
 use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM, SIGUSR1};
 use signal_hook::flag;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
@@ -28,8 +27,17 @@ static CHECKPOINT: LazyLock<Arc<AtomicBool>> = LazyLock::new(|| Arc::new(AtomicB
 /// The signal received (0: none).
 static SIGNAL: LazyLock<Arc<AtomicUsize>> = LazyLock::new(|| Arc::new(AtomicUsize::new(0)));
 
+/// A signal handler that could not be installed.
+#[derive(Debug, thiserror::Error)]
+#[error("cannot install the handler of {signal}")]
+pub struct HandlerError {
+    pub signal: String,
+    #[source]
+    pub error: std::io::Error,
+}
+
 /// Installs the handlers (once per process; later calls do nothing).
-pub fn install() -> Result<()> {
+pub fn install() -> Result<(), HandlerError> {
     static DONE: AtomicBool = AtomicBool::new(false);
     if DONE.swap(true, Ordering::SeqCst) {
         return Ok(());
@@ -40,10 +48,15 @@ pub fn install() -> Result<()> {
         flag::register_conditional_shutdown(sig, 128 + sig, Arc::clone(&second))
             .and_then(|_| flag::register(sig, Arc::clone(&second)))
             .and_then(|_| flag::register_usize(sig, Arc::clone(&SIGNAL), sig as usize))
-            .with_context(|| format!("cannot install the handler of signal {sig}"))?;
+            .map_err(|error| HandlerError {
+                signal: format!("signal {sig}"),
+                error,
+            })?;
     }
-    flag::register(SIGUSR1, Arc::clone(&CHECKPOINT))
-        .context("cannot install the handler of SIGUSR1")?;
+    flag::register(SIGUSR1, Arc::clone(&CHECKPOINT)).map_err(|error| HandlerError {
+        signal: "SIGUSR1".into(),
+        error,
+    })?;
     Ok(())
 }
 
@@ -75,8 +88,9 @@ pub fn exit_code(sig: i32) -> i32 {
     128 + sig
 }
 
-/// What the watchdog runs before ending the process (finishing a recording).
-pub type Finisher = Box<dyn FnOnce() -> Result<()> + Send>;
+/// What the watchdog runs before ending the process (finishing a recording), with the
+/// caller's error.
+pub type Finisher = Box<dyn FnOnce() -> Result<(), crate::out::BoxError> + Send>;
 
 /// Ends the process when a step goes on for `grace` ([`GRACE`], [`CHECKPOINT_GRACE`]) after
 /// a signal, after running its finisher; does nothing once [`done`](Self::done).
@@ -109,7 +123,10 @@ impl Watchdog {
                     grace.as_secs_f64(),
                     match finished {
                         Ok(()) => "the recording holds the steps completed before it".into(),
-                        Err(e) => format!("the recording could not be finished: {e:#}"),
+                        Err(e) => format!(
+                            "the recording could not be finished: {}",
+                            crate::out::chain(&*e)
+                        ),
                     }
                 );
                 std::process::exit(exit_code(sig));

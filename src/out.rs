@@ -6,6 +6,18 @@
 use std::io::Write;
 use std::sync::atomic::{AtomicBool, Ordering};
 
+/// An error of a caller's callback (a frame sink, a finisher), whatever its type.
+pub type BoxError = Box<dyn std::error::Error + Send + Sync>;
+
+/// An error and its causes, one after the other (`a: b: c`), as `anyhow`'s `{:#}` prints them.
+pub fn chain(e: &(dyn std::error::Error + 'static)) -> String {
+    let causes = std::iter::successors(Some(e), |e| e.source());
+    causes
+        .map(ToString::to_string)
+        .collect::<Vec<_>>()
+        .join(": ")
+}
+
 static FAILED: AtomicBool = AtomicBool::new(false);
 static TO_STDERR: AtomicBool = AtomicBool::new(false);
 

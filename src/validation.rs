@@ -3,9 +3,8 @@
 //! `cellflip validate`, so the docs' figures and the tests come from the same code.
 
 use crate::runner::{Limit, Runner, StepFailed};
-use crate::scene::{Overrides, Scene};
+use crate::scene::{LoadError, Overrides, Scene};
 use crate::simulation::Simulation;
-use anyhow::{anyhow, Context, Result};
 
 /// Surge front, `T = t sqrt(2 g / a)`, `Z = x / a` (Martin & Moyce 1952, table 2).
 pub const SURGE_FRONT_CSV: &str = include_str!("../validation/martin_moyce_1952.csv");
@@ -16,8 +15,26 @@ pub const COLUMN_HEIGHT_CSV: &str = include_str!("../validation/martin_moyce_195
 pub const COLUMN_WIDTH_M: f64 = 0.05715;
 const G: f64 = 9.81;
 
+/// A line of a CSV that is not two numbers.
+#[derive(Debug, thiserror::Error)]
+#[error("bad CSV line '{0}'")]
+pub struct BadCsvLine(pub String);
+
+/// Why a validation run could not be made.
+#[derive(Debug, thiserror::Error)]
+pub enum ValidationError {
+    #[error(transparent)]
+    Scene(#[from] LoadError),
+    #[error("{scene}")]
+    Run {
+        scene: &'static str,
+        #[source]
+        error: StepFailed,
+    },
+}
+
 /// Parses a two-column CSV with `#` comments and a header line.
-pub fn parse_csv(text: &str) -> Result<Vec<(f64, f64)>> {
+pub fn parse_csv(text: &str) -> Result<Vec<(f64, f64)>, BadCsvLine> {
     text.lines()
         .map(str::trim)
         .filter(|l| !l.is_empty() && !l.starts_with('#'))
@@ -26,7 +43,7 @@ pub fn parse_csv(text: &str) -> Result<Vec<(f64, f64)>> {
             let mut it = l.split(',').map(|v| v.trim().parse::<f64>());
             match (it.next(), it.next()) {
                 (Some(Ok(a)), Some(Ok(b))) => Ok((a, b)),
-                _ => Err(anyhow!("bad CSV line '{l}'")),
+                _ => Err(BadCsvLine(l.into())),
             }
         })
         .collect()
@@ -126,9 +143,10 @@ impl MartinMoyceProbe {
     }
 
     /// The comparison with experiment, the simulated `T` shifted by `shift_t`.
-    pub fn compare(&self, shift_t: f64, steps: u64, cells_per_a: f64) -> Result<MartinMoyce> {
-        let front_data = parse_csv(SURGE_FRONT_CSV).context("martin_moyce_1952.csv")?;
-        let height_data = parse_csv(COLUMN_HEIGHT_CSV).context("martin_moyce_1952_height.csv")?;
+    pub fn compare(&self, shift_t: f64, steps: u64, cells_per_a: f64) -> MartinMoyce {
+        let embedded = "the measurements built in parse (tests/it/validation.rs)";
+        let front_data = parse_csv(SURGE_FRONT_CSV).expect(embedded);
+        let height_data = parse_csv(COLUMN_HEIGHT_CSV).expect(embedded);
         let a = COLUMN_WIDTH_M;
         let (t_front, t_height) = ((2.0 * G / a).sqrt(), (G / a).sqrt());
         let fronts: Vec<(f64, f64)> = self
@@ -150,19 +168,19 @@ impl MartinMoyceProbe {
                 })
                 .collect()
         };
-        Ok(MartinMoyce {
+        MartinMoyce {
             front: rows(&front_data, &fronts),
             height: rows(&height_data, &heights),
             shift_t,
             steps,
             cells_per_a,
-        })
+        }
     }
 }
 
 /// Runs scene `martin-moyce-2d` (with `overrides`) until the last tabulated time and compares
 /// it with experiment ([`MartinMoyceProbe`]).
-pub fn martin_moyce(overrides: &Overrides, shift_t: f64) -> Result<MartinMoyce> {
+pub fn martin_moyce(overrides: &Overrides, shift_t: f64) -> Result<MartinMoyce, ValidationError> {
     let scene = Scene::load("martin-moyce-2d", overrides)?;
     let sim = Simulation::<2>::new(scene.config::<2>(), &scene.method);
     let mut probe = MartinMoyceProbe::default();
@@ -175,12 +193,15 @@ pub fn martin_moyce(overrides: &Overrides, shift_t: f64) -> Result<MartinMoyce> 
             || false,
             |sim, _| {
                 probe.observe(sim);
-                Ok::<_, StepFailed>(())
+                Ok(())
             },
         )
-        .context("martin-moyce-2d")?;
+        .map_err(|error| ValidationError::Run {
+            scene: "martin-moyce-2d",
+            error,
+        })?;
     let cells_per_a = COLUMN_WIDTH_M / runner.sim.state.config.cell_size_m;
-    probe.compare(shift_t, runner.sim.state.steps, cells_per_a)
+    Ok(probe.compare(shift_t, runner.sim.state.steps, cells_per_a))
 }
 
 /// Water at rest after `steps` steps: the largest particle speed as a fraction of
@@ -192,7 +213,7 @@ pub struct Hydrostatic {
     pub volume_max: f64,
 }
 
-pub fn hydrostatic(steps: u64) -> Result<Hydrostatic> {
+pub fn hydrostatic(steps: u64) -> Result<Hydrostatic, ValidationError> {
     let scene = Scene::load("hydrostatic-2d", &Overrides::default())?;
     let mut runner = Runner::new(Simulation::<2>::new(scene.config::<2>(), &scene.method));
     let s = &runner.sim.state;
@@ -200,7 +221,10 @@ pub fn hydrostatic(steps: u64) -> Result<Hydrostatic> {
     let depth_m = top.ceil() * s.config.cell_size_m;
     runner
         .run_to(Limit::Steps(steps))
-        .context("hydrostatic-2d")?;
+        .map_err(|error| ValidationError::Run {
+            scene: "hydrostatic-2d",
+            error,
+        })?;
     let s = &runner.sim.state;
     let speed = s.particles.vel.iter().map(|v| v.norm()).fold(0.0, f64::max);
     let vmax_speed = speed * s.config.cell_size_m;

@@ -139,7 +139,9 @@ fn compare_dim<const D: usize>(
         runners.push((Runner::new(sim), Status::Running));
     }
     let duration = entries[0].scene.duration_secs();
-    let finisher = recording.as_ref().map(|r| Box::new(r.finisher()) as _);
+    let finisher = recording
+        .as_ref()
+        .map(|r| super::run::finisher(r.finisher()));
     let watchdog = Watchdog::start(finisher, interrupt::GRACE);
     let frames = Frames {
         dt: args.frame_dt,
@@ -158,7 +160,7 @@ fn compare_dim<const D: usize>(
         .into_iter()
         .flatten()
         .try_for_each(FrameWorker::finish);
-    let stepped = stepped.and(drawn);
+    let stepped = stepped.and(drawn.map_err(Into::into));
     watchdog.done();
     let served = match (&stepped, recording) {
         (Ok(()), Some(r)) => r.finish()?,
@@ -213,11 +215,12 @@ pub fn step_frames<const D: usize>(
             let stepped = runner.run(Limit::SimSeconds(t_frame), interrupted, |sim, rep| {
                 let frame = sim.state.time_secs >= t_frame;
                 let logged = recording.map_or(Ok(()), |r| r.log_step(i, sim, Some(rep), frame));
+                let logged = logged.map_err(anyhow::Error::from);
                 let handed = match (frame, worker.as_mut()) {
                     (true, Some(w)) => w.submit(sim),
                     _ => Ok(()),
                 };
-                logged.and(handed).inspect_err(|e| {
+                logged.and(handed.map_err(Into::into)).inspect_err(|e| {
                     *write_error.borrow_mut() = Some(format!("{e:#}"));
                 })
             });

@@ -10,6 +10,7 @@
 
 use super::canvas::PointLook;
 use super::layout::{self, Compared, RunFacts};
+use super::RecordError;
 use super::{Drawing, Output, RunLog, Sink, Stream};
 use crate::draw::legend;
 use crate::draw::Log;
@@ -17,7 +18,6 @@ use crate::grid::Vector;
 use crate::metrics::kinetic_energy;
 use crate::scene::Scene;
 use crate::simulation::{Simulation, StepReport};
-use anyhow::{anyhow, Result};
 
 /// One run of a comparison, as the recording names and colours it.
 pub struct ComparedRun<'a> {
@@ -41,15 +41,12 @@ pub struct Comparison {
 impl Comparison {
     /// Opens the recording with its layout, legend and each run's line colours; fails (naming
     /// the file or the viewer) before anything is simulated.
-    pub fn create(sink: &Sink, name: &str, runs: &[ComparedRun<'_>]) -> Result<Self> {
+    pub fn create(sink: &Sink, name: &str, runs: &[ComparedRun<'_>]) -> Result<Self, RecordError> {
         let output = Output::open(sink, name, None)?;
         let rec = &output.rec;
-        let cannot = |e| anyhow!("cannot write the recording to {}: {e}", sink.describe());
+        let cannot = |e: rerun::RecordingStreamError| RecordError::sink(sink, e);
         let compared: Vec<Compared<'_>> = runs.iter().map(compared).collect();
-        let first = runs
-            .first()
-            .ok_or_else(|| anyhow!("no run to compare"))?
-            .scene;
+        let first = runs.first().ok_or(RecordError::NoRun)?.scene;
         let obstacles: Vec<String> = first.file.obstacle.iter().map(|o| o.name.clone()).collect();
         let root = layout::compare_layout(&compared, &obstacles);
         super::blueprint::send(rec, &root, "sim_time").map_err(cannot)?;
@@ -94,7 +91,7 @@ impl Comparison {
         sim: &Simulation<D>,
         rep: Option<&StepReport<D>>,
         frame: bool,
-    ) -> Result<()> {
+    ) -> Result<(), RecordError> {
         let (title, run) = &self.runs[i];
         run.log_step(sim, rep, frame);
         let s = &sim.state;
@@ -135,7 +132,7 @@ impl Comparison {
     }
 
     /// See [`Output::finish`].
-    pub fn finish(self) -> Result<Option<super::Served>> {
+    pub fn finish(self) -> Result<Option<super::Served>, RecordError> {
         self.output.finish()
     }
 
@@ -145,7 +142,7 @@ impl Comparison {
     }
 
     /// See [`Output::finisher`].
-    pub fn finisher(&self) -> impl FnOnce() -> Result<()> + Send + 'static {
+    pub fn finisher(&self) -> impl FnOnce() -> Result<(), RecordError> + Send + 'static {
         self.output.finisher()
     }
 }

@@ -15,7 +15,7 @@
 //!   stays one stream with one footer indexing all of it (`rerun rrd verify` passes), and
 //!   the earlier file is replaced only once the continuation records its first step.
 
-use anyhow::{anyhow, bail, Result};
+use super::RecordError;
 use rerun::external::re_log_encoding::{EncodeError, Encoder, EncodingOptions};
 use rerun::log::LogMsg;
 use rerun::sink::{LogSink, SinkFlushError};
@@ -82,20 +82,18 @@ pub struct RrdFile {
 
 impl RrdFile {
     /// Creates the file (beside `path` until committed) and writes the stream's header.
-    pub fn create(path: &Path) -> Result<Self> {
+    pub fn create(path: &Path) -> Result<Self, RecordError> {
         let special = std::fs::metadata(path).is_ok_and(|m| !m.is_file());
         let partial = (!special).then(|| partial_path(path));
         let at = partial.as_deref().unwrap_or(path);
-        let fail =
-            |e: &dyn std::fmt::Display| anyhow!("cannot write recording '{}': {e}", path.display());
-        let file = File::create(at).map_err(|e| fail(&e))?;
+        let file = File::create(at).map_err(|e| cannot_write(path, e))?;
         Self::encode(path, file, partial)
     }
 
     /// A new recording at `path` that starts with the messages in the first `at` bytes of the
     /// recording there now (what a checkpoint noted: what lies after is left out); the run
     /// logs on after them. The file there is replaced at [`RrdFile::commit`].
-    pub fn continue_from(path: &Path, at: u64) -> Result<Self> {
+    pub fn continue_from(path: &Path, at: u64) -> Result<Self, RecordError> {
         let f = Self::create(path)?;
         if let Err(e) = replay(path, at, &f).and_then(|()| f.check()) {
             f.discard();
@@ -105,7 +103,7 @@ impl RrdFile {
     }
 
     /// The stream's header written to `file`.
-    fn encode(path: &Path, file: File, partial: Option<PathBuf>) -> Result<Self> {
+    fn encode(path: &Path, file: File, partial: Option<PathBuf>) -> Result<Self, RecordError> {
         let version = rerun::build_info().version;
         let len = Arc::new(AtomicU64::new(0));
         let writer = WholeWrites {
@@ -115,11 +113,7 @@ impl RrdFile {
         let encoder = Encoder::new_eager(version, EncodingOptions::PROTOBUF_COMPRESSED, writer)
             .map_err(|e| {
                 let _ = partial.as_deref().map(std::fs::remove_file);
-                anyhow!(
-                    "cannot write recording '{}': {}",
-                    path.display(),
-                    os_error(e)
-                )
+                cannot_write(path, os_error(e))
             })?;
         Ok(Self {
             path: path.to_path_buf(),
@@ -148,38 +142,34 @@ impl RrdFile {
 
     /// Fails, naming the file and the OS error, once a write has failed or the file is gone
     /// (its directory removed: writes to an unlinked file succeed but are lost).
-    pub fn check(&self) -> Result<()> {
+    pub fn check(&self) -> Result<(), RecordError> {
         let s = self.lock();
         if let Some(e) = &s.error {
-            bail!("cannot write recording '{}': {e}", self.path.display());
+            return Err(cannot_write(&self.path, e.clone()));
         }
         let at = s.partial.as_deref().unwrap_or(&self.path);
         if s.encoder.is_some() && !at.exists() {
-            bail!(
-                "cannot write recording '{}': the file (or its directory) was removed during the run",
-                self.path.display()
-            );
+            let why = "the file (or its directory) was removed during the run";
+            return Err(cannot_write(&self.path, why));
         }
         Ok(())
     }
 
     /// Gives the file its name (once; later calls do nothing).
-    pub fn commit(&self) -> Result<()> {
+    pub fn commit(&self) -> Result<(), RecordError> {
         let mut s = self.lock();
         if let Some(partial) = s.partial.take() {
-            std::fs::rename(&partial, &self.path).map_err(|e| {
-                anyhow!(
-                    "cannot rename '{}' to '{}': {e}",
-                    partial.display(),
-                    self.path.display()
-                )
+            std::fs::rename(&partial, &self.path).map_err(|error| RecordError::Rename {
+                from: partial,
+                to: self.path.clone(),
+                error,
             })?;
         }
         Ok(())
     }
 
     /// Writes the footer and closes the file; then [`check`](Self::check)s. Idempotent.
-    pub fn finish(&self) -> Result<()> {
+    pub fn finish(&self) -> Result<(), RecordError> {
         {
             let mut s = self.lock();
             if let Some(mut encoder) = s.encoder.take() {
@@ -226,6 +216,13 @@ impl LogSink for RrdFile {
     }
 }
 
+fn cannot_write(path: &Path, error: impl Into<crate::out::BoxError>) -> RecordError {
+    RecordError::File {
+        path: path.into(),
+        error: error.into(),
+    }
+}
+
 /// The OS error of a failed write as the OS says it ("No space left on device (os error 28)").
 fn os_error(e: EncodeError) -> String {
     match e {
@@ -236,23 +233,26 @@ fn os_error(e: EncodeError) -> String {
 
 /// Sends the messages in the first `at` bytes of the recording at `path` to `sink`, in order:
 /// what a checkpoint noted of a recording to go on with (what lies after is left out).
-pub fn replay(path: &Path, at: u64, sink: &dyn LogSink) -> Result<()> {
+pub fn replay(path: &Path, at: u64, sink: &dyn LogSink) -> Result<(), RecordError> {
     use rerun::external::re_log_encoding::DecoderApp;
     use std::io::Read;
-    let fail = |e: &dyn std::fmt::Display| {
-        anyhow!("cannot go on with recording '{}': {e}", path.display())
+    let fail = |error: crate::out::BoxError| RecordError::Continue {
+        path: path.into(),
+        error,
     };
-    let old = File::open(path).map_err(|e| fail(&e))?;
-    let len = old.metadata().map_err(|e| fail(&e))?.len();
+    let old = File::open(path).map_err(|e| fail(e.into()))?;
+    let len = old.metadata().map_err(|e| fail(e.into()))?.len();
     if len < at {
-        bail!(
-            "cannot go on with recording '{}': it has {len} bytes, fewer than the {at} the \
-             checkpoint recorded up to (record to a new file with --save PATH)",
-            path.display()
-        );
+        return Err(fail(
+            format!(
+                "it has {len} bytes, fewer than the {at} the checkpoint recorded up to (record \
+                 to a new file with --save PATH)"
+            )
+            .into(),
+        ));
     }
     for msg in DecoderApp::decode_lazy(std::io::BufReader::new(old.take(at))) {
-        sink.send(msg.map_err(|e| fail(&e))?);
+        sink.send(msg.map_err(|e| fail(e.into()))?);
     }
     Ok(())
 }

@@ -26,12 +26,13 @@ pub use serve::{parse_memory_limit, serve_files, Served, WebServe};
 pub use stream::Stream;
 
 use crate::draw::legend;
+use crate::out::BoxError;
 use crate::scene::Scene;
 use crate::simulation::{Simulation, StepReport};
-use anyhow::{anyhow, Result};
 use layout::RunFacts;
 use rerun::blueprint::{Blueprint, Tabs, TimeSeriesView, Vertical};
 use std::path::Path;
+use std::path::PathBuf;
 
 /// How the correction's moves are drawn (`--moves`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
@@ -63,6 +64,66 @@ pub struct Recorder {
     continued: bool,
 }
 
+/// Why a recording could not be written, read or served: what and where, with the cause.
+#[derive(Debug, thiserror::Error)]
+pub enum RecordError {
+    /// Writing to a sink (a file, a viewer, standard output, the web viewer's server).
+    #[error("cannot write the recording to {sink}")]
+    Sink {
+        sink: String,
+        #[source]
+        error: BoxError,
+    },
+    /// The recording's own file.
+    #[error("cannot write recording '{}'", .path.display())]
+    File {
+        path: PathBuf,
+        #[source]
+        error: BoxError,
+    },
+    #[error("cannot rename '{}' to '{}'", .from.display(), .to.display())]
+    Rename {
+        from: PathBuf,
+        to: PathBuf,
+        #[source]
+        error: std::io::Error,
+    },
+    /// The recording a resumed run goes on with.
+    #[error("cannot go on with recording '{}'", .path.display())]
+    Continue {
+        path: PathBuf,
+        #[source]
+        error: BoxError,
+    },
+    #[error("cannot read recording '{}'", .path.display())]
+    Read {
+        path: PathBuf,
+        #[source]
+        error: BoxError,
+    },
+    /// A command-line option that cannot be met: the option as given, and why.
+    #[error("{option}")]
+    Option {
+        option: String,
+        #[source]
+        error: BoxError,
+    },
+    #[error("cannot hand the recordings to the server")]
+    Serve(#[source] BoxError),
+    #[error("no run to compare")]
+    NoRun,
+}
+
+impl RecordError {
+    /// A failure writing to `sink`.
+    pub(crate) fn sink(sink: &Sink, error: impl Into<BoxError>) -> Self {
+        RecordError::Sink {
+            sink: sink.describe(),
+            error: error.into(),
+        }
+    }
+}
+
 impl Recorder {
     /// Opens the recording with the run's identity, layout and scene; fails (naming the file
     /// or the viewer) before anything is simulated; a run resumed from a checkpoint goes on
@@ -72,10 +133,10 @@ impl Recorder {
         scene: &Scene,
         drawing: Drawing,
         resumed: Option<&Resumed>,
-    ) -> Result<Self> {
+    ) -> Result<Self, RecordError> {
         let output = Output::open(sink, &recording_name(scene), resumed)?;
         let rec = &output.rec;
-        let cannot = |e| anyhow!("cannot write the recording to {}: {e}", sink.describe());
+        let cannot = |e: rerun::RecordingStreamError| RecordError::sink(sink, e);
         let facts = RunFacts::of(scene, &drawing);
         let run = RunLog::new(Stream::new(rec.clone(), ""), scene, drawing, false);
         // A recording that goes on in its own file has its layout and static data already: sent
@@ -125,7 +186,7 @@ impl Recorder {
         sim: &Simulation<D>,
         rep: Option<&StepReport<D>>,
         full: bool,
-    ) -> Result<()> {
+    ) -> Result<(), RecordError> {
         self.run.log_step(sim, rep, full);
         self.output.step_logged(rep.is_some())
     }
@@ -144,7 +205,7 @@ impl Recorder {
     }
 
     /// Flushes everything; see [`Output::finish`].
-    pub fn finish(self) -> Result<Option<Served>> {
+    pub fn finish(self) -> Result<Option<Served>, RecordError> {
         self.output.finish()
     }
 
@@ -174,7 +235,7 @@ impl Recorder {
     }
 
     /// See [`Output::finisher`].
-    pub fn finisher(&self) -> impl FnOnce() -> Result<()> + Send + 'static {
+    pub fn finisher(&self) -> impl FnOnce() -> Result<(), RecordError> + Send + 'static {
         self.output.finisher()
     }
 }
@@ -268,7 +329,11 @@ fn shade(runs: &[ComparisonSeries<'_>], r: &ComparisonSeries<'_>) -> [u8; 3] {
 /// timeline, under `volume/<scene>/<method>/<cells>` and
 /// `kinetic_energy/<scene>/<method>/<cells>` (`_s<seed>` appended when a scene runs with
 /// several seeds), with one tab per scene comparing the methods.
-pub fn write_comparison(path: &Path, runs: &[ComparisonSeries<'_>]) -> Result<()> {
+pub fn write_comparison(path: &Path, runs: &[ComparisonSeries<'_>]) -> Result<(), RecordError> {
+    let cannot = |e: BoxError| RecordError::File {
+        path: path.into(),
+        error: e,
+    };
     let mut scenes: Vec<String> = vec![];
     for r in runs {
         let s = path_part(r.scene);
@@ -292,7 +357,8 @@ pub fn write_comparison(path: &Path, runs: &[ComparisonSeries<'_>]) -> Result<()
         .recording_name("cellflip report")
         .send_properties(false)
         .with_blueprint(blueprint)
-        .save(path)?;
+        .save(path)
+        .map_err(|e| cannot(e.into()))?;
     rec.set_log_time_enabled(false);
     let several_seeds = |r: &ComparisonSeries<'_>| {
         runs.iter().any(|o| {
@@ -309,14 +375,15 @@ pub fn write_comparison(path: &Path, runs: &[ComparisonSeries<'_>]) -> Result<()
             // The method's colour in both panels (the viewer would pick one per path), lighter
             // for each further resolution or seed of the same method and scene.
             let line = rerun::SeriesLines::new().with_colors([shade(runs, r)]);
-            rec.log_static(entity.as_str(), &line)?;
+            (rec.log_static(entity.as_str(), &line)).map_err(|e| cannot(e.into()))?;
             for &(t, v) in series {
                 rec.set_duration_secs("sim_time", t);
-                rec.log(entity.as_str(), &rerun::Scalars::single(v))?;
+                (rec.log(entity.as_str(), &rerun::Scalars::single(v)))
+                    .map_err(|e| cannot(e.into()))?;
             }
         }
     }
-    rec.flush_blocking().map_err(|e| anyhow!("{e}"))?;
+    rec.flush_blocking().map_err(|e| cannot(e.into()))?;
     Ok(())
 }
 

@@ -7,8 +7,8 @@
 //! [`LIVE_FLUSH_TIMEOUT`] for the rest and then says the stream was lost (see [`end_live`]).
 
 use super::serve::{Served, WebServe};
+use super::RecordError;
 use super::RrdFile;
-use anyhow::{anyhow, Result};
 use rerun::sink::LogSink;
 use rerun::{RecordingStream, RecordingStreamBuilder};
 use std::cell::Cell;
@@ -79,16 +79,18 @@ impl Sink {
     /// For a live stream to a viewer already running: fails, naming the URL, when nothing
     /// accepts a connection at its host and port within [`REACH_TIMEOUT`] (rerun's gRPC client
     /// would drop the whole stream silently and the run would end with a warning only).
-    pub fn check_reachable(&self) -> Result<()> {
+    pub fn check_reachable(&self) -> Result<(), RecordError> {
         let Sink::Connect(url) = self else {
             return Ok(());
         };
         let url = url.as_deref().unwrap_or(DEFAULT_URL);
-        let cannot = |why: &dyn std::fmt::Display| {
-            anyhow!(
-                "--connect {url}: no viewer answers there ({why}); start one with `rerun` \
-                 (pip install rerun-sdk==0.36.3), or pass --no-viewer-check to run anyway"
+        let cannot = |why: &dyn std::fmt::Display| RecordError::Option {
+            option: format!("--connect {url}"),
+            error: format!(
+                "no viewer answers there ({why}); start one with `rerun` (pip install \
+                 rerun-sdk==0.36.3), or pass --no-viewer-check to run anyway"
             )
+            .into(),
         };
         let rest = url.split_once("://").map_or(url, |(_, r)| r);
         let authority = rest.split('/').next().unwrap_or(rest);
@@ -120,14 +122,11 @@ impl Output {
     /// Opens the stream with the recording's `name`; fails, naming the file or the viewer,
     /// before anything is simulated. A run resumed from a checkpoint goes on with its
     /// recording's id and, when `resumed.append_at` says so, its file.
-    pub fn open(sink: &Sink, name: &str, resumed: Option<&Resumed>) -> Result<Self> {
+    pub fn open(sink: &Sink, name: &str, resumed: Option<&Resumed>) -> Result<Self, RecordError> {
         let mut builder = RecordingStreamBuilder::new("cellflip").recording_name(name);
         if let Some(r) = resumed {
             builder = builder.recording_id(r.id.as_str());
         }
-        let cannot = |e: &dyn std::fmt::Display| {
-            anyhow!("cannot write the recording to {}: {e}", sink.describe())
-        };
         let file = match sink.file() {
             Some(path) => Some(match resumed.and_then(|r| r.append_at) {
                 Some(at) => RrdFile::continue_from(path, at)?,
@@ -151,7 +150,7 @@ impl Output {
             Sink::Connect(Some(url)) => builder.connect_grpc_opts(url.clone()),
             Sink::Stdout => builder.stdout(),
         }
-        .map_err(|e| cannot(&e))?;
+        .map_err(|e| RecordError::sink(sink, e))?;
         rec.set_log_time_enabled(false);
         Ok(Self {
             rec,
@@ -175,7 +174,7 @@ impl Output {
 
     /// After a step was logged: everything logged more than two seconds ago is on its way;
     /// a file takes its name at the first step (`committed`) and a failed write stops the run.
-    pub fn step_logged(&self, committed: bool) -> Result<()> {
+    pub fn step_logged(&self, committed: bool) -> Result<(), RecordError> {
         if self.last_flush.get().elapsed() > Duration::from_secs(2) {
             let _ = match self.file {
                 Some(_) => self.rec.flush_blocking(),
@@ -196,7 +195,7 @@ impl Output {
     /// (an interrupted run). A live stream that cannot be drained is reported, not an error:
     /// the run itself went well. A served recording stays served as long as the [`Served`]
     /// returned is held.
-    pub fn finish(self) -> Result<Option<Served>> {
+    pub fn finish(self) -> Result<Option<Served>, RecordError> {
         if let Some(file) = &self.file {
             let _ = self.rec.flush_blocking();
             file.commit()?;
@@ -238,7 +237,7 @@ impl Output {
 
     /// A closure that finishes the recording from another thread with what was logged so far
     /// (the signal watchdog: a step that does not end in time is not waited for).
-    pub fn finisher(&self) -> impl FnOnce() -> Result<()> + Send + 'static {
+    pub fn finisher(&self) -> impl FnOnce() -> Result<(), RecordError> + Send + 'static {
         let (rec, file) = (self.rec.clone(), self.file.clone());
         move || match file {
             Some(file) => {

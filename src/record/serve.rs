@@ -5,7 +5,7 @@
 //! browser that opens the page late still gets the whole run; past the limit it drops the
 //! oldest non-static data. Serving goes on after the run until Ctrl-C ([`Served::hold_until_signal`]).
 
-use anyhow::{anyhow, bail, Result};
+use super::RecordError;
 use rerun::sink::LogSink;
 use std::net::{IpAddr, TcpListener};
 use std::time::Duration;
@@ -46,24 +46,27 @@ impl WebServe {
 
     /// Fails, naming the option and the address, when a port is taken (checked by binding it:
     /// rerun's gRPC server binds on a thread of its own and would only log the failure).
-    pub fn check_ports(&self) -> Result<()> {
+    pub fn check_ports(&self) -> Result<(), RecordError> {
         if self.web_port == self.grpc_port {
-            bail!(
-                "--serve-web {0} and --grpc-port {0}: the web viewer and the recording need two \
-                 ports",
-                self.web_port
-            );
+            return Err(RecordError::Option {
+                option: format!("--serve-web {0} and --grpc-port {0}", self.web_port),
+                error: "the web viewer and the recording need two ports".into(),
+            });
         }
         for (option, port) in [
             ("--serve-web", self.web_port),
             ("--grpc-port", self.grpc_port),
         ] {
             if let Err(e) = TcpListener::bind((self.bind, port)) {
-                bail!(
-                    "{option} {port}: cannot listen on {}:{port} ({e}); is another viewer or \
-                     cellflip serving there? Choose another port with {option} PORT",
-                    self.bind
-                );
+                return Err(RecordError::Option {
+                    option: format!("{option} {port}"),
+                    error: format!(
+                        "cannot listen on {}:{port} ({e}); is another viewer or cellflip serving \
+                         there? Choose another port with {option} PORT",
+                        self.bind
+                    )
+                    .into(),
+                });
             }
         }
         Ok(())
@@ -71,11 +74,16 @@ impl WebServe {
 
     /// Starts both servers and gives the sink that feeds them; says where to point a browser,
     /// and warns when they listen beyond this machine.
-    pub fn start(&self) -> Result<Box<dyn LogSink>> {
+    pub fn start(&self) -> Result<Box<dyn LogSink>, RecordError> {
         self.check_ports()?;
+        let option = |name: &str, value: &dyn std::fmt::Display| format!("{name} {value}");
         let mut options = rerun::ServerOptions {
-            memory_limit: rerun::MemoryLimit::parse(&self.memory_limit)
-                .map_err(|e| anyhow!("--server-memory-limit {}: {e}", self.memory_limit))?,
+            memory_limit: rerun::MemoryLimit::parse(&self.memory_limit).map_err(|e| {
+                RecordError::Option {
+                    option: option("--server-memory-limit", &self.memory_limit),
+                    error: e.into(),
+                }
+            })?,
             ..Default::default()
         };
         if !self.bind.is_loopback() {
@@ -105,7 +113,10 @@ impl WebServe {
             self.grpc_port,
             options,
         )
-        .map_err(|e| anyhow!("--serve-web {}: {e}", self.web_port))?;
+        .map_err(|e| RecordError::Option {
+            option: option("--serve-web", &self.web_port),
+            error: e.into(),
+        })?;
         eprintln!("serving the web viewer: open {}", self.url());
         Ok(sink)
     }
@@ -145,18 +156,20 @@ impl Served {
 
 /// Serves saved recordings as `serve` says: each file's messages, in order, go to the servers
 /// before the page is announced as ready. Fails, naming the file, on one that cannot be read.
-pub fn serve_files(serve: &WebServe, files: &[std::path::PathBuf]) -> Result<Served> {
+pub fn serve_files(serve: &WebServe, files: &[std::path::PathBuf]) -> Result<Served, RecordError> {
     use rerun::external::re_log_encoding::DecoderApp;
     let sink = serve.start()?;
     for path in files {
-        let cannot =
-            |e: &dyn std::fmt::Display| anyhow!("cannot read recording '{}': {e}", path.display());
-        let file = std::fs::File::open(path).map_err(|e| cannot(&e))?;
+        let cannot = |error: crate::out::BoxError| RecordError::Read {
+            path: path.clone(),
+            error,
+        };
+        let file = std::fs::File::open(path).map_err(|e| cannot(e.into()))?;
         for msg in DecoderApp::decode_lazy(std::io::BufReader::new(file)) {
-            sink.send(msg.map_err(|e| cannot(&e))?);
+            sink.send(msg.map_err(|e| cannot(e.into()))?);
         }
     }
     sink.flush_blocking(Duration::from_secs(60))
-        .map_err(|e| anyhow!("cannot hand the recordings to the server: {e}"))?;
+        .map_err(|e| RecordError::Serve(e.into()))?;
     Ok(Served::new(sink, serve.url()))
 }

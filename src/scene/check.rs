@@ -24,6 +24,8 @@ pub enum ErrorKind {
     Geometry,
     /// Settings that do not go together.
     Conflict,
+    /// A run larger than the memory this machine has left (`scene::ensure_fit`).
+    Memory,
 }
 
 /// A scene that cannot run: which file, which key, what kind of problem and why.

@@ -15,12 +15,12 @@
 //! measurements, the ratio of estimate to peak per method and the command that repeats them).
 
 use super::Scene;
+use super::{ErrorKind, SceneError};
 use crate::grid::Grid;
 use crate::methods::Holds;
 use crate::sim::markings::Markings;
 use crate::sim::solids::Solids;
 use crate::sim::SimConfig;
-use anyhow::{bail, Result};
 
 /// The process before any simulation: code, the thread pool, the scene.
 const BASE_BYTES: f64 = 12.0 * MIB;
@@ -130,7 +130,7 @@ impl Scene {
     /// estimate exceeds the memory left under the smallest limit on this process (the
     /// machine's, its cgroup's, its own: [`super::limits`]); passes where none can be read.
     /// Gives the estimate.
-    pub fn ensure_fits_in_memory(&self, recorded: bool) -> Result<MemoryEstimate> {
+    pub fn ensure_fits_in_memory(&self, recorded: bool) -> Result<MemoryEstimate, SceneError> {
         let mut estimates = ensure_fit(&[self], recorded)?;
         Ok(estimates.remove(0))
     }
@@ -139,7 +139,7 @@ impl Scene {
 /// Fails when runs of `scenes` side by side in one process (`cellflip compare`) would not fit,
 /// naming the first scene's file and the key that makes the runs large; gives each scene's
 /// estimate.
-pub fn ensure_fit(scenes: &[&Scene], recorded: bool) -> Result<Vec<MemoryEstimate>> {
+pub fn ensure_fit(scenes: &[&Scene], recorded: bool) -> Result<Vec<MemoryEstimate>, SceneError> {
     let Some((first, _)) = scenes.split_first() else {
         return Ok(vec![]);
     };
@@ -159,10 +159,9 @@ pub fn ensure_fit(scenes: &[&Scene], recorded: bool) -> Result<Vec<MemoryEstimat
         1 => "the run needs".to_string(),
         n => format!("{n} runs side by side need"),
     };
-    bail!(
-        "{}: key '{key}': {runs} about {:.1} GiB ({} cells, about {:.3e} particles{}), \
-         more than the {:.1} GiB left under {}",
-        first.source,
+    let reason = format!(
+        "{runs} about {:.1} GiB ({} cells, about {:.3e} particles{}), more than the {:.1} GiB \
+         left under {}",
         gib(bytes),
         estimates[0].cells,
         estimates[0].particles,
@@ -172,7 +171,13 @@ pub fn ensure_fit(scenes: &[&Scene], recorded: bool) -> Result<Vec<MemoryEstimat
         },
         gib(limit.bytes),
         limit.source
-    )
+    );
+    Err(SceneError {
+        file: first.source.clone(),
+        key: key.into(),
+        kind: ErrorKind::Memory,
+        reason,
+    })
 }
 
 /// Peak resident memory of this process so far (Linux `VmHWM`), in MiB.

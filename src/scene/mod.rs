@@ -20,7 +20,6 @@ use crate::sim::emit::Emitter;
 use crate::sim::solids::{Motion, Obstacle, ObstacleMode};
 use crate::sim::SimConfig;
 use crate::solvers::pcg::Preconditioner;
-use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -50,6 +49,32 @@ pub const BUILT_IN: &[(&str, &str)] = built_in![
     "deep-pool-2d",
     "deep-pool-3d",
 ];
+
+/// Why a scene does not load.
+#[derive(Debug, thiserror::Error)]
+pub enum LoadError {
+    #[error("cannot read scene file '{path}'")]
+    Read {
+        path: String,
+        #[source]
+        error: std::io::Error,
+    },
+    #[error(
+        "unknown scene '{name}': not a built-in scene ({}) and not a .toml file",
+        built_in_names()
+    )]
+    Unknown { name: String },
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+}
+
+fn built_in_names() -> String {
+    BUILT_IN
+        .iter()
+        .map(|(n, _)| *n)
+        .collect::<Vec<_>>()
+        .join(", ")
+}
 
 /// The rate at which a falling obstacle approaches its terminal speed in the water, 1/s,
 /// unless `obstacle.drag` says otherwise.
@@ -310,28 +335,28 @@ impl Scene {
     }
 
     /// Loads a built-in scene by name, or a scene file by path.
-    pub fn load(name_or_path: &str, overrides: &Overrides) -> Result<Scene> {
-        let (source, text) =
-            if let Some((_, text)) = BUILT_IN.iter().find(|(n, _)| *n == name_or_path) {
-                (format!("built-in scene '{name_or_path}'"), text.to_string())
-            } else if name_or_path.ends_with(".toml") || Path::new(name_or_path).exists() {
-                let text = std::fs::read_to_string(name_or_path)
-                    .with_context(|| format!("cannot read scene file '{name_or_path}'"))?;
-                (format!("scene file '{name_or_path}'"), text)
-            } else {
-                let names: Vec<&str> = BUILT_IN.iter().map(|(n, _)| *n).collect();
-                bail!(
-                "unknown scene '{name_or_path}': not a built-in scene ({}) and not a .toml file",
-                names.join(", ")
-            );
-            };
-        Self::parse(&source, &text, overrides)
+    pub fn load(name_or_path: &str, overrides: &Overrides) -> Result<Scene, LoadError> {
+        let (source, text) = if let Some((_, text)) =
+            BUILT_IN.iter().find(|(n, _)| *n == name_or_path)
+        {
+            (format!("built-in scene '{name_or_path}'"), text.to_string())
+        } else if name_or_path.ends_with(".toml") || Path::new(name_or_path).exists() {
+            let text = std::fs::read_to_string(name_or_path).map_err(|error| LoadError::Read {
+                path: name_or_path.into(),
+                error,
+            })?;
+            (format!("scene file '{name_or_path}'"), text)
+        } else {
+            let name = name_or_path.into();
+            return Err(LoadError::Unknown { name });
+        };
+        Ok(Self::parse(&source, &text, overrides)?)
     }
 
     /// Parses and checks scene text; `source` names it in errors. The method keys the file
     /// sets are checked against the file's own method, before the command line's overrides
     /// (whose flags the commands check against the method run).
-    pub fn parse(source: &str, text: &str, overrides: &Overrides) -> Result<Scene> {
+    pub fn parse(source: &str, text: &str, overrides: &Overrides) -> Result<Scene, SceneError> {
         let file: SceneFile =
             toml::from_str(text).map_err(|e| check::toml_error(source, text, &e))?;
         check::method_keys(source, &file.simulation)?;
@@ -340,7 +365,11 @@ impl Scene {
 
     /// The scene as run, from its [`Scene::resolved_toml`] (a checkpoint's) with `overrides`:
     /// checked as any scene.
-    pub fn parse_resolved(source: &str, text: &str, overrides: &Overrides) -> Result<Scene> {
+    pub fn parse_resolved(
+        source: &str,
+        text: &str,
+        overrides: &Overrides,
+    ) -> Result<Scene, SceneError> {
         let file: SceneFile =
             toml::from_str(text).map_err(|e| check::toml_error(source, text, &e))?;
         Self::checked(source, file, overrides)
@@ -348,7 +377,11 @@ impl Scene {
 
     /// The file with `overrides` applied, checked; its `[simulation]` then holds every method's
     /// table as it runs ([`SimulationFile::with_tables`]).
-    fn checked(source: &str, mut file: SceneFile, overrides: &Overrides) -> Result<Scene> {
+    fn checked(
+        source: &str,
+        mut file: SceneFile,
+        overrides: &Overrides,
+    ) -> Result<Scene, SceneError> {
         overrides.apply(&mut file);
         let mut scene = check::check(source, file, &overrides.flags)?;
         scene.file.simulation = scene.file.simulation.with_tables(&scene.method);

@@ -23,10 +23,7 @@ max = [0.5, 0.5]
 /// the file fails cleanly (no panic, non-zero exit, no output file) naming the file and the
 /// key in its message.
 pub(crate) fn rejects(test: &str, text: &str, key: &str, kind: ErrorKind) {
-    let e = Scene::parse("scene.toml", text, &Overrides::default())
-        .expect_err(test)
-        .downcast::<SceneError>()
-        .unwrap_or_else(|e| panic!("{test}: not a scene error: {e:#}"));
+    let e: SceneError = Scene::parse("scene.toml", text, &Overrides::default()).expect_err(test);
     assert_eq!((e.key.as_str(), e.kind), (key, kind), "{test}: {e}");
     let dir = scratch_dir(test);
     let file = dir.join("scene.toml");

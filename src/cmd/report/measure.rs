@@ -223,10 +223,12 @@ pub fn resumable(dir: &Path) -> Option<Opened> {
     if !dir.is_dir() {
         return None;
     }
-    let opened = checkpoint::open(dir).and_then(|c| match c.reader.meta("program") {
-        Ok(p) if p == checkpoint::build() => Ok(c),
-        _ => anyhow::bail!("'{}' was written by another build", c.path.display()),
-    });
+    let opened = checkpoint::open(dir)
+        .map_err(anyhow::Error::from)
+        .and_then(|c| match c.reader.meta("program") {
+            Ok(p) if p == checkpoint::build() => Ok(c),
+            _ => anyhow::bail!("'{}' was written by another build", c.path.display()),
+        });
     opened
         .inspect_err(|e| eprintln!("warning: {e:#}; the run starts again from its beginning"))
         .ok()
@@ -318,11 +320,10 @@ fn finish<const D: usize>(runner: &Runner<D>, g: &Gathered, lowest: f64, m: &mut
     put("volume_error", err / steps);
     put("volume_end", m.volume.last().map_or(f64::NAN, |x| x.1));
     if let Some(p) = &g.probe {
-        if let Ok(c) = p.compare(0.0, sum.steps, COLUMN_WIDTH_M / h) {
-            put("front_error", 100.0 * c.front_mean_relative_error());
-            put("column_error", 100.0 * c.height_mean_relative_error());
-            m.front = c.front.iter().map(|r| (r.time, r.simulated)).collect();
-        }
+        let c = p.compare(0.0, sum.steps, COLUMN_WIDTH_M / h);
+        put("front_error", 100.0 * c.front_mean_relative_error());
+        put("column_error", 100.0 * c.height_mean_relative_error());
+        m.front = c.front.iter().map(|r| (r.time, r.simulated)).collect();
     }
     if m.spec.label == "hydrostatic-2d" {
         let speed = s.particles.vel.iter().map(|x| x.norm()).fold(0.0, f64::max) * h;

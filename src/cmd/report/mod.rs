@@ -255,8 +255,12 @@ pub fn scene_of(spec: &RunSpec) -> Result<Scene> {
         ..Default::default()
     };
     match &spec.source {
-        Source::Named(name) => Scene::load(name, &o),
-        Source::Text(text) => Scene::parse(&format!("scene variant '{}'", spec.label), text, &o),
+        Source::Named(name) => Ok(Scene::load(name, &o)?),
+        Source::Text(text) => Ok(Scene::parse(
+            &format!("scene variant '{}'", spec.label),
+            text,
+            &o,
+        )?),
     }
 }
 

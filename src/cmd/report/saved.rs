@@ -205,7 +205,7 @@ impl RunCheckpoints {
         let written = self
             .checkpoints
             .write_with(sim, &self.origin, |w| p.write(w));
-        written.map(drop)
+        Ok(written.map(drop)?)
     }
 
     /// The run ended: its checkpoints go (its result is kept instead).

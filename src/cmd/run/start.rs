@@ -192,10 +192,10 @@ fn checkpoint_scene(
         );
     }
     match duration {
-        Some(d) => parse(&Overrides {
+        Some(d) => Ok(parse(&Overrides {
             duration: Some(d),
             ..Default::default()
-        }),
+        })?),
         None => Ok(base),
     }
 }
