@@ -1,13 +1,13 @@
 //! A method's options, declared once beside its settings: the keys of its scene table
-//! (`[simulation.<method>]`, its `Settings` as serde reads them), the keys a file of that method
-//! may give directly in `[simulation]` ([`MethodType::SCENE_KEYS`]) and its command-line flags
+//! (`[simulation.<method>]`, its `Settings` as serde reads them) and its command-line flags
 //! ([`MethodType::FLAGS`], each a [`Flag`]). The command line offers the union of every
 //! method's flags ([`MethodFlags`]); a flag that several methods declare is one flag that sets
-//! each of them. Whatever the input path, an option the run's method does not declare is refused
-//! in the same words ([`NoSuchOption`]).
+//! each of them. Whatever the input path (a flag, or one of the five `[simulation]` keys that
+//! predate the tables, listed in `crate::scene`), an option the run's method lacks is refused in
+//! the same words ([`NoSuchOption`]).
 //!
-//! [`MethodType::SCENE_KEYS`]: super::MethodType::SCENE_KEYS
 //! [`MethodType::FLAGS`]: super::MethodType::FLAGS
+//! [`NoSuchOption`]: super::NoSuchOption
 
 use clap::builder::EnumValueParser;
 use clap::parser::ValueSource;
