@@ -35,8 +35,10 @@ compile_error!("checkpoints store arrays little-endian straight from memory");
 pub const MAGIC: &[u8; 8] = b"\x89CFCKPT\n";
 /// Its last bytes, after the checksum.
 pub const END: &[u8; 8] = b"CFCKEND\n";
-/// The format's version: a reader refuses any other.
-pub const VERSION: u32 = 1;
+/// The format's version: a reader refuses any other. 2 (2026-11-27): a checkpoint's scene holds
+/// every method's table (ccp's `cross_check` among them) and no `cross_check` meta key; a version
+/// 1 checkpoint would resume without the cross-check it was started with.
+pub const VERSION: u32 = 2;
 /// Arrays start at multiples of this many bytes (a cache line; numpy's `frombuffer` needs
 /// only the item size).
 pub const ALIGN: usize = 64;
@@ -571,8 +573,10 @@ mod tests {
                 "flip at {at}"
             );
         }
-        let mut b = good.clone();
-        b[8] = 7;
-        assert_eq!(read(b), Some(SnapshotError::Version { found: 7 }));
+        for old in [1, 7] {
+            let mut b = good.clone();
+            b[8] = old;
+            assert_eq!(read(b), Some(SnapshotError::Version { found: old.into() }));
+        }
     }
 }

@@ -19,7 +19,7 @@ import numpy as np
 
 MAGIC = b"\x89CFCKPT\n"
 END = b"CFCKEND\n"
-VERSION = 1
+VERSION = 2
 
 
 def load(path):
