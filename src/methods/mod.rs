@@ -137,12 +137,13 @@ macro_rules! methods {
                 }
             }
 
-            /// Sets flag `name` of every method that declares it.
+            /// Sets flag `name` of the method to run, if it declares it (the command line
+            /// configures the run's method only, so a scene as run keeps the other methods'
+            /// tables as its file gave them).
             pub fn apply_flag(&mut self, name: &str, value: &toml::Value) {
-                $(for f in $module::$ty::FLAGS.iter().filter(|f| f.name == name) {
-                    (f.set)(&mut self.$module, value.clone())
-                        .expect("a flag's value has the type its setter takes");
-                })*
+                match self.kind {
+                    $(MethodKind::$ty => set_flag::<$module::$ty>(&mut self.$module, name, value),)*
+                }
             }
         }
 
@@ -253,6 +254,13 @@ impl MethodKind {
     }
 }
 
+/// Sets flag `name` of method `M` in `settings`, if `M` declares it.
+fn set_flag<M: MethodType>(settings: &mut M::Settings, name: &str, value: &toml::Value) {
+    for f in M::FLAGS.iter().filter(|f| f.name == name) {
+        (f.set)(settings, value.clone()).expect("a flag's value has the type its setter takes");
+    }
+}
+
 /// A method asked for an option it does not have.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 #[error(
@@ -337,14 +345,21 @@ mod tests {
     }
 
     #[test]
-    fn a_flag_two_methods_declare_is_offered_once_and_sets_both() {
+    fn a_flag_two_methods_declare_is_offered_once_and_sets_the_run_methods() {
         let flags = MethodKind::flags();
         let band_r: Vec<_> = flags.iter().filter(|f| f.name == "band-r").collect();
         assert_eq!(band_r.len(), 1);
         let by: Vec<&str> = band_r[0].declared_by.iter().map(|d| d.0).collect();
         assert_eq!(by, ["ccp", "nbflip"]);
-        let mut s = MethodSettings::new(MethodKind::Nbflip);
-        s.apply_flags(&MethodFlags(vec![("band-r", toml::Value::Integer(5))]));
-        assert_eq!((s.ccp.band_r, s.nbflip.band_r), (5, 5));
+        let r = MethodFlags::default().with("band-r", 5u32);
+        let (default_r, mut s) = (
+            crate::sim::band::DEFAULT_BAND_R,
+            MethodSettings::new(MethodKind::Nbflip),
+        );
+        s.apply_flags(&r);
+        assert_eq!((s.ccp.band_r, s.nbflip.band_r), (default_r, 5));
+        let mut s = MethodSettings::new(MethodKind::Ccp);
+        s.apply_flags(&r);
+        assert_eq!((s.ccp.band_r, s.nbflip.band_r), (5, default_r));
     }
 }

@@ -1,10 +1,10 @@
 //! A method's options, declared once beside its settings: the keys of its scene table
 //! (`[simulation.<method>]`, its `Settings` as serde reads them) and its command-line flags
 //! ([`MethodType::FLAGS`], each a [`Flag`]). The command line offers the union of every
-//! method's flags ([`MethodFlags`]); a flag that several methods declare is one flag that sets
-//! each of them. Whatever the input path (a flag, or one of the five `[simulation]` keys that
-//! predate the tables, listed in `crate::scene`), an option the run's method lacks is refused in
-//! the same words ([`NoSuchOption`]).
+//! method's flags ([`MethodFlags`]); a flag that several methods declare is one flag, which sets
+//! the run method's setting. Whatever the input path (a flag, or one of the five `[simulation]`
+//! keys that predate the tables, listed in `crate::scene`), an option the run's method lacks is
+//! refused in the same words ([`NoSuchOption`]).
 //!
 //! [`MethodType::FLAGS`]: super::MethodType::FLAGS
 //! [`NoSuchOption`]: super::NoSuchOption

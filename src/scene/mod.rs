@@ -491,6 +491,31 @@ mod tests {
         }
     }
 
+    /// A resumed run refuses a flag that changes its scene as run (`cmd::run::start`): a flag
+    /// that repeats the run method's value must leave it as it was, even where another method
+    /// declaring the same flag has another value in its table.
+    #[test]
+    fn a_flag_repeating_the_run_methods_value_leaves_the_scene_as_run_unchanged() {
+        let text = "name = \"x\"\ndim = 2\n[domain]\nsize = [1.0, 1.0]\ncells = 24\n\
+                    [simulation]\nmethod = \"ccp\"\n[simulation.ccp]\nband = \"paths\"\n\
+                    band_r = 6\n[[fluid]]\nshape = \"box\"\nmin = [0.0, 0.0]\nmax = [1.0, 0.5]\n";
+        let base = Scene::parse("x", text, &Overrides::default()).unwrap();
+        assert_eq!((base.method.ccp.band_r, base.method.nbflip.band_r), (6, 3));
+        let resolved = base.resolved_toml();
+        let flag = |r: u32| Overrides {
+            flags: MethodFlags::default().with("band-r", r),
+            ..Default::default()
+        };
+        let same = Scene::parse_resolved("x", &resolved, &flag(6)).unwrap();
+        assert_eq!(same.resolved_toml(), resolved);
+        let other = Scene::parse_resolved("x", &resolved, &flag(5)).unwrap();
+        assert_ne!(other.resolved_toml(), resolved);
+        assert_eq!(
+            (other.method.ccp.band_r, other.method.nbflip.band_r),
+            (5, 3)
+        );
+    }
+
     #[test]
     fn the_pressure_preconditioner_comes_from_the_file_or_the_flag() {
         let dam = |o: &Overrides| Scene::load("dam-2d", o).unwrap().config::<2>();
