@@ -32,11 +32,10 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
     for &res in &args.res {
         let mut results: Vec<(&str, Measured)> = vec![];
         for band in &bands {
-            let mut flags = args.methods.clone();
-            if let Some(b) = band {
-                let value = toml::Value::try_from(b).expect("a band mode is a TOML value");
-                flags.0.push(("band", value));
-            }
+            let flags = match band {
+                Some(b) => args.methods.clone().with("band", b),
+                None => args.methods.clone(),
+            };
             let overrides = Overrides {
                 cells: Some(res),
                 method: args.method,
@@ -46,6 +45,13 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
             };
             let scene = Scene::load(&args.scene, &overrides)?;
             scene.method.check_flags(&overrides.flags)?;
+            // A flag that asks for a file (`--export-lp`) has no file to go beside here.
+            if let Some(f) = scene.method.clone().files(std::path::Path::new("")).first() {
+                bail!(
+                    "--{}: cellflip bench writes no files; use cellflip run",
+                    f.flag
+                );
+            }
             let estimate = scene.ensure_fits_in_memory(false)?;
             let m = match scene.dim() {
                 2 => bench_dim::<2>(&scene, &estimate, args)?,

@@ -283,6 +283,30 @@ fn hostile_scene_values_panicked_aborted_hung_or_wrote_outside_recordings() {
     assert!(!o.status.success() && !String::from_utf8_lossy(&o.stderr).contains("panicked"));
 }
 
+/// Fixed in the stop of issue 58: `bench` took every method flag, `--export-lp` among them, and
+/// wrote nothing (it has no recording to put the file beside).
+#[test]
+fn bench_took_export_lp_and_wrote_nothing() {
+    let args = [
+        "bench",
+        "--scene",
+        "dam-2d",
+        "--res",
+        "24",
+        "--steps",
+        "1",
+        "--export-lp",
+        "1",
+    ];
+    let o = cellflip(&args);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "{err}");
+    assert!(
+        err.contains("--export-lp") && err.contains("cellflip run"),
+        "{err}"
+    );
+}
+
 // The correction step (correction).
 
 /// Fixed in 1a53a1a: when the flow solver failed, the exported problem still began
