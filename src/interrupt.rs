@@ -92,6 +92,13 @@ pub fn exit_code(sig: i32) -> i32 {
 /// caller's error.
 pub type Finisher = Box<dyn FnOnce() -> Result<(), crate::out::BoxError> + Send>;
 
+/// `f` (a recording's finisher, with its own error type) as the watchdog takes it.
+pub fn finisher<E: Into<crate::out::BoxError>>(
+    f: impl FnOnce() -> Result<(), E> + Send + 'static,
+) -> Finisher {
+    Box::new(move || f().map_err(Into::into))
+}
+
 /// Ends the process when a step goes on for `grace` ([`GRACE`], [`CHECKPOINT_GRACE`]) after
 /// a signal, after running its finisher; does nothing once [`done`](Self::done).
 pub struct Watchdog {

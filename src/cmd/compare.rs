@@ -141,7 +141,7 @@ fn compare_dim<const D: usize>(
     let duration = entries[0].scene.duration_secs();
     let finisher = recording
         .as_ref()
-        .map(|r| super::run::finisher(r.finisher()));
+        .map(|r| interrupt::finisher(r.finisher()));
     let watchdog = Watchdog::start(finisher, interrupt::GRACE);
     let frames = Frames {
         dt: args.frame_dt,

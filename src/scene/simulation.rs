@@ -8,18 +8,6 @@ use crate::solvers::pcg::Preconditioner;
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
-/// The method keys a file may give directly in `[simulation]` (they predate the tables; a new
-/// option belongs in its method's table only), each with the key it sets in every method's table
-/// that has that key: the file's own method must have it, and one that has its table sets it
-/// there instead.
-const SCENE_KEYS: &[(&str, &str)] = &[
-    ("solver", "solver"),
-    ("directions", "directions"),
-    ("band", "band"),
-    ("band_r", "band_r"),
-    ("idp_resample", "resample"),
-];
-
 macro_rules! simulation_file {
     ($($module:ident :: $ty:ident),*) => {
         /// `[simulation]` as written.
@@ -58,7 +46,7 @@ macro_rules! simulation_file {
             /// Default: the method's first mode ([`crate::methods::MethodInfo::obstacle_modes`]).
             #[serde(skip_serializing_if = "Option::is_none")]
             pub obstacle: Option<ObstacleMode>,
-            /// The keys of [`SCENE_KEYS`], read by the tables they set.
+            /// The method keys of [`SimulationFile::scene_keys`], read by the tables they set.
             #[serde(skip_serializing_if = "Option::is_none")]
             pub solver: Option<toml::Value>,
             #[serde(skip_serializing_if = "Option::is_none")]
@@ -112,8 +100,8 @@ macro_rules! simulation_file {
                 }
             }
 
-            /// Each method's settings: its table, or else its defaults with the keys of
-            /// [`SCENE_KEYS`] the file gives.
+            /// Each method's settings: its table, or else its defaults with the method keys
+            /// the file gives ([`SimulationFile::scene_keys`]).
             pub fn method_settings(&self) -> Result<MethodSettings, BadValue> {
                 let keys = self.scene_keys();
                 Ok(MethodSettings {
@@ -125,8 +113,8 @@ macro_rules! simulation_file {
                 })
             }
 
-            /// The file as run with `m`: every method's table as it ran, and none of the keys
-            /// of [`SCENE_KEYS`] (their values are in the tables).
+            /// The file as run with `m`: every method's table as it ran, and none of the method
+            /// keys of [`SimulationFile::scene_keys`] (their values are in the tables).
             pub fn with_tables(&self, m: &MethodSettings) -> Self {
                 Self {
                     solver: None,
@@ -143,8 +131,8 @@ macro_rules! simulation_file {
 }
 crate::methods::registry!(simulation_file);
 
-/// A key of [`SCENE_KEYS`] the file gives: its name there, the key it sets in the tables, and
-/// its value.
+/// A method key the file gives directly in `[simulation]`: its name there, the key it sets in
+/// the tables, and its value.
 pub struct SceneKey<'a> {
     pub name: &'static str,
     pub table_key: &'static str,
@@ -152,30 +140,31 @@ pub struct SceneKey<'a> {
 }
 
 impl SimulationFile {
-    /// The keys of [`SCENE_KEYS`] the file gives.
+    /// The method keys the file gives directly in `[simulation]`. They predate the tables (a
+    /// new option belongs in its method's table only); each sets the key of the name given here
+    /// in every method's table that has it. The file's own method must have it, and one that
+    /// has its table sets it there instead.
     pub fn scene_keys(&self) -> Vec<SceneKey<'_>> {
-        let values = [
-            &self.solver,
-            &self.directions,
-            &self.band,
-            &self.band_r,
-            &self.idp_resample,
+        let keys = [
+            ("solver", "solver", &self.solver),
+            ("directions", "directions", &self.directions),
+            ("band", "band", &self.band),
+            ("band_r", "band_r", &self.band_r),
+            ("idp_resample", "resample", &self.idp_resample),
         ];
-        let given = SCENE_KEYS.iter().zip(values);
-        given
-            .filter_map(|(&(name, table_key), v)| {
-                let value = v.as_ref()?;
-                Some(SceneKey {
-                    name,
-                    table_key,
-                    value,
-                })
+        let given = keys.into_iter().filter_map(|(name, table_key, v)| {
+            let value = v.as_ref()?;
+            Some(SceneKey {
+                name,
+                table_key,
+                value,
             })
-            .collect()
+        });
+        given.collect()
     }
 }
 
-/// A key of [`SCENE_KEYS`] whose value the tables refuse (of the wrong type, or an unknown
+/// A method key given in `[simulation]` whose value the tables refuse (of the wrong type, or an unknown
 /// name): the key and why.
 #[derive(Debug)]
 pub struct BadValue {

@@ -195,7 +195,7 @@ fn simulate<const D: usize>(
         Some(_) => interrupt::CHECKPOINT_GRACE,
         None => interrupt::GRACE,
     };
-    let watchdog = Watchdog::start(recorder.map(|r| finisher(r.finisher())), grace);
+    let watchdog = Watchdog::start(recorder.map(|r| interrupt::finisher(r.finisher())), grace);
     let interrupted = || interrupt::signal().is_some();
     let cadence = Cadence::of(args.record_every, D);
     let mut last_time_secs = runner.sim.state.time_secs;
@@ -550,13 +550,6 @@ fn files_stem(scene: &Scene, out: Option<&Path>) -> Result<PathBuf> {
             Ok(dir.join(name))
         }
     }
-}
-
-/// A recording's finisher as the watchdog takes it.
-pub(crate) fn finisher<E: Into<crate::out::BoxError>>(
-    f: impl FnOnce() -> Result<(), E> + Send + 'static,
-) -> interrupt::Finisher {
-    Box::new(move || f().map_err(Into::into))
 }
 
 fn progress_bar(limit: Limit) -> ProgressBar {
