@@ -8,6 +8,7 @@
 
 use nalgebra::SVector;
 
+pub mod active;
 #[cfg(target_arch = "x86_64")]
 pub mod lanes;
 use rayon::prelude::*;

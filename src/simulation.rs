@@ -72,6 +72,7 @@ impl<const D: usize> Simulation<D> {
         let mut state = State::new(config);
         let mut method = settings.kind.build::<D>(settings);
         method.start(&mut state);
+        state.activate();
         Self {
             state,
             method,
@@ -132,17 +133,19 @@ impl<const D: usize> Simulation<D> {
         // Line 1: particles to grid.
         let mut u = rep.times.time(Stage::ParticlesToGrid, || {
             let (mut u, mut known) = m.particles_to_grid(s)?;
-            transfer::extrapolate(&s.grid, &mut u, &mut known, 2);
+            transfer::extrapolate(&s.grid, &mut u, &mut known, 2, &s.active);
             Ok::<_, StepError>(u)
         })?;
-        let u_old = u.clone();
+        // `u` is zero off the active faces: the particles and the extrapolation stay inside.
+        let u_old = s.active.copy(&u);
         // Lines 2-3: forces and the pressure projection.
         rep.times
             .time(Stage::Forces, || forces::apply(s, &mut u, dt));
         rep.pcg = rep
             .times
             .time(Stage::Pressure, || pressure::project_stage(s, &mut u));
-        rep.max_speed = timestep::finite_speed(&u, &rep.pcg)?;
+        let air = forces::air_velocity(&s.config, dt);
+        rep.max_speed = timestep::finite_speed(&s.grid, &u, &s.active, air, &rep.pcg)?;
         (dt, rep.dt_shortened) = timestep::shortened(dt, rep.max_speed, s.config.cfl);
         // Line 4: grid to particles.
         let have_at = rep.times.time(Stage::GridToParticles, || {
@@ -212,4 +215,5 @@ fn refresh_markings<const D: usize>(s: &mut State<D>, m: &mut dyn FluidMethod<D>
     let keep = m.before_markings(s.particles_mut());
     let previous = s.remark(keep.as_deref());
     m.after_markings(s, &previous);
+    s.activate();
 }

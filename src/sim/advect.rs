@@ -6,6 +6,7 @@
 //! `dt * max|u_face| <= 1` no particle moves more than one cell along any axis: it stays in the
 //! Moore neighbourhood of its cell (sec. grid_move).
 
+use crate::grid::active::Active;
 use crate::grid::{AtGridPoints, Grid, MacField, NearCells, Vector};
 use rayon::prelude::*;
 
@@ -53,15 +54,16 @@ pub fn displace<const D: usize>(
 
 /// Semi-Lagrangian advection of the grid velocity by itself over `dt` (first order): each face
 /// takes the value found at the point its velocity traces back from, `u(x_f - dt u(x_f))`.
-/// Only faces next to a cell of `needed` are advected; the others keep `u` (the band
-/// method reads the grid velocity only near its interface and deep).
+/// Only faces next to a cell of `needed` are advected; the other `active` faces keep `u`, the
+/// rest are zero (the band method reads the grid velocity only near its interface and deep).
 pub fn advect_velocity<const D: usize>(
     grid: &Grid<D>,
     u: &MacField<D>,
     dt: f64,
     needed: &NearCells,
+    active: &Active<D>,
 ) -> MacField<D> {
-    let mut out = u.clone();
+    let mut out = active.copy(u);
     for (a, comp) in out.comp.iter_mut().enumerate() {
         let at_faces = AtGridPoints::faces(grid, a);
         grid.par_for_each_face_near(a, comp, needed, |_, f, v| {
@@ -91,7 +93,8 @@ mod tests {
             let f = g.face_coords(1, i);
             u.comp[1][i] = 0.5 * (f[0] as f64 + 0.5);
         }
-        let out = advect_velocity(&g, &u, 0.5, &NearCells::new(&g, vec![true; g.num_cells()]));
+        let all = NearCells::new(&g, vec![true; g.num_cells()]);
+        let out = advect_velocity(&g, &u, 0.5, &all, &Active::all(&g));
         assert!(out.comp[0].iter().all(|&v| (v - 2.0).abs() < 1e-12));
         for i in 0..g.num_faces(1) {
             let f = g.face_coords(1, i);

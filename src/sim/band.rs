@@ -6,6 +6,7 @@
 //! What the deep holds is a method's business: method ccp counts its imaginary particles in
 //! `n_deep`; narrow-band FLIP keeps the deep as a level set.
 
+use crate::grid::active::Active;
 use crate::grid::{Cell, Grid, MacField, NearCells, Vector};
 use crate::sim::advect;
 use crate::sim::markings::{DepthLevel, Markings};
@@ -106,8 +107,9 @@ impl Band {
         u: &MacField<D>,
         dt: f64,
         m: &Markings,
+        active: &Active<D>,
     ) -> MacField<D> {
-        advect::advect_velocity(grid, u, dt, &NearCells::new(grid, m.fluid()))
+        advect::advect_velocity(grid, u, dt, &NearCells::new(grid, m.fluid()), active)
     }
 }
 

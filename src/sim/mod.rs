@@ -15,12 +15,13 @@ pub mod solids;
 pub mod timestep;
 pub mod transfer;
 
+use crate::grid::active::Active;
 use crate::grid::{Grid, MacField, Vector};
 use crate::metrics;
 use crate::particles::{self, Particles, Region};
 use crate::solvers::pcg::Preconditioner;
 use emit::Emitter;
-use markings::Markings;
+use markings::{CellKind, Markings};
 use rand::SeedableRng;
 use solids::{Obstacle, ObstacleMode, Solids};
 
@@ -76,6 +77,9 @@ pub struct State<const D: usize> {
     /// Static solids and obstacles.
     pub solids: Solids<D>,
     pub markings: Markings,
+    /// Where the step's grid passes work: the cells within [`ACTIVE_MARGIN`] of a fluid cell
+    /// or a moving obstacle's cell, from the current markings ([`State::activate`]).
+    pub active: Active<D>,
     pub time_secs: f64,
     pub steps: u64,
     /// Particles seeded at the start plus all emitted since.
@@ -84,6 +88,15 @@ pub struct State<const D: usize> {
     pub target_volume: f64,
     pub rng: SimRng,
 }
+
+/// How far the active cells reach beyond the fluid cells. After the projection, a step reads
+/// the grid velocity within 2 cells of a fluid cell: a particle (always in a fluid cell) moves
+/// at most `cfl <= 1` cell and its interpolation stencil reaches one cell further, and the
+/// band's semi-Lagrangian trace back from a fluid cell's face reaches as far. Those faces take
+/// their values from the extrapolation's 2 rings, which read known flags one face further
+/// (5 cells); one cell more keeps them clear of the set's edge, where the passes stop and a
+/// ring misses the neighbours beyond.
+pub const ACTIVE_MARGIN: usize = 6;
 
 /// Why a step failed.
 #[derive(Debug, thiserror::Error)]
@@ -166,9 +179,10 @@ impl<const D: usize> State<D> {
             solids.moving_mask(),
         );
         let total = particles.len();
-        State {
+        let mut state = State {
             target_volume: total as f64 / config.mu() as f64,
             velocity: MacField::zeros(&grid),
+            active: Active::all(&grid),
             markings,
             time_secs: 0.0,
             steps: 0,
@@ -178,7 +192,17 @@ impl<const D: usize> State<D> {
             solids,
             config,
             rng,
-        }
+        };
+        state.activate();
+        state
+    }
+
+    /// The active cells for the current markings and obstacles ([`State::active`]): a
+    /// step's grid passes outside them would only write values no later pass reads.
+    pub fn activate(&mut self) {
+        let (fluid, moving) = (&self.markings.kind, self.solids.moving_mask());
+        let seed = |c| fluid[c] == CellKind::Fluid || moving.is_some_and(|m| m[c]);
+        self.active = Active::around(&self.grid, seed, ACTIVE_MARGIN);
     }
 
     /// The volume measure of eq. volume as a percentage of `V*`.

@@ -6,6 +6,7 @@
 //! Grid units with unit density: the unknown is `p dt / rho`, so the update is
 //! `u_f -= p_R - p_L` and the projection does not depend on the time step.
 
+use crate::grid::active::{par_runs, Active};
 use crate::grid::{Grid, MacField, Vector};
 use crate::sim::markings::CellKind;
 use crate::sim::{transfer, State};
@@ -25,13 +26,23 @@ pub fn project_stage<const D: usize>(s: &State<D>, u: &mut MacField<D>) -> PcgSt
         preconditioner: c.pressure_preconditioner,
         ..Default::default()
     };
-    let (grid, kind, solids) = (&s.grid, &s.markings.kind, &s.solids);
-    let stats = project(grid, kind, &solids.solid, &solids.velocity, u, &settings);
-    let mut known = known_after_projection(grid, kind, &solids.solid);
-    transfer::extrapolate(grid, u, &mut known, 2);
-    for comp in u.comp.iter_mut() {
-        comp.iter_mut()
-            .for_each(|v| *v = v.clamp(-c.max_speed, c.max_speed));
+    let (grid, kind, solids, active) = (&s.grid, &s.markings.kind, &s.solids, &s.active);
+    let stats = project(
+        grid,
+        kind,
+        &solids.solid,
+        &solids.velocity,
+        u,
+        &settings,
+        active,
+    );
+    let mut known = known_after_projection(grid, kind, &solids.solid, active);
+    transfer::extrapolate(grid, u, &mut known, 2, active);
+    for (a, comp) in u.comp.iter_mut().enumerate() {
+        par_runs(active.faces(a), comp).for_each(|(_, run)| {
+            run.iter_mut()
+                .for_each(|v| *v = v.clamp(-c.max_speed, c.max_speed))
+        });
     }
     stats
 }
@@ -64,16 +75,17 @@ fn face_kind<const D: usize>(
     }
 }
 
-/// Sets the normal velocity of every solid face (domain walls and solid cells) to the solid's
-/// velocity: `u . n = u_solid . n` (eq. solid_boundary).
+/// Sets the normal velocity of every `active` solid face (domain walls and solid cells) to the
+/// solid's velocity: `u . n = u_solid . n` (eq. solid_boundary).
 pub fn apply_solid_boundary<const D: usize>(
     grid: &Grid<D>,
     solid: &[bool],
     solid_vel: &[Vector<D>],
     u: &mut MacField<D>,
+    active: &Active<D>,
 ) {
     for (a, comp) in u.comp.iter_mut().enumerate() {
-        grid.par_for_each_face(a, comp, |_, f, v| {
+        active.par_for_each_face(grid, a, comp, |_, f, v| {
             if let FaceKind::Solid(s) = face_kind(grid, a, f, solid, solid_vel) {
                 *v = s;
             }
@@ -94,9 +106,9 @@ pub fn divergence<const D: usize>(grid: &Grid<D>, u: &MacField<D>, c: usize) -> 
         .sum()
 }
 
-/// Makes `u` divergence-free on fluid cells. Solid faces must already hold the solid velocity
-/// ([`apply_solid_boundary`]). Returns the solver statistics; the residual is the largest
-/// remaining `|div u|` over fluid cells.
+/// Makes `u` divergence-free on fluid cells, which must be `active`. Solid faces must already
+/// hold the solid velocity ([`apply_solid_boundary`]). Returns the solver statistics; the
+/// residual is the largest remaining `|div u|` over fluid cells.
 pub fn project<const D: usize>(
     grid: &Grid<D>,
     kind: &[CellKind],
@@ -104,12 +116,13 @@ pub fn project<const D: usize>(
     solid_vel: &[Vector<D>],
     u: &mut MacField<D>,
     settings: &PcgSettings,
+    active: &Active<D>,
 ) -> PcgStats {
     let system = Poisson::new(grid, |c| kind[c] == CellKind::Fluid, solid);
     let rhs = system.cells().map(|c| -divergence(grid, u, c)).collect();
     let (p, stats) = system.solve(rhs, settings);
     for (ax, comp) in u.comp.iter_mut().enumerate() {
-        grid.par_for_each_face(ax, comp, |_, f, v| {
+        active.par_for_each_face(grid, ax, comp, |_, f, v| {
             if let FaceKind::Open { left, right } = face_kind(grid, ax, f, solid, solid_vel) {
                 if system.has(left) || system.has(right) {
                     *v -= p[right] - p[left];
@@ -288,16 +301,18 @@ fn remove_mean_of_closed_components<const D: usize>(
     }
 }
 
-/// Faces whose value the projection determined: those touching a fluid cell, and all solid
-/// faces. The rest is extrapolated.
+/// The `active` faces whose value the projection determined: those touching a fluid cell, and
+/// all solid faces. The rest is extrapolated (faces off the active set count as unknown).
 pub fn known_after_projection<const D: usize>(
     grid: &Grid<D>,
     kind: &[CellKind],
     solid: &[bool],
+    active: &Active<D>,
 ) -> [Vec<bool>; D] {
     std::array::from_fn(|a| {
-        let mut known = vec![true; grid.num_faces(a)];
-        grid.par_for_each_face(a, &mut known, |_, f, k| {
+        let mut known = vec![false; grid.num_faces(a)];
+        active.par_for_each_face(grid, a, &mut known, |_, f, k| {
+            *k = true;
             if f[a] > 0 && f[a] < grid.dims[a] {
                 let right = grid.cell_index(f);
                 let left = right - grid.cell_stride(a);
@@ -330,7 +345,7 @@ mod tests {
             preconditioner,
             ..Default::default()
         };
-        let stats = project(g, kind, solid, solid_vel, u, &settings);
+        let stats = project(g, kind, solid, solid_vel, u, &settings, &Active::all(g));
         assert!(stats.converged, "{stats:?}");
         let umax = u.max_abs();
         let worst = (0..g.num_cells())
@@ -374,11 +389,11 @@ mod tests {
             comp.iter_mut()
                 .for_each(|v| *v = rng.random_range(-3.0..3.0));
         }
-        apply_solid_boundary(&g, &solid, &solid_vel, &mut u);
+        apply_solid_boundary(&g, &solid, &solid_vel, &mut u, &Active::all(&g));
         let before = u.clone();
         project_and_check(&g, &kind, &solid, &solid_vel, &mut u, preconditioner);
         let mut bc = before.clone();
-        apply_solid_boundary(&g, &solid, &solid_vel, &mut bc);
+        apply_solid_boundary(&g, &solid, &solid_vel, &mut bc, &Active::all(&g));
         for a in 0..D {
             for i in 0..g.num_faces(a) {
                 let f = g.face_coords(a, i);
@@ -425,7 +440,7 @@ mod tests {
             })
             .collect();
         let mut u = MacField::zeros(&g);
-        apply_solid_boundary(&g, &solid, &solid_vel, &mut u);
+        apply_solid_boundary(&g, &solid, &solid_vel, &mut u, &Active::all(&g));
         let umax = project_and_check(&g, &kind, &solid, &solid_vel, &mut u, Preconditioner::Mic0);
         assert!(umax >= 2.0);
         // The fluid right below the block moves down with it.
@@ -461,12 +476,12 @@ mod tests {
             comp.iter_mut()
                 .for_each(|v| *v = rng.random_range(-1.0..1.0));
         }
-        apply_solid_boundary(&g, &solid, &sv, &mut u);
+        apply_solid_boundary(&g, &solid, &sv, &mut u, &Active::all(&g));
         let settings = PcgSettings {
             preconditioner,
             ..Default::default()
         };
-        let stats = project(&g, &kind, &solid, &sv, &mut u, &settings);
+        let stats = project(&g, &kind, &solid, &sv, &mut u, &settings, &Active::all(&g));
         assert!(stats.converged, "{stats:?}");
         let worst = (0..n)
             .map(|c| divergence(&g, &u, c).abs())
@@ -488,7 +503,7 @@ mod tests {
             comp.iter_mut()
                 .for_each(|v| *v = rng.random_range(-1.0..1.0));
         }
-        apply_solid_boundary(&g, &solid, &sv, &mut u0);
+        apply_solid_boundary(&g, &solid, &sv, &mut u0, &Active::all(&g));
         let rows = Preconditioner::AUTO_ROWS[0];
         for (fluid, chosen, other) in [(rows, Multigrid, Mic0), (rows - 1, Mic0, Multigrid)] {
             let kind: Vec<CellKind> = (0..n)
@@ -502,7 +517,15 @@ mod tests {
                     preconditioner,
                     ..Default::default()
                 };
-                project(&g, &kind, &solid, &sv, &mut u0.clone(), &settings)
+                project(
+                    &g,
+                    &kind,
+                    &solid,
+                    &sv,
+                    &mut u0.clone(),
+                    &settings,
+                    &Active::all(&g),
+                )
             };
             let auto = solve(Auto);
             assert!(auto.converged, "{auto:?}");

@@ -61,7 +61,8 @@ impl<const D: usize> State<D> {
         for (a, c) in velocity.comp.iter_mut().enumerate() {
             *c = r.slice(&format!("velocity.{a}"), Some(c.len()))?;
         }
-        Ok(State {
+        let mut state = State {
+            active: crate::grid::active::Active::all(&grid),
             markings: restore_markings(r, n)?,
             time_secs: r.scalar("time_secs")?,
             steps: r.scalar("steps")?,
@@ -73,7 +74,9 @@ impl<const D: usize> State<D> {
             solids,
             grid,
             config,
-        })
+        };
+        state.activate();
+        Ok(state)
     }
 }
 

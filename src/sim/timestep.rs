@@ -1,7 +1,8 @@
 //! The time step (paper sec. grid_move): small enough that no particle and no obstacle moves
 //! more than `cfl <= 1` cells along any axis in one step.
 
-use crate::grid::MacField;
+use crate::grid::active::Active;
+use crate::grid::{Grid, MacField, Vector};
 use crate::metrics::InvariantViolation;
 use crate::sim::State;
 use crate::solvers::pcg::PcgStats;
@@ -37,13 +38,23 @@ pub fn planned<const D: usize>(s: &State<D>) -> f64 {
     dt.min(c.max_dt_secs)
 }
 
-/// The largest face velocity component after the projection, cells per second; an error if
+/// The largest face velocity component after the projection, cells per second: over the
+/// `active` faces, and `air` (the velocity of the faces off the active set,
+/// [`crate::sim::forces::air_velocity`]) in each component that has such faces; an error if
 /// the field is not finite.
 pub fn finite_speed<const D: usize>(
+    grid: &Grid<D>,
     u: &MacField<D>,
+    active: &Active<D>,
+    air: Vector<D>,
     pcg: &PcgStats,
 ) -> Result<f64, InvariantViolation> {
-    let v = u.max_abs();
+    let has_air = |a: usize| active.num_faces(a) < grid.num_faces(a);
+    let air = (0..D)
+        .filter(|&a| has_air(a))
+        .fold(0.0, |m, a| air[a].abs().max(m));
+    let v = active.max_abs(u);
+    let v = if v.is_nan() { v } else { v.max(air) };
     if v.is_finite() {
         Ok(v)
     } else {

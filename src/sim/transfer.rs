@@ -3,6 +3,7 @@
 //! without fluid, and grid-to-particle with a FLIP/PIC blend. The band method's velocity
 //! combination is in [`crate::sim::band`].
 
+use crate::grid::active::{par_runs, Active};
 use crate::grid::{Cell, FacePoint, FaceStencil, Grid, MacField, Vector};
 use crate::particles::Particles;
 use crate::{PAR_GRAIN, PAR_GRAIN_PARTICLES};
@@ -78,20 +79,24 @@ fn splat<const D: usize>(
                 }
             });
     }
+    // Only the faces beside the points' cells and their neighbours got weight: the rest stay
+    // zero and unknown, and their pages are never touched.
+    let reached = Active::around_points(grid, pos, 1);
     let mut field = MacField::zeros(grid);
     let known = std::array::from_fn(|a| {
-        field.comp[a]
-            .par_iter_mut()
-            .with_min_len(PAR_GRAIN)
-            .zip(&acc[a])
-            .map(|(u, &[s, w])| {
-                let k = w > 1e-12;
-                if k {
-                    *u = s / w;
+        let mut known = vec![false; grid.num_faces(a)];
+        let faces = reached.faces(a);
+        (par_runs(faces, &mut field.comp[a]).zip(par_runs(faces, &mut known))).for_each(
+            |((r, u), (_, k))| {
+                for ((u, k), &[s, w]) in u.iter_mut().zip(k).zip(&acc[a][r]) {
+                    *k = w > 1e-12;
+                    if *k {
+                        *u = s / w;
+                    }
                 }
-                k
-            })
-            .collect()
+            },
+        );
+        known
     });
     (field, known)
 }
@@ -152,7 +157,8 @@ fn slab_windows<'a, const D: usize>(
 
 /// Extrapolates face values into unknown faces, `layers` rings deep: each ring takes the
 /// average of its known axis neighbours (in the same component) from the previous ring, and
-/// the rings are filled in ascending face order.
+/// the rings are filled in ascending face order. The first ring is sought among the `active`
+/// faces only.
 ///
 /// The first ring, the unknown faces next to a known one, is found by one parallel pass over
 /// the faces, which reads only the flags; the later rings are the unknown neighbours of the
@@ -163,11 +169,12 @@ pub fn extrapolate<const D: usize>(
     field: &mut MacField<D>,
     known: &mut [Vec<bool>; D],
     layers: usize,
+    active: &Active<D>,
 ) {
     for (a, (u, k)) in field.comp.iter_mut().zip(known.iter_mut()).enumerate() {
         let near =
             |i, c, f: &mut dyn FnMut(usize, Cell<D>)| for_each_axis_neighbor(grid, a, i, c, f);
-        let mut ring = first_ring(grid, a, k);
+        let mut ring = first_ring(grid, a, k, active);
         for layer in 0..layers {
             if layer > 0 {
                 let mut next = vec![];
@@ -205,18 +212,19 @@ pub fn extrapolate<const D: usize>(
     }
 }
 
-/// The unknown faces of component `a` with a known axis neighbour, in ascending order, each
-/// with its coordinates: a parallel pass over layers of the last axis.
-fn first_ring<const D: usize>(grid: &Grid<D>, a: usize, k: &[bool]) -> Vec<(usize, Cell<D>)> {
-    let layer = grid.face_stride(a, D - 1);
-    let layers = k.len() / layer;
-    (0..layers)
-        .into_par_iter()
-        .with_min_len(PAR_GRAIN.div_ceil(layer))
-        .flat_map_iter(|l| {
-            let start = l * layer;
-            let coords = grid.face_coords_from(a, start);
-            (start..start + layer).zip(coords).filter(|&(i, c)| {
+/// The unknown `active` faces of component `a` with a known axis neighbour, in ascending
+/// order, each with its coordinates: a parallel pass over the active lines.
+fn first_ring<const D: usize>(
+    grid: &Grid<D>,
+    a: usize,
+    k: &[bool],
+    active: &Active<D>,
+) -> Vec<(usize, Cell<D>)> {
+    (active.faces(a).par_iter())
+        .with_min_len(PAR_GRAIN.div_ceil(grid.dims[0]))
+        .flat_map_iter(|r| {
+            let coords = grid.face_coords_from(a, r.start);
+            r.clone().zip(coords).filter(|&(i, c)| {
                 let mut near_known = false;
                 if !k[i] {
                     for_each_axis_neighbor(grid, a, i, c, &mut |j, _| near_known |= k[j]);
@@ -608,7 +616,7 @@ mod tests {
         let i = g.face_index(0, [3, 3]);
         u.comp[0][i] = 2.0;
         known[0][i] = true;
-        extrapolate(&g, &mut u, &mut known, 2);
+        extrapolate(&g, &mut u, &mut known, 2, &Active::all(&g));
         assert_eq!(u.comp[0][g.face_index(0, [3, 5])], 2.0);
         assert_eq!(u.comp[0][g.face_index(0, [4, 4])], 2.0);
         assert!(!known[0][g.face_index(0, [0, 0])]);

@@ -113,7 +113,7 @@ impl<const D: usize> FluidMethod<D> for CcpSim<D> {
 
     fn next_grid_velocity(&mut self, s: &State<D>, u: MacField<D>, dt: f64) -> MacField<D> {
         match self.band() {
-            Some(_) => Band::advect_grid_velocity(&s.grid, &u, dt, &s.markings),
+            Some(_) => Band::advect_grid_velocity(&s.grid, &u, dt, &s.markings, &s.active),
             None => u,
         }
     }

@@ -295,7 +295,7 @@ impl<const D: usize> FluidMethod<D> for NbflipSim<D> {
         let advected = self.advected.get_or_insert_with(|| (*self.phi).clone());
         let cells = &self.advected_over.cells;
         self.phi.advect_into(&s.grid, &u, dt, cells, advected);
-        Band::advect_grid_velocity(&s.grid, &u, dt, &s.markings)
+        Band::advect_grid_velocity(&s.grid, &u, dt, &s.markings, &s.active)
     }
 
     /// Steps 4 and 5; the level set's inside stays fluid.

@@ -1,0 +1,321 @@
+//! The active part of the grid: where a step's grid passes work, so that their cost follows
+//! the liquid rather than the box (at 300^3 a drop and its pool fill a tenth of the cells).
+//!
+//! **Storage: dense arrays, run-length active set.** Every field stays a dense array indexed
+//! as [`Grid`] indexes it; what is sparse is the set of entries a pass visits: per line of
+//! cells along axis 0, one span `[lo, hi)` of active cells (the hull of the line's active
+//! cells), as in the run-length encoded grids of Houston et al. 2006 ("Hierarchical RLE level
+//! set", ACM TOG 25(1)). A line is contiguous in memory, so a pass walks a few long runs, and
+//! pages the liquid never reaches are never touched: a fresh zeroed field costs memory only
+//! where it is written. See docs/architecture.md, "Active spans", for why this and not tiles.
+
+use super::{Cell, Grid, MacField, Vector};
+use rayon::prelude::*;
+use std::ops::Range;
+
+/// Lines per task of a parallel pass (a line is tens to hundreds of entries).
+const LINE_GRAIN: usize = 64;
+
+/// An empty span: the identity of [`hull`].
+const EMPTY: [u32; 2] = [u32::MAX, 0];
+
+/// The smallest span holding both.
+fn hull(a: [u32; 2], b: [u32; 2]) -> [u32; 2] {
+    [a[0].min(b[0]), a[1].max(b[1])]
+}
+
+/// Each line's span widened by `margin` cells along axis 0, then made the hull of the spans of
+/// the lines within `margin` along each other axis, one axis at a time.
+fn dilate<const D: usize>(
+    grid: &Grid<D>,
+    mut spans: Vec<[u32; 2]>,
+    margin: usize,
+) -> Vec<[u32; 2]> {
+    let n0 = grid.dims[0];
+    for s in spans.iter_mut().filter(|s| s[0] < s[1]) {
+        *s = [
+            s[0].saturating_sub(margin as u32),
+            (s[1] as usize + margin).min(n0) as u32,
+        ];
+    }
+    for a in 1..D {
+        let (stride, len) = (grid.cell_stride(a) / n0, grid.dims[a]);
+        spans = (0..spans.len())
+            .into_par_iter()
+            .with_min_len(LINE_GRAIN)
+            .map(|l| {
+                let at = l / stride % len;
+                let first = l - at.min(margin) * stride;
+                let last = l + (len - 1 - at).min(margin) * stride;
+                (first..=last)
+                    .step_by(stride)
+                    .fold(EMPTY, |s, k| hull(s, spans[k]))
+            })
+            .collect();
+    }
+    spans
+}
+
+/// The active cells of a grid and the faces beside them, as ascending index ranges.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Active<const D: usize> {
+    /// One range of cell indices per line of cells that holds any active cell.
+    cells: Vec<Range<usize>>,
+    /// Per component, one range of face indices per line of faces beside an active cell:
+    /// the hull of the faces of its active cells on either side.
+    faces: [Vec<Range<usize>>; D],
+}
+
+impl<const D: usize> Active<D> {
+    /// Every cell active.
+    pub fn all(grid: &Grid<D>) -> Self {
+        let n0 = grid.dims[0] as u32;
+        Self::from_spans(grid, vec![[0, n0]; grid.num_cells() / n0 as usize])
+    }
+
+    /// The cells within `margin` cells of a cell where `seed` holds (along every axis at
+    /// once: the cube of side `2 margin + 1` around each), each line's as one span.
+    pub fn around(grid: &Grid<D>, seed: impl Fn(usize) -> bool + Sync, margin: usize) -> Self {
+        let n0 = grid.dims[0];
+        let spans = (0..grid.num_cells() / n0)
+            .into_par_iter()
+            .with_min_len(LINE_GRAIN)
+            .map(|l| {
+                let line = l * n0..(l + 1) * n0;
+                match line.clone().position(&seed) {
+                    None => EMPTY,
+                    Some(lo) => [lo as u32, (n0 - line.rev().position(&seed).unwrap()) as u32],
+                }
+            })
+            .collect();
+        Self::from_spans(grid, dilate(grid, spans, margin))
+    }
+
+    /// As [`Self::around`] with the cells that hold one of the points `pos` as seeds.
+    pub fn around_points(grid: &Grid<D>, pos: &[Vector<D>], margin: usize) -> Self {
+        let n0 = grid.dims[0];
+        let mut spans = vec![EMPTY; grid.num_cells() / n0];
+        for x in pos {
+            let c = grid.cell_index_of(x);
+            let (line, x0) = (c / n0, (c % n0) as u32);
+            spans[line] = hull(spans[line], [x0, x0 + 1]);
+        }
+        Self::from_spans(grid, dilate(grid, spans, margin))
+    }
+
+    /// The ranges from one span per line of cells.
+    fn from_spans(grid: &Grid<D>, spans: Vec<[u32; 2]>) -> Self {
+        let n0 = grid.dims[0];
+        let ranges = |spans: &mut dyn Iterator<Item = (usize, [u32; 2])>| {
+            spans
+                .filter(|(_, s)| s[0] < s[1])
+                .map(|(start, s)| start + s[0] as usize..start + s[1] as usize)
+                .collect()
+        };
+        let cells = ranges(&mut spans.iter().enumerate().map(|(l, &s)| (l * n0, s)));
+        let faces = std::array::from_fn(|a| {
+            let len = grid.face_dims(a)[0];
+            let lines = grid.num_faces(a) / len;
+            let span = |l: usize| {
+                if a == 0 {
+                    let [lo, hi] = spans[l];
+                    return if lo < hi { [lo, hi + 1] } else { EMPTY };
+                }
+                // The lines of cells below and above a line of faces normal to `a`.
+                let f = grid.face_coords(a, l * len);
+                let stride = grid.cell_stride(a) / n0;
+                let above = (f[a] < grid.dims[a]).then(|| grid.cell_index(f) / n0);
+                let below = (f[a] > 0).then(|| grid.cell_index(f) / n0 - stride);
+                let above = above.map_or(EMPTY, |k| spans[k]);
+                below.map_or(above, |k| hull(above, spans[k]))
+            };
+            ranges(&mut (0..lines).map(|l| (l * len, span(l))))
+        });
+        Active { cells, faces }
+    }
+
+    /// The active cells, one ascending index range per line.
+    pub fn cells(&self) -> &[Range<usize>] {
+        &self.cells
+    }
+
+    /// The faces of component `axis` beside an active cell, one ascending range per line.
+    pub fn faces(&self, axis: usize) -> &[Range<usize>] {
+        &self.faces[axis]
+    }
+
+    /// How many faces of component `axis` are active.
+    pub fn num_faces(&self, axis: usize) -> usize {
+        self.faces[axis].iter().map(|r| r.len()).sum()
+    }
+
+    /// `f(face_index, face_coords, value)` for every active face of component `axis`, with
+    /// its entry of `values` (one per face of the grid), in parallel over lines.
+    pub fn par_for_each_face<T: Send>(
+        &self,
+        grid: &Grid<D>,
+        axis: usize,
+        values: &mut [T],
+        f: impl Fn(usize, Cell<D>, &mut T) + Sync,
+    ) {
+        assert_eq!(values.len(), grid.num_faces(axis));
+        par_runs(&self.faces[axis], values).for_each(|(r, run)| {
+            let coords = grid.face_coords_from(axis, r.start);
+            for ((i, v), c) in r.zip(run).zip(coords) {
+                f(i, c, v);
+            }
+        });
+    }
+}
+
+impl<const D: usize> Active<D> {
+    /// `u` on the active faces, zero elsewhere.
+    pub fn copy(&self, u: &MacField<D>) -> MacField<D> {
+        let comp = std::array::from_fn(|a| {
+            let mut out = vec![0.0; u.comp[a].len()];
+            par_runs(&self.faces[a], &mut out)
+                .for_each(|(r, run)| run.copy_from_slice(&u.comp[a][r]));
+            out
+        });
+        MacField { comp }
+    }
+
+    /// The largest absolute value of `u` over the active faces; NaN if any is NaN.
+    pub fn max_abs(&self, u: &MacField<D>) -> f64 {
+        let max = |m: f64, v: f64| match m.is_nan() || v.is_nan() {
+            true => f64::NAN,
+            false => m.max(v.abs()),
+        };
+        (0..D)
+            .map(|a| {
+                (self.faces[a].par_iter().with_min_len(LINE_GRAIN))
+                    .map(|r| u.comp[a][r.clone()].iter().fold(0.0, |m, &v| max(m, v)))
+                    .reduce(|| 0.0, max)
+            })
+            .fold(0.0, max)
+    }
+}
+
+/// The runs of `values` at `ranges` (ascending, disjoint), with their ranges, as a parallel
+/// iterator: each run is a slice of its own, so that a pass can write them all at once.
+pub fn par_runs<'a, T: Send>(
+    ranges: &'a [Range<usize>],
+    mut values: &'a mut [T],
+) -> impl IndexedParallelIterator<Item = (Range<usize>, &'a mut [T])> {
+    let mut runs = Vec::with_capacity(ranges.len());
+    let mut at = 0;
+    for r in ranges {
+        let (_, rest) = std::mem::take(&mut values).split_at_mut(r.start - at);
+        let (run, rest) = rest.split_at_mut(r.len());
+        runs.push(run);
+        (values, at) = (rest, r.end);
+    }
+    (ranges.par_iter().cloned())
+        .zip(runs)
+        .with_min_len(LINE_GRAIN)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    /// Whether cell `c` lies within `margin` of a seed along every axis, by brute force.
+    fn near_seed<const D: usize>(g: &Grid<D>, seed: &[bool], c: Cell<D>, margin: usize) -> bool {
+        (0..g.num_cells()).any(|s| {
+            let sc = g.cell_coords(s);
+            seed[s] && (0..D).all(|k| sc[k].abs_diff(c[k]) <= margin)
+        })
+    }
+
+    /// The active set holds every cell near a seed, each line's active cells are the hull of
+    /// its cells near a seed, and the faces are the hull of the faces of the active cells on
+    /// either side; checked against brute force on random seeds.
+    fn check<const D: usize>(dims: [usize; D], seeds: f64, margin: usize, rng_seed: u64) {
+        let g = Grid::new(dims);
+        let mut rng = rand::rngs::StdRng::seed_from_u64(rng_seed);
+        let seed: Vec<bool> = (0..g.num_cells()).map(|_| rng.random_bool(seeds)).collect();
+        let active = Active::around(&g, |c| seed[c], margin);
+        let mut is = vec![false; g.num_cells()];
+        for r in active.cells() {
+            r.clone().for_each(|c| is[c] = true);
+        }
+        let n0 = dims[0];
+        for (l, line) in is.chunks(n0).enumerate() {
+            let near: Vec<usize> = (0..n0)
+                .filter(|&x| near_seed(&g, &seed, g.cell_coords(l * n0 + x), margin))
+                .collect();
+            let expect = |x: usize| {
+                near.first()
+                    .is_some_and(|&lo| lo <= x && x <= near[near.len() - 1])
+            };
+            assert!(
+                (0..n0).all(|x| line[x] == expect(x)),
+                "line {l} of {dims:?}"
+            );
+        }
+        for a in 0..D {
+            let mut on = vec![false; g.num_faces(a)];
+            active.par_for_each_face(&g, a, &mut on, |i, f, v| {
+                assert_eq!(g.face_coords(a, i), f);
+                *v = true;
+            });
+            assert_eq!(on.iter().filter(|&&v| v).count(), active.num_faces(a));
+            for (i, &v) in on.iter().enumerate() {
+                let beside = g.face_cells(a, i).any(|c| is[c]);
+                // A face beside an active cell is active; an active face lies between two
+                // active faces of its line, or is beside an active cell.
+                assert!(!beside || v, "face {i} of component {a}");
+            }
+            for r in active.faces(a) {
+                let ends = [r.start, r.end - 1];
+                assert!(ends.iter().all(|&i| g.face_cells(a, i).any(|c| is[c])));
+            }
+        }
+    }
+
+    #[test]
+    fn the_active_set_is_the_hull_of_each_line_near_a_seed_2d_and_3d() {
+        for (seed, (p, m)) in [(0.0, 1), (0.002, 0), (0.01, 1), (0.05, 2), (1.0, 3)]
+            .into_iter()
+            .enumerate()
+        {
+            check([13, 9], p, m, seed as u64);
+            check([7, 9, 6], p, m, 10 + seed as u64);
+        }
+    }
+
+    #[test]
+    fn around_points_seeds_the_points_cells_2d_and_3d() {
+        fn check_points<const D: usize>(dims: [usize; D], seed: u64) {
+            let g = Grid::new(dims);
+            let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+            let pos: Vec<Vector<D>> = (0..5)
+                .map(|_| Vector::<D>::from_fn(|k, _| rng.random_range(0.0..dims[k] as f64)))
+                .collect();
+            let cells: Vec<usize> = pos.iter().map(|x| g.cell_index_of(x)).collect();
+            for margin in [0, 1, 3] {
+                let by_cells = Active::around(&g, |c| cells.contains(&c), margin);
+                assert_eq!(Active::around_points(&g, &pos, margin), by_cells);
+            }
+        }
+        check_points([11, 7], 1);
+        check_points([6, 5, 9], 2);
+    }
+
+    #[test]
+    fn all_is_every_cell_and_face_2d_and_3d() {
+        fn check_all<const D: usize>(dims: [usize; D]) {
+            let g = Grid::new(dims);
+            let all = Active::all(&g);
+            assert_eq!(all, Active::around(&g, |_| true, 0));
+            assert_eq!(
+                all.cells().iter().map(|r| r.len()).sum::<usize>(),
+                g.num_cells()
+            );
+            (0..D).for_each(|a| assert_eq!(all.num_faces(a), g.num_faces(a)));
+        }
+        check_all([5, 4]);
+        check_all([3, 5, 4]);
+    }
+}
