@@ -7,12 +7,17 @@ use crate::sim::State;
 use rand::Rng;
 
 /// The emission stage: every emitter tops up its cells to `mu` (by `counts`, the particle
-/// count per cell the method says emitters see, or the markings' when `None`), and the particle
-/// total and `V*` grow with what was added. Returns how many particles were added.
-pub fn emit<const D: usize>(s: &mut State<D>, counts: Option<Vec<u32>>) -> usize {
+/// count per cell the method says emitters see, or the markings' when it gives `None`; asked
+/// only when there are emitters), and the particle total and `V*` grow with what was added.
+/// Returns how many particles were added.
+pub fn emit<const D: usize>(
+    s: &mut State<D>,
+    counts: impl FnOnce(&State<D>) -> Option<Vec<u32>>,
+) -> usize {
     if s.config.emitters.is_empty() {
         return 0;
     }
+    let counts = counts(s);
     let count = counts.as_deref().unwrap_or(&s.markings.count);
     let c = &s.config;
     let mut added = 0;

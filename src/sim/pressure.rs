@@ -118,8 +118,10 @@ pub fn project<const D: usize>(
     settings: &PcgSettings,
     active: &Active<D>,
 ) -> PcgStats {
-    let system = Poisson::new(grid, |c| kind[c] == CellKind::Fluid, solid);
-    let rhs = system.cells().map(|c| -divergence(grid, u, c)).collect();
+    let system = Poisson::new(grid, |c| kind[c] == CellKind::Fluid, solid, active);
+    let rhs = (system.cells().par_iter().with_min_len(PAR_GRAIN / 8))
+        .map(|&c| -divergence(grid, u, c))
+        .collect();
     let (p, stats) = system.solve(rhs, settings);
     for (ax, comp) in u.comp.iter_mut().enumerate() {
         active.par_for_each_face(grid, ax, comp, |_, f, v| {
@@ -140,8 +142,11 @@ pub fn project<const D: usize>(
 /// that both use the same matrix.
 pub struct Poisson<const D: usize> {
     dims: [usize; D],
-    /// Row of each cell, or [`NONE`] outside the set.
+    /// One more than the row of each cell, 0 outside the set (a fresh zeroed array costs
+    /// memory only where the set is).
     row: Vec<u32>,
+    /// The cell of each row.
+    cells: Vec<usize>,
     a: StencilMatrix<D>,
     /// Rows with a Dirichlet neighbour.
     dirichlet: Vec<bool>,
@@ -149,74 +154,93 @@ pub struct Poisson<const D: usize> {
     class: Vec<CellClass>,
 }
 
+/// A row of the matrix: its diagonal, its `+axis` and `-axis` neighbours' rows, its entries
+/// to the `+axis` ones, and whether it has a Dirichlet neighbour.
+type Row<const D: usize> = (f64, [u32; D], [u32; D], [f64; D], bool);
+
 impl<const D: usize> Poisson<D> {
-    pub fn new(grid: &Grid<D>, in_set: impl Fn(usize) -> bool, solid: &[bool]) -> Self {
+    /// The system for the cells where `in_set` holds, all of which must be `active`.
+    pub fn new(
+        grid: &Grid<D>,
+        in_set: impl Fn(usize) -> bool + Sync,
+        solid: &[bool],
+        active: &Active<D>,
+    ) -> Self {
         let n = grid.num_cells();
-        let mut row = vec![NONE; n];
-        let mut rows = 0u32;
-        for c in (0..n).filter(|&c| in_set(c)) {
-            row[c] = rows;
-            rows += 1;
+        let cells: Vec<usize> = (active.cells().par_iter())
+            .flat_map_iter(|r| r.clone().filter(|&c| in_set(c)))
+            .collect();
+        let mut row = vec![0u32; n];
+        for (r, &c) in cells.iter().enumerate() {
+            row[c] = r as u32 + 1;
         }
         let class = (0..n)
             .into_par_iter()
             .with_min_len(PAR_GRAIN)
-            .map(|c| match (row[c] != NONE, solid[c]) {
+            .map(|c| match (row[c] != 0, solid[c]) {
                 (true, _) => CellClass::Unknown,
                 (false, true) => CellClass::Neumann,
                 (false, false) => CellClass::Dirichlet,
             })
             .collect();
+        let rows: Vec<Row<D>> = (cells.par_iter().with_min_len(PAR_GRAIN / 8))
+            .map(|&c| Self::row_at(grid, &row, solid, c))
+            .collect();
         let mut a = StencilMatrix::<D>::default();
-        let mut dirichlet = vec![false; rows as usize];
-        for c in (0..n).filter(|&c| row[c] != NONE) {
-            let cc = grid.cell_coords(c);
-            let mut diag = 0.0;
-            let mut plus = [NONE; D];
-            let mut minus = [NONE; D];
-            let mut off = [0.0; D];
-            for ax in 0..D {
-                for dir in [-1, 1] {
-                    let Some(nb) = grid.neighbor(cc, ax, dir) else {
-                        continue;
-                    };
-                    let nb = grid.cell_index(nb);
-                    if solid[nb] {
-                        continue;
-                    }
-                    diag += 1.0;
-                    match row[nb] {
-                        NONE => dirichlet[a.diag.len()] = true,
-                        r if dir > 0 => {
-                            plus[ax] = r;
-                            off[ax] = -1.0;
-                        }
-                        r => minus[ax] = r,
-                    }
-                }
-            }
+        let mut dirichlet = Vec::with_capacity(rows.len());
+        for (diag, plus, minus, off, d) in rows {
             a.diag.push(diag);
             a.plus.push(plus);
             a.minus.push(minus);
             a.off_plus.push(off);
+            dirichlet.push(d);
         }
         Self {
             dims: grid.dims,
             row,
+            cells,
             a,
             dirichlet,
             class,
         }
     }
 
+    /// The row of cell `c` (in the set; `row` as [`Poisson::row`]).
+    fn row_at(grid: &Grid<D>, row: &[u32], solid: &[bool], c: usize) -> Row<D> {
+        let cc = grid.cell_coords(c);
+        let (mut diag, mut dirichlet) = (0.0, false);
+        let (mut plus, mut minus, mut off) = ([NONE; D], [NONE; D], [0.0; D]);
+        for ax in 0..D {
+            for dir in [-1, 1] {
+                let Some(nb) = grid.neighbor(cc, ax, dir) else {
+                    continue;
+                };
+                let nb = grid.cell_index(nb);
+                if solid[nb] {
+                    continue;
+                }
+                diag += 1.0;
+                match row[nb] {
+                    0 => dirichlet = true,
+                    r if dir > 0 => {
+                        plus[ax] = r - 1;
+                        off[ax] = -1.0;
+                    }
+                    r => minus[ax] = r - 1,
+                }
+            }
+        }
+        (diag, plus, minus, off, dirichlet)
+    }
+
     /// Whether cell `c` has a row.
     pub fn has(&self, c: usize) -> bool {
-        self.row[c] != NONE
+        self.row[c] != 0
     }
 
     /// The cells of the set, in row order.
-    pub fn cells(&self) -> impl Iterator<Item = usize> + '_ {
-        (0..self.row.len()).filter(|&c| self.row[c] != NONE)
+    pub fn cells(&self) -> &[usize] {
+        &self.cells
     }
 
     /// Solves `A x = rhs` (`rhs` in row order) by PCG from zero, with the preconditioner
@@ -235,11 +259,10 @@ impl<const D: usize> Poisson<D> {
                 Multigrid::new(self.dims, &self.class)
             }),
         };
-        let per_cell = self
-            .row
-            .iter()
-            .map(|&r| if r == NONE { 0.0 } else { x[r as usize] })
-            .collect();
+        let mut per_cell = vec![0.0; self.row.len()];
+        for (&c, x) in self.cells.iter().zip(x) {
+            per_cell[c] = x;
+        }
         (per_cell, stats)
     }
 }

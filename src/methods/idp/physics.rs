@@ -1,6 +1,7 @@
 //! Method idp's step: the hooks it implements (see the module doc of `super`).
 
 use crate::draw::Log;
+use crate::grid::active::Active;
 use crate::grid::{for_each_cell_weight, Grid, MacField, Vector};
 use crate::methods::seam::{FluidMethod, MethodRecording, MethodReport};
 use crate::sim::advect::{displace, CELL_MARGIN};
@@ -150,8 +151,8 @@ pub fn project_density<const D: usize, R: Rng>(
             *e = e.clamp(-CLAMP, CLAMP);
         }
     }
-    let system = Poisson::new(grid, |c| in_solve[c], inp.solid);
-    let rhs = system.cells().map(|c| s[c]).collect();
+    let system = Poisson::new(grid, |c| in_solve[c], inp.solid, &Active::all(grid));
+    let rhs = system.cells().iter().map(|&c| s[c]).collect();
     let (phi, pcg) = system.solve(rhs, inp.pcg);
     rep.pcg = pcg;
     let d = displacement(grid, inp.solid, &phi, push);
