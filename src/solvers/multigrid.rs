@@ -90,6 +90,7 @@ use crate::solvers::pcg::Precondition;
 use crate::solvers::NONE;
 use crate::PAR_GRAIN;
 use rayon::prelude::*;
+use std::borrow::Cow;
 
 /// What a cell is to the system.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -208,13 +209,14 @@ fn movable<const D: usize>(f: [usize; D], coarse: &Shape<D>, cells: &Cells) -> u
     let (parent, step) = corners(f, coarse);
     let mut axes = 0;
     for a in 0..D {
-        let p = f[a] / 2;
-        let lower = match f[a] % 2 {
-            1 if p + 1 < coarse.dims[a] => parent,
-            0 if p > 0 => parent.wrapping_add_signed(step[a]),
+        let mut lower = f.map(|v| v / 2);
+        let i = match f[a] % 2 {
+            1 if lower[a] + 1 < coarse.dims[a] => parent,
+            0 if lower[a] > 0 => parent.wrapping_add_signed(step[a]),
             _ => continue,
         };
-        if cells.open[lower] >> a & 1 == 1 {
+        lower[a] -= 1 - f[a] % 2;
+        if cells.open(coarse, i, lower, a) {
             axes |= 1 << a;
         }
     }
@@ -242,7 +244,8 @@ struct Stencil<const D: usize> {
 /// One level's matrix: `scale * count` on the diagonal, `-scale` to each unknown neighbour.
 struct Operator<const D: usize> {
     shape: Shape<D>,
-    /// Row of each cell, or [`NONE`].
+    /// One more than the row of each cell, 0 for none (a fresh zeroed array costs memory only
+    /// where the rows are).
     row: Vec<u32>,
     /// Cell of each row: the red rows (even coordinate sum) first, then the black ones.
     at: Vec<At<D>>,
@@ -271,9 +274,9 @@ impl<const D: usize> Operator<D> {
         let mut at: Vec<At<D>> = of_colour(true).collect();
         let red = at.len();
         at.par_extend(of_colour(false));
-        let mut row = vec![NONE; class.len()];
+        let mut row = vec![0u32; class.len()];
         for (r, &c) in at.iter().enumerate() {
-            row[shape.index(widen(c))] = r as u32;
+            row[shape.index(widen(c))] = r as u32 + 1;
         }
         let stencil = (at.par_iter().with_min_len(ROW_GRAIN))
             .map(|&c| Self::stencil_of(&shape, cells, &row, widen(c)))
@@ -297,18 +300,19 @@ impl<const D: usize> Operator<D> {
             minus: [NONE; D],
             count: 0,
         };
-        let open = |lower: usize, a: usize| cells.open[lower] >> a & 1 == 1;
         for a in 0..D {
+            let mut lower = c;
+            lower[a] = lower[a].wrapping_sub(1);
             let below = (c[a] > 0)
                 .then(|| i - shape.stride[a])
-                .filter(|&b| open(b, a));
-            let above = open(i, a).then(|| i + shape.stride[a]);
+                .filter(|&b| cells.open(shape, b, lower, a));
+            let above = cells.open(shape, i, c, a).then(|| i + shape.stride[a]);
             for (nb, plus) in [(below, false), (above, true)] {
                 let Some(nb) = nb else { continue };
                 match cells.class[nb] {
                     CellClass::Neumann => continue,
-                    CellClass::Unknown if plus => s.plus[a] = row[nb],
-                    CellClass::Unknown => s.minus[a] = row[nb],
+                    CellClass::Unknown if plus => s.plus[a] = row[nb] - 1,
+                    CellClass::Unknown => s.minus[a] = row[nb] - 1,
                     CellClass::Dirichlet => {}
                 }
                 s.count += 1;
@@ -319,6 +323,23 @@ impl<const D: usize> Operator<D> {
 
     fn len(&self) -> usize {
         self.at.len()
+    }
+
+    /// The rows in ascending cell order: the red rows and the black rows, each ascending,
+    /// merged.
+    fn rows_in_cell_order(&self) -> Vec<u32> {
+        let cell = |r: usize| self.shape.index(widen(self.at[r]));
+        let (mut red, mut black) = (0, self.red);
+        let mut rows = Vec::with_capacity(self.len());
+        while red < self.red || black < self.len() {
+            let r = match black == self.len() || (red < self.red && cell(red) < cell(black)) {
+                true => &mut red,
+                false => &mut black,
+            };
+            rows.push(*r as u32);
+            *r += 1;
+        }
+        rows
     }
 
     /// `scale` times the sum of `x` over row `i`'s unknown neighbours.
@@ -373,52 +394,65 @@ impl<const D: usize> Operator<D> {
 /// A level's cells as coarsening sees them: each one's class, and which of its faces are
 /// open: bit `a` for the face to the next cell along axis `a`, open if at least one face
 /// of the finest grid within it joins two cells that are not Neumann.
-struct Cells {
-    class: Vec<CellClass>,
-    open: Vec<u8>,
+struct Cells<'a> {
+    class: Cow<'a, [CellClass]>,
+    /// The open faces' bits per cell; `None` on the finest level, where a face is open when
+    /// neither cell is Neumann, read from the classes when asked (the finest grid is the
+    /// whole box: bits for every cell of it would cost a pass over all of them).
+    open: Option<Vec<u8>>,
 }
 
-impl Cells {
-    fn finest<const D: usize>(shape: &Shape<D>, class: &[CellClass]) -> Self {
-        let wet = |c: usize| class[c] != CellClass::Neumann;
-        let open = map_cells(shape, 0, |c, cc| {
-            let joins = |a: usize| cc[a] + 1 < shape.dims[a] && wet(c) && wet(c + shape.stride[a]);
-            (0..D)
-                .filter(|&a| joins(a))
-                .fold(0, |bits, a| bits | 1 << a)
-        });
+impl<'a> Cells<'a> {
+    fn finest(class: &'a [CellClass]) -> Self {
         Cells {
-            class: class.to_vec(),
-            open,
+            class: Cow::Borrowed(class),
+            open: None,
+        }
+    }
+
+    /// Whether the face of cell `i` (coordinates `c`, on a level of `shape`) to the next
+    /// cell along axis `a` is open.
+    fn open<const D: usize>(&self, shape: &Shape<D>, i: usize, c: [usize; D], a: usize) -> bool {
+        match &self.open {
+            Some(bits) => bits[i] >> a & 1 == 1,
+            None => {
+                let wet = |c: usize| self.class[c] != CellClass::Neumann;
+                c[a] + 1 < shape.dims[a] && wet(i) && wet(i + shape.stride[a])
+            }
         }
     }
 
     /// The next coarser grid's cells: a coarse cell is unknown if any of its children is,
     /// else Dirichlet if any is, else Neumann; a coarse face is open if any fine face in it
     /// is.
-    fn coarsen<const D: usize>(&self, fine: &Shape<D>) -> Self {
+    fn coarsen<const D: usize>(&self, fine: &Shape<D>) -> Cells<'static> {
         let coarse = fine.coarser();
         let (class, open) = map_cells(&coarse, (CellClass::Neumann, 0), |_, kc| {
             let (mut class, mut open) = (CellClass::Neumann, 0);
             for mask in 0..1usize << D {
-                let f: [usize; D] = std::array::from_fn(|a| 2 * kc[a] + (mask >> a & 1));
-                if (0..D).any(|a| f[a] >= fine.dims[a]) {
+                let fc: [usize; D] = std::array::from_fn(|a| 2 * kc[a] + (mask >> a & 1));
+                if (0..D).any(|a| fc[a] >= fine.dims[a]) {
                     continue;
                 }
-                let f = fine.index(f);
+                let f = fine.index(fc);
                 class = match (class, self.class[f]) {
                     (CellClass::Dirichlet, _) | (_, CellClass::Dirichlet) => CellClass::Dirichlet,
                     (CellClass::Unknown, _) | (_, CellClass::Unknown) => CellClass::Unknown,
                     _ => CellClass::Neumann,
                 };
                 // The child on the upper side of each axis carries that face.
-                open |= self.open[f] & mask as u8;
+                for a in (0..D).filter(|&a| mask >> a & 1 == 1) {
+                    open |= (self.open(fine, f, fc, a) as u8) << a;
+                }
             }
             (class, open)
         })
         .into_iter()
         .unzip();
-        Cells { class, open }
+        Cells {
+            class: Cow::Owned(class),
+            open: Some(open),
+        }
     }
 }
 
@@ -599,7 +633,8 @@ impl<const D: usize> Level<D> {
                         continue;
                     }
                     let r = self.op.row[base.wrapping_add_signed(offset)] as usize;
-                    if r == NONE as usize || moved & !self.movable[r] != 0 {
+                    let Some(r) = r.checked_sub(1) else { continue };
+                    if moved & !self.movable[r] != 0 {
                         continue;
                     }
                     let w = if moved == 0 {
@@ -767,7 +802,7 @@ impl<const D: usize> Multigrid<D> {
             "at most 2^16 cells per axis"
         );
         let mut shape = Shape::new(dims);
-        let mut cells = Cells::finest(&shape, class);
+        let mut cells = Cells::finest(class);
         let mut levels = vec![Level::new(Operator::new(shape, &cells, 1.0))];
         let coarser = 2f64.powi(D as i32 - 2);
         loop {
@@ -782,8 +817,7 @@ impl<const D: usize> Multigrid<D> {
             levels.push(Level::new(Operator::new(shape, &cells, scale)));
         }
         let coarsest = Dense::new(&levels.last().expect("the coarsest level").op);
-        let fine_rows = levels[0].op.row.iter().copied();
-        let level_row: Vec<u32> = fine_rows.filter(|&r| r != NONE).collect();
+        let level_row = levels[0].op.rows_in_cell_order();
         let mut system_row = vec![0; level_row.len()];
         for (i, &r) in level_row.iter().enumerate() {
             system_row[r as usize] = i as u32;
