@@ -4,6 +4,7 @@
 
 mod common;
 
+mod active;
 mod band;
 mod checkpoint;
 mod cli_process;
