@@ -360,6 +360,23 @@ pub fn closest_along(q: f64, c: usize, margin: f64) -> f64 {
     }
 }
 
+/// The larger of two non-negative values, NaN if either is (`f64::max` would drop the NaN,
+/// and a solver or a speed check would then report a NaN field as finite).
+pub fn nan_max(m: f64, v: f64) -> f64 {
+    if m.is_nan() || v.is_nan() {
+        f64::NAN
+    } else {
+        m.max(v)
+    }
+}
+
+/// The largest absolute value of `values` (0 for none), NaN if any is NaN; in parallel.
+pub fn max_abs(values: &[f64]) -> f64 {
+    (values.par_iter().with_min_len(crate::PAR_GRAIN))
+        .map(|v| v.abs())
+        .reduce(|| 0.0, nan_max)
+}
+
 /// A velocity field stored on the faces of a MAC grid: component `a` lives on the faces normal
 /// to axis `a`.
 #[derive(Clone, Debug, PartialEq)]
@@ -376,16 +393,7 @@ impl<const D: usize> MacField<D> {
 
     /// Largest absolute face value over all components; NaN if any value is NaN.
     pub fn max_abs(&self) -> f64 {
-        self.comp
-            .iter()
-            .flat_map(|c| c.iter())
-            .fold(0.0f64, |m, v| {
-                if m.is_nan() || v.is_nan() {
-                    f64::NAN
-                } else {
-                    m.max(v.abs())
-                }
-            })
+        self.comp.iter().map(|c| max_abs(c)).fold(0.0, nan_max)
     }
 
     /// Multilinear interpolation of the field at `x` (grid units).

@@ -9,7 +9,7 @@
 //! pages the liquid never reaches are never touched: a fresh zeroed field costs memory only
 //! where it is written. See docs/architecture.md, "Active spans", for why this and not tiles.
 
-use super::{Cell, Grid, MacField, Vector};
+use super::{max_abs, nan_max, Cell, Grid, MacField, Vector};
 use rayon::prelude::*;
 use std::ops::Range;
 
@@ -182,17 +182,13 @@ impl<const D: usize> Active<D> {
 
     /// The largest absolute value of `u` over the active faces; NaN if any is NaN.
     pub fn max_abs(&self, u: &MacField<D>) -> f64 {
-        let max = |m: f64, v: f64| match m.is_nan() || v.is_nan() {
-            true => f64::NAN,
-            false => m.max(v.abs()),
-        };
         (0..D)
             .map(|a| {
                 (self.faces[a].par_iter().with_min_len(LINE_GRAIN))
-                    .map(|r| u.comp[a][r.clone()].iter().fold(0.0, |m, &v| max(m, v)))
-                    .reduce(|| 0.0, max)
+                    .map(|r| max_abs(&u.comp[a][r.clone()]))
+                    .reduce(|| 0.0, nan_max)
             })
-            .fold(0.0, max)
+            .fold(0.0, nan_max)
     }
 }
 

@@ -2,7 +2,7 @@
 //! more than `cfl <= 1` cells along any axis in one step.
 
 use crate::grid::active::Active;
-use crate::grid::{Grid, MacField, Vector};
+use crate::grid::{nan_max, Grid, MacField, Vector};
 use crate::metrics::InvariantViolation;
 use crate::sim::State;
 use crate::solvers::pcg::PcgStats;
@@ -53,8 +53,7 @@ pub fn finite_speed<const D: usize>(
     let air = (0..D)
         .filter(|&a| has_air(a))
         .fold(0.0, |m, a| air[a].abs().max(m));
-    let v = active.max_abs(u);
-    let v = if v.is_nan() { v } else { v.max(air) };
+    let v = nan_max(active.max_abs(u), air);
     if v.is_finite() {
         Ok(v)
     } else {

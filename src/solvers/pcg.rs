@@ -7,6 +7,7 @@
 //! sec. 5.3, Fig. 5.7), written once for any dimension: the factor of row `r` needs only the
 //! rows that precede it along each axis.
 
+use crate::grid::max_abs;
 use crate::PAR_GRAIN;
 use rayon::prelude::*;
 
@@ -251,21 +252,6 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
         .map(|(x, y)| x.iter().zip(y).map(|(p, q)| p * q).sum())
         .collect();
     partial.iter().sum()
-}
-
-/// Largest absolute value; NaN if any value is NaN (`f64::max` would drop it and report a NaN
-/// system as solved).
-fn max_abs(a: &[f64]) -> f64 {
-    let nan_max = |m: f64, v: f64| {
-        if m.is_nan() || v.is_nan() {
-            f64::NAN
-        } else {
-            m.max(v)
-        }
-    };
-    (a.par_iter().with_min_len(PAR_GRAIN))
-        .map(|v| v.abs())
-        .reduce(|| 0.0, nan_max)
 }
 
 /// Solves `A x = b` by MIC(0)-PCG starting from `x = 0`; `x` receives the solution.
