@@ -98,6 +98,18 @@ pub struct State<const D: usize> {
 /// ring misses the neighbours beyond.
 pub const ACTIVE_MARGIN: usize = 6;
 
+/// The cells within [`ACTIVE_MARGIN`] of a fluid cell of `markings` or a moving obstacle's
+/// cell: a step's grid passes outside them would only write values no later pass reads.
+fn active_cells<const D: usize>(
+    grid: &Grid<D>,
+    markings: &Markings,
+    solids: &Solids<D>,
+) -> Active<D> {
+    let (fluid, moving) = (&markings.kind, solids.moving_mask());
+    let seed = |c| fluid[c] == CellKind::Fluid || moving.is_some_and(|m| m[c]);
+    Active::around(grid, seed, ACTIVE_MARGIN)
+}
+
 /// Why a step failed.
 #[derive(Debug, thiserror::Error)]
 pub enum StepError {
@@ -179,10 +191,10 @@ impl<const D: usize> State<D> {
             solids.moving_mask(),
         );
         let total = particles.len();
-        let mut state = State {
+        State {
             target_volume: total as f64 / config.mu() as f64,
             velocity: MacField::zeros(&grid),
-            active: Active::all(&grid),
+            active: active_cells(&grid, &markings, &solids),
             markings,
             time_secs: 0.0,
             steps: 0,
@@ -192,17 +204,13 @@ impl<const D: usize> State<D> {
             solids,
             config,
             rng,
-        };
-        state.activate();
-        state
+        }
     }
 
-    /// The active cells for the current markings and obstacles ([`State::active`]): a
-    /// step's grid passes outside them would only write values no later pass reads.
+    /// Finds the active cells again ([`State::active`]), after the markings or obstacles
+    /// changed.
     pub fn activate(&mut self) {
-        let (fluid, moving) = (&self.markings.kind, self.solids.moving_mask());
-        let seed = |c| fluid[c] == CellKind::Fluid || moving.is_some_and(|m| m[c]);
-        self.active = Active::around(&self.grid, seed, ACTIVE_MARGIN);
+        self.active = active_cells(&self.grid, &self.markings, &self.solids);
     }
 
     /// The volume measure of eq. volume as a percentage of `V*`.

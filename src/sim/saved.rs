@@ -61,9 +61,10 @@ impl<const D: usize> State<D> {
         for (a, c) in velocity.comp.iter_mut().enumerate() {
             *c = r.slice(&format!("velocity.{a}"), Some(c.len()))?;
         }
-        let mut state = State {
-            active: crate::grid::active::Active::all(&grid),
-            markings: restore_markings(r, n)?,
+        let markings = restore_markings(r, n)?;
+        Ok(State {
+            active: super::active_cells(&grid, &markings, &solids),
+            markings,
             time_secs: r.scalar("time_secs")?,
             steps: r.scalar("steps")?,
             total_particles: r.scalar::<u64>("total_particles")? as usize,
@@ -74,9 +75,7 @@ impl<const D: usize> State<D> {
             solids,
             grid,
             config,
-        };
-        state.activate();
-        Ok(state)
+        })
     }
 }
 
