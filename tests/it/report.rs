@@ -308,8 +308,10 @@ fn a_run_over_its_budget_stops_and_says_so() {
             "dam-2d",
             "--methods",
             "flip,ccp",
+            // Long enough that no run ends within the budget however fast it steps (1 s of
+            // flip on dam-2d took under 0.05 s once its grid passes followed the liquid).
             "--duration",
-            "1",
+            "20",
             "--budget",
             "0.05",
             "-q",
@@ -330,7 +332,7 @@ fn a_run_over_its_budget_stops_and_says_so() {
             row["method"]
         );
         let t: f64 = row["sim_s"].parse().unwrap();
-        assert!(t > 0.0 && t < 1.0, "{}: {t} s simulated", row["method"]);
+        assert!(t > 0.0 && t < 20.0, "{}: {t} s simulated", row["method"]);
     }
 }
 
