@@ -92,7 +92,11 @@ impl<const D: usize> Active<D> {
     }
 
     /// As [`Self::around`] with the cells that hold one of the points `pos` as seeds.
-    pub fn around_points(grid: &Grid<D>, pos: &[Vector<D>], margin: usize) -> Self {
+    pub fn around_points<'p>(
+        grid: &Grid<D>,
+        pos: impl IntoIterator<Item = &'p Vector<D>>,
+        margin: usize,
+    ) -> Self {
         let n0 = grid.dims[0];
         let mut spans = vec![EMPTY; grid.num_cells() / n0];
         for x in pos {
@@ -144,6 +148,19 @@ impl<const D: usize> Active<D> {
         &self.faces[axis]
     }
 
+    /// The active cells numbered densely in index order, for per-cell scratch arrays as long
+    /// as the set rather than the grid.
+    pub fn numbers(&self, grid: &Grid<D>) -> CellNumbers {
+        let n0 = grid.dims[0];
+        let mut span = vec![(0, 0, 0); grid.num_cells() / n0];
+        let mut len = 0;
+        for r in &self.cells {
+            span[r.start / n0] = (r.start % n0, r.end - r.start, len);
+            len += r.len();
+        }
+        CellNumbers { n0, span, len }
+    }
+
     /// How many faces of component `axis` are active.
     pub fn num_faces(&self, axis: usize) -> usize {
         self.faces[axis].iter().map(|r| r.len()).sum()
@@ -189,6 +206,33 @@ impl<const D: usize> Active<D> {
                     .reduce(|| 0.0, nan_max)
             })
             .fold(0.0, nan_max)
+    }
+}
+
+/// The dense numbers of an [`Active`] set's cells ([`Active::numbers`]).
+pub struct CellNumbers {
+    n0: usize,
+    /// Per line of cells: its span's first cell along axis 0, its length and the number of
+    /// that first cell.
+    span: Vec<(usize, usize, usize)>,
+    len: usize,
+}
+
+impl CellNumbers {
+    /// How many cells are numbered.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// The number of cell `c`, if it is active.
+    pub fn get(&self, c: usize) -> Option<usize> {
+        let (lo, len, first) = self.span[c / self.n0];
+        let at = (c % self.n0).wrapping_sub(lo);
+        (at < len).then_some(first + at)
     }
 }
 
@@ -299,6 +343,31 @@ mod tests {
         check_points([6, 5, 9], 2);
     }
 
+    /// The numbers count the active cells in index order, and only them.
+    #[test]
+    fn numbers_count_the_active_cells_in_order_2d_and_3d() {
+        fn check_numbers<const D: usize>(dims: [usize; D], seed: u64) {
+            let g = Grid::new(dims);
+            let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+            let seeds: Vec<bool> = (0..g.num_cells()).map(|_| rng.random_bool(0.02)).collect();
+            let active = Active::around(&g, |c| seeds[c], 1);
+            let numbers = active.numbers(&g);
+            let listed: Vec<usize> = active.cells().iter().flat_map(|r| r.clone()).collect();
+            assert!(!listed.is_empty() && listed.len() < g.num_cells());
+            assert_eq!(numbers.len(), listed.len());
+            let mut next = 0;
+            for c in 0..g.num_cells() {
+                let expect = listed.contains(&c).then(|| {
+                    next += 1;
+                    next - 1
+                });
+                assert_eq!(numbers.get(c), expect, "cell {c} of {dims:?}");
+            }
+        }
+        check_numbers([17, 9], 3);
+        check_numbers([6, 7, 9], 4);
+    }
+
     #[test]
     fn all_is_every_cell_and_face_2d_and_3d() {
         fn check_all<const D: usize>(dims: [usize; D]) {
@@ -310,6 +379,9 @@ mod tests {
                 g.num_cells()
             );
             (0..D).for_each(|a| assert_eq!(all.num_faces(a), g.num_faces(a)));
+            let numbers = all.numbers(&g);
+            assert_eq!(numbers.len(), g.num_cells());
+            assert!((0..g.num_cells()).all(|c| numbers.get(c) == Some(c)));
         }
         check_all([5, 4]);
         check_all([3, 5, 4]);

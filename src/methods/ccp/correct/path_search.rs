@@ -4,11 +4,13 @@
 //! particles one cell on), as the paper writes them.
 
 use super::paths::{BandPath, BandScene, PathDirection};
-use crate::grid::{Cell, Vector};
+use crate::grid::active::{Active, CellNumbers};
+use crate::grid::{Cell, Grid, Vector};
 use crate::sim::advect::CELL_MARGIN;
 use crate::solvers::cheapest::Cheapest;
 use crate::solvers::NONE;
 use std::collections::BinaryHeap;
+use std::ops::Range;
 
 /// What pushing particles along paths did.
 #[derive(Clone, Debug, Default)]
@@ -35,6 +37,78 @@ struct FoundPath {
     edge: u32,
     sink: u32,
     cost: f64,
+}
+
+/// alg. find's per-cell arrays, over the only cells a search can reach: those that hold a
+/// particle when it starts and their neighbours that may take one.
+struct Search {
+    cells: Vec<Range<usize>>,
+    numbers: CellNumbers,
+    /// `gamma_c` of the current positions, per numbered cell `k`:
+    /// `members[start[k]..start[k + 1]]`, in particle order.
+    start: Vec<usize>,
+    members: Vec<u32>,
+    /// Per numbered cell: `J`, the edge (particle) to its parent (`NONE` unvisited, `ROOT` a
+    /// source); `sigma`, its cost; `finished`, whether its path (as a root) is found.
+    parent: Vec<u32>,
+    sigma: Vec<f64>,
+    finished: Vec<bool>,
+}
+
+impl Search {
+    /// Numbers the cells within one cell of a particle's previous position `x_bar` or of its
+    /// position `pos`, which hold every cell a search reaches: a particle's cell is the one of
+    /// `pos` until alg. update moves it, and alg. edge moves a particle only out of its previous
+    /// cell or into it, so a cell a path enters is its previous cell or a neighbour of it.
+    fn new<const D: usize>(grid: &Grid<D>, x_bar: &[Vector<D>], pos: &[Vector<D>]) -> Self {
+        let active = Active::around_points(grid, x_bar.iter().chain(pos), 1);
+        let numbers = active.numbers(grid);
+        let n = numbers.len();
+        Self {
+            cells: active.cells().to_vec(),
+            numbers,
+            start: vec![0; n + 1],
+            members: vec![],
+            parent: vec![NONE; n],
+            sigma: vec![f64::INFINITY; n],
+            finished: vec![false; n],
+        }
+    }
+
+    /// The number of cell `c`, which a search reaches.
+    fn number(&self, c: u32) -> usize {
+        self.numbers.get(c as usize).expect("a cell a search reaches")
+    }
+
+    /// Lists `gamma_c` of the particles' cells `cell_of` (a counting sort).
+    fn sort(&mut self, cell_of: &[u32]) {
+        let number: Vec<usize> = cell_of.iter().map(|&c| self.number(c)).collect();
+        self.start.fill(0);
+        for &k in &number {
+            self.start[k + 1] += 1;
+        }
+        for k in 1..self.start.len() {
+            self.start[k] += self.start[k - 1];
+        }
+        let mut fill = self.start.clone();
+        self.members.resize(cell_of.len(), 0);
+        for (j, &k) in number.iter().enumerate() {
+            self.members[fill[k]] = j as u32;
+            fill[k] += 1;
+        }
+    }
+
+    /// `gamma_c` of numbered cell `k`.
+    fn gamma(&self, k: usize) -> &[u32] {
+        &self.members[self.start[k]..self.start[k + 1]]
+    }
+
+    /// Forgets the last search.
+    fn clear(&mut self) {
+        self.parent.fill(NONE);
+        self.sigma.fill(f64::INFINITY);
+        self.finished.fill(false);
+    }
 }
 
 /// The state alg. find, alg. edge and alg. update work on: the band's scene, its depth `R`
@@ -77,33 +151,19 @@ impl<'a, const D: usize> PathSearch<'a, D> {
     /// when no other path is left (reverting `b*` must stay possible, sec. push_part).
     pub fn push(&self, pos: &mut [Vector<D>], n_move: usize) -> PathOutcome<D> {
         let grid = self.sc.grid;
-        let n = grid.num_cells();
         let cells = |xs: &[Vector<D>]| -> Vec<u32> {
             xs.iter().map(|x| grid.cell_index_of(x) as u32).collect()
         };
         let mut cell_of = cells(pos);
         // Each particle's previous cell, which alg. edge reads for every move it considers.
         let home = cells(self.sc.x_bar);
+        let mut search = Search::new(grid, self.sc.x_bar, pos);
         let mut out = PathOutcome::default();
         let mut allow_wanted = self.sc.penalty.is_none();
         while out.applied < n_move {
-            // gamma_c of the current positions, as lists (counting sort).
-            let mut start = vec![0usize; n + 1];
-            for &c in &cell_of {
-                start[c as usize + 1] += 1;
-            }
-            for c in 0..n {
-                start[c + 1] += start[c];
-            }
-            let mut fill = start.clone();
-            let mut members = vec![0u32; cell_of.len()];
-            for (j, &c) in cell_of.iter().enumerate() {
-                members[fill[c as usize]] = j as u32;
-                fill[c as usize] += 1;
-            }
-            let gamma = |c: usize| &members[start[c]..start[c + 1]];
+            search.sort(&cell_of);
             let want = n_move - out.applied;
-            let (found, parent) = self.find(pos, &cell_of, &home, &gamma, allow_wanted, want);
+            let found = self.find(&mut search, pos, &cell_of, &home, allow_wanted, want);
             out.find_calls += 1;
             out.found += found.len();
             if found.is_empty() {
@@ -114,8 +174,8 @@ impl<'a, const D: usize> PathSearch<'a, D> {
                 continue;
             }
             for path in found {
-                out.paths
-                    .push(self.update(&parent, &path, pos, &mut cell_of));
+                let path = self.update(&search, &path, pos, &mut cell_of);
+                out.paths.push(path);
                 out.applied += 1;
             }
         }
@@ -124,7 +184,7 @@ impl<'a, const D: usize> PathSearch<'a, D> {
 
     /// alg. find: non-intersecting cheapest paths from every non-empty source, one per source,
     /// each ending at the first sink with room that its search reaches. Returns the paths in
-    /// the order found and `J`, each cell's edge (particle) to its parent.
+    /// the order found and leaves in `search` `J`, each cell's edge (particle) to its parent.
     ///
     /// The search stops once `want` paths are found: alg. update applies the paths in the order
     /// found, only as many as are still needed, and a path's cells and edges are final when its
@@ -133,25 +193,22 @@ impl<'a, const D: usize> PathSearch<'a, D> {
     ///
     /// One deviation from the listing: a node extends its path from its own cost rather than
     /// from `sigma[c]`, which a cheaper node of an already finished root may have lowered.
-    fn find<'g>(
+    fn find(
         &self,
+        search: &mut Search,
         pos: &[Vector<D>],
         cell_of: &[u32],
         home: &[u32],
-        gamma: &impl Fn(usize) -> &'g [u32],
         allow_wanted: bool,
         want: usize,
-    ) -> (Vec<FoundPath>, Vec<u32>) {
+    ) -> Vec<FoundPath> {
         let grid = self.sc.grid;
-        let n = grid.num_cells();
-        let mut parent = vec![NONE; n];
-        let mut finished = vec![false; n];
-        let mut sigma = vec![f64::INFINITY; n];
+        search.clear();
         let mut queue = BinaryHeap::new();
-        for c in 0..n {
-            if self.is_source(c) && !gamma(c).is_empty() {
-                parent[c] = ROOT;
-                sigma[c] = 0.0;
+        for (k, c) in search.cells.iter().flat_map(|r| r.clone()).enumerate() {
+            if self.is_source(c) && !search.gamma(k).is_empty() {
+                search.parent[k] = ROOT;
+                search.sigma[k] = 0.0;
                 let node = Node {
                     cell: c as u32,
                     root: c as u32,
@@ -165,17 +222,19 @@ impl<'a, const D: usize> PathSearch<'a, D> {
         }
         let mut paths = vec![];
         while let Some(Cheapest { cost, tie: a }) = queue.pop() {
-            let c = a.cell as usize;
-            if parent[c] != NONE && parent[c] != ROOT {
+            let (c, k) = (a.cell as usize, search.number(a.cell));
+            if search.parent[k] != NONE && search.parent[k] != ROOT {
                 continue; // visited
             }
-            if finished[a.root as usize] {
+            if search.finished[search.number(a.root)] {
                 continue;
             }
-            parent[c] = a.edge;
-            sigma[c] = cost;
-            if self.is_sink(c, allow_wanted) && (gamma(c).len() as u32) < self.sc.mu {
-                finished[a.root as usize] = true;
+            search.parent[k] = a.edge;
+            search.sigma[k] = cost;
+            let gamma = search.gamma(k);
+            if self.is_sink(c, allow_wanted) && (gamma.len() as u32) < self.sc.mu {
+                let root = search.number(a.root);
+                search.finished[root] = true;
                 paths.push(FoundPath {
                     edge: a.edge,
                     sink: a.cell,
@@ -193,13 +252,18 @@ impl<'a, const D: usize> PathSearch<'a, D> {
                         continue;
                     };
                     let c2 = grid.cell_index(nb);
-                    if parent[c2] != NONE || self.sc.solid[c2] {
+                    // Off the numbered cells no particle of `c` may move to `c2` (see
+                    // [`Search::new`]).
+                    let Some(k2) = search.numbers.get(c2) else {
+                        continue;
+                    };
+                    if search.parent[k2] != NONE || self.sc.solid[c2] {
                         continue; // visited, a source or solid
                     }
                     // alg. edge: the cheapest particle of c that may move to c2, i.e. one whose
                     // previous cell is c or c2.
                     let mut best: Option<(f64, u32)> = None;
-                    for &j in gamma(c) {
+                    for &j in search.gamma(k) {
                         let home = home[j as usize] as usize;
                         if home != c && home != c2 {
                             continue;
@@ -214,10 +278,10 @@ impl<'a, const D: usize> PathSearch<'a, D> {
                     };
                     debug_assert_eq!(cell_of[j as usize] as usize, c);
                     let t = cost + e;
-                    if t >= sigma[c2] {
+                    if t >= search.sigma[k2] {
                         continue;
                     }
-                    sigma[c2] = t;
+                    search.sigma[k2] = t;
                     let node = Node {
                         cell: c2 as u32,
                         root: a.root,
@@ -227,14 +291,14 @@ impl<'a, const D: usize> PathSearch<'a, D> {
                 }
             }
         }
-        (paths, parent)
+        paths
     }
 
     /// alg. update: walks the path back from its sink, moving each edge's particle into the
     /// cell after it, and returns the path's cell centres from source to sink.
     fn update(
         &self,
-        parent: &[u32],
+        search: &Search,
         path: &FoundPath,
         pos: &mut [Vector<D>],
         cell_of: &mut [u32],
@@ -248,7 +312,7 @@ impl<'a, const D: usize> PathSearch<'a, D> {
             pos[ju] = grid.closest_in_cell(&self.sc.x_hat[ju], grid.cell_coords(c), CELL_MARGIN);
             cell_of[ju] = c as u32;
             cells.push(grid.center(grid.cell_coords(from)));
-            j = parent[from];
+            j = search.parent[search.number(from as u32)];
             c = from;
         }
         cells.reverse();
