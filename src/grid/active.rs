@@ -9,7 +9,7 @@
 //! pages the liquid never reaches are never touched: a fresh zeroed field costs memory only
 //! where it is written. See docs/architecture.md, "Active spans", for why this and not tiles.
 
-use super::{max_abs, nan_max, Cell, Grid, MacField, Vector};
+use super::{max_abs, nan_max, Cell, Grid, MacField, NearCells, Vector};
 use rayon::prelude::*;
 use std::ops::Range;
 
@@ -146,6 +146,26 @@ impl<const D: usize> Active<D> {
     /// The faces of component `axis` beside an active cell, one ascending range per line.
     pub fn faces(&self, axis: usize) -> &[Range<usize>] {
         &self.faces[axis]
+    }
+
+    /// The cells of the set where `flag` holds, with their lines: a [`NearCells`] whose flags
+    /// off the set are false and never asked for (so their pages are never touched). For the
+    /// cells of markings the set was built around, the same as [`NearCells::new`] of all flags.
+    pub fn near_cells(&self, grid: &Grid<D>, flag: impl Fn(usize) -> bool + Sync) -> NearCells {
+        let n0 = grid.dims[0];
+        let mut cells = vec![false; grid.num_cells()];
+        let held: Vec<(usize, bool)> = par_runs(&self.cells, &mut cells)
+            .map(|(r, run)| {
+                let line = r.start / n0;
+                (line, r.zip(run).fold(false, |any, (c, v)| {
+                    *v = flag(c);
+                    any | *v
+                }))
+            })
+            .collect();
+        let mut lines = vec![false; grid.num_cells() / n0];
+        held.into_iter().for_each(|(l, any)| lines[l] = any);
+        NearCells { cells, lines }
     }
 
     /// The active cells numbered densely in index order, for per-cell scratch arrays as long

@@ -86,7 +86,8 @@ impl Band {
 
     /// The velocity combination of alg. band line 1: faces next to a band interface or deep
     /// cell (depth `<= -R`) take the grid velocity `grid_u` and count as known; the others
-    /// keep the particle velocity where particles gave weight.
+    /// keep the particle velocity where particles gave weight. `active` holds every fluid
+    /// cell of `m`.
     pub fn combine_with_grid<const D: usize>(
         &self,
         grid: &Grid<D>,
@@ -94,14 +95,15 @@ impl Band {
         known: &mut Known<D>,
         grid_u: &MacField<D>,
         m: &Markings,
+        active: &Active<D>,
     ) {
-        let near = NearCells::new(grid, self.at_or_below_interface(m));
+        let near = active.near_cells(grid, |c| m.at_or_below_interface(c, self.r));
         combine_velocities(grid, u, known, grid_u, &near, |_, _, _| true);
     }
 
     /// Alg. band line 5: the grid velocity advected semi-Lagrangian over `dt`. The next step
     /// reads it next to the interface and the deep, which lie inside the fluid: the faces of
-    /// fluid cells are advected, the others keep `u`.
+    /// fluid cells are advected, the others keep `u`. `active` holds every fluid cell of `m`.
     pub fn advect_grid_velocity<const D: usize>(
         grid: &Grid<D>,
         u: &MacField<D>,
@@ -109,7 +111,8 @@ impl Band {
         m: &Markings,
         active: &Active<D>,
     ) -> MacField<D> {
-        advect::advect_velocity(grid, u, dt, &NearCells::new(grid, m.fluid()), active)
+        let fluid = active.near_cells(grid, |c| m.is_fluid(c));
+        advect::advect_velocity(grid, u, dt, &fluid, active)
     }
 }
 
@@ -174,7 +177,8 @@ mod tests {
         let (mut u, mut known) = particles_to_grid(&g, &pos, &vel);
         let mut grid_u = MacField::zeros(&g);
         grid_u.comp[2].iter_mut().for_each(|v| *v = -7.0);
-        Band { r: 1 }.combine_with_grid(&g, &mut u, &mut known, &grid_u, &m);
+        let all = Active::all(&g);
+        Band { r: 1 }.combine_with_grid(&g, &mut u, &mut known, &grid_u, &m, &all);
         for i in 0..g.num_faces(2) {
             let f = g.face_coords(2, i);
             match f[2] {

@@ -177,13 +177,6 @@ impl Markings {
         self.kind[c] == CellKind::Fluid
     }
 
-    /// [`Markings::is_fluid`] of every cell.
-    pub fn fluid(&self) -> Vec<bool> {
-        (self.kind.par_iter().with_min_len(crate::PAR_GRAIN))
-            .map(|&k| k == CellKind::Fluid)
-            .collect()
-    }
-
     pub fn class(&self, c: usize, mu: u32) -> MarkingClass {
         match self.kind[c] {
             CellKind::Empty => MarkingClass::Empty,

@@ -5,6 +5,7 @@
 //! what resampling guarantees.
 
 use crate::common::{load, run, run_at_rest, with};
+use cellflip::grid::active::Active;
 use cellflip::grid::{Grid, MacField, Vector};
 use cellflip::methods::nbflip::levelset::{particle_radius, LevelSet};
 use cellflip::methods::nbflip::region::Region;
@@ -237,7 +238,9 @@ fn the_combination_takes_particles_in_the_band_and_the_grid_below_3d() {
     let (mut u, mut known) = particles_to_grid(&g, &pos, &vel);
     let mut grid_u = MacField::zeros(&g);
     grid_u.comp[2].iter_mut().for_each(|v| *v = -7.0);
-    combine(&g, &m, &phi, 3.0, &mut u, &mut known, &grid_u);
+    // The fluid cells alone as the active set: the least one the combination may be given.
+    let active = Active::around(&g, |c| m.is_fluid(c), 0);
+    combine(&g, &m, &active, &phi, 3.0, &mut u, &mut known, &grid_u);
     for (i, (&k, &v)) in known[2].iter().zip(&u.comp[2]).enumerate() {
         let z = g.face_coords(2, i)[2];
         match z {

@@ -102,7 +102,8 @@ impl<const D: usize> FluidMethod<D> for CcpSim<D> {
         let (mut u, mut known) =
             transfer::particles_to_grid(&s.grid, &s.particles.pos, &s.particles.vel);
         if let Some(b) = self.band() {
-            b.combine_with_grid(&s.grid, &mut u, &mut known, &s.velocity, &s.markings);
+            let (m, active) = (&s.markings, &s.active);
+            b.combine_with_grid(&s.grid, &mut u, &mut known, &s.velocity, m, active);
         }
         Ok((u, known))
     }

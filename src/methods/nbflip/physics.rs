@@ -3,7 +3,8 @@
 use super::levelset::{particle_radius, LevelSet, March, Side};
 use super::region::{Margin, Region};
 use crate::draw::{depth_level_classes, Log};
-use crate::grid::{Cell, Grid, MacField, NearCells, Vector};
+use crate::grid::active::Active;
+use crate::grid::{Cell, Grid, MacField, Vector};
 use crate::methods::seam::{FluidMethod, MethodRecording, MethodReport};
 use crate::metrics::InvariantViolation;
 use crate::particles::Particles;
@@ -198,17 +199,19 @@ pub fn level<const D: usize>(phi: &LevelSet, solid: &[bool], r: f64, c: usize) -
 /// its other faces take the advected grid velocity `grid_u` (MantaFlow's `combineGridVel` with
 /// `narrowBand = R - 1`, `thresh = 0`). Faces in the air are left to the extrapolation, as in
 /// flip: a grid value kept there would gather gravity step after step, which MantaFlow avoids
-/// by adding gravity to the liquid's faces only.
+/// by adding gravity to the liquid's faces only. `active` holds every fluid cell of `m`.
+#[allow(clippy::too_many_arguments)]
 pub fn combine<const D: usize>(
     g: &Grid<D>,
     m: &Markings,
+    active: &Active<D>,
     phi: &LevelSet,
     r: f64,
     u: &mut MacField<D>,
     known: &mut Known<D>,
     grid_u: &MacField<D>,
 ) {
-    let fluid = NearCells::new(g, m.fluid());
+    let fluid = active.near_cells(g, |c| m.is_fluid(c));
     combine_velocities(g, u, known, grid_u, &fluid, |a, f, weighted| {
         !weighted || phi.at_face(g, a, f) < -(r - 1.0)
     });
@@ -279,6 +282,7 @@ impl<const D: usize> FluidMethod<D> for NbflipSim<D> {
         combine(
             &s.grid,
             &s.markings,
+            &s.active,
             &self.phi,
             self.r(),
             &mut u,
