@@ -1,5 +1,6 @@
 //! The volume measure of paper eq. volume, invariant checks and stage timings.
 
+use crate::grid::active::Active;
 use crate::grid::{Grid, Vector};
 use crate::sim::markings::{CellKind, Markings};
 use crate::PAR_GRAIN;
@@ -7,11 +8,11 @@ use rayon::prelude::*;
 use std::time::Duration;
 
 /// Total fluid volume `V = sum_c V_c` in cells (paper eq. volume), each cell's `V_c` from
-/// [`cell_volume`].
-pub fn volume_cells(markings: &Markings, mu: u32) -> f64 {
-    (0..markings.kind.len())
-        .map(|c| cell_volume(markings, mu, c))
-        .sum()
+/// [`cell_volume`], summed in cell order over `active`, which holds every fluid cell (the
+/// others add exactly zero).
+pub fn volume_cells<const D: usize>(markings: &Markings, mu: u32, active: &Active<D>) -> f64 {
+    let cells = active.cells().iter().flat_map(|r| r.clone());
+    cells.fold(0.0, |v, c| v + cell_volume(markings, mu, c))
 }
 
 /// Cell `c`'s fluid volume `V_c` in cells (paper eq. volume): 0 for non-fluid cells (depth >
@@ -239,7 +240,7 @@ mod tests {
         }
         let m = Markings::compute(&g, &pos, &[false; 36]);
         assert_eq!(m.depth[g.cell_index([0, 0])], -3);
-        let v = volume_cells(&m, mu);
+        let v = volume_cells(&m, mu, &Active::all(&g));
         assert!((v - (24.0 - 0.5)).abs() < 1e-12, "{v}");
     }
 

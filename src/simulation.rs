@@ -209,11 +209,11 @@ impl<const D: usize> Simulation<D> {
     }
 }
 
-/// New markings from the current positions; the method may keep cells fluid without
-/// particles, and acts on the new markings (the band's exchange with the deep).
+/// New markings from the current positions and their active cells; the method may keep cells
+/// fluid without particles, and acts on the new markings (the band's exchange with the deep).
 fn refresh_markings<const D: usize>(s: &mut State<D>, m: &mut dyn FluidMethod<D>) {
     let keep = m.before_markings(s.particles_mut());
     let previous = s.remark(keep.as_deref());
-    m.after_markings(s, &previous);
     s.activate();
+    m.after_markings(s, &previous);
 }

@@ -153,19 +153,22 @@ impl<const D: usize> Active<D> {
     /// cells of markings the set was built around, the same as [`NearCells::new`] of all flags.
     pub fn near_cells(&self, grid: &Grid<D>, flag: impl Fn(usize) -> bool + Sync) -> NearCells {
         let n0 = grid.dims[0];
-        let mut cells = vec![false; grid.num_cells()];
-        let held: Vec<(usize, bool)> = par_runs(&self.cells, &mut cells)
-            .map(|(r, run)| {
-                let line = r.start / n0;
-                (line, r.zip(run).fold(false, |any, (c, v)| {
-                    *v = flag(c);
-                    any | *v
-                }))
-            })
-            .collect();
+        let cells = self.flags(grid, flag);
         let mut lines = vec![false; grid.num_cells() / n0];
-        held.into_iter().for_each(|(l, any)| lines[l] = any);
+        for r in &self.cells {
+            lines[r.start / n0] = cells[r.clone()].contains(&true);
+        }
         NearCells { cells, lines }
+    }
+
+    /// `flag` of every cell of the set, false off it (one entry per cell of the grid; the
+    /// pages off the set are never touched).
+    pub fn flags(&self, grid: &Grid<D>, flag: impl Fn(usize) -> bool + Sync) -> Vec<bool> {
+        let mut flags = vec![false; grid.num_cells()];
+        par_runs(&self.cells, &mut flags).for_each(|(r, run)| {
+            r.zip(run).for_each(|(c, v)| *v = flag(c));
+        });
+        flags
     }
 
     /// The active cells numbered densely in index order, for per-cell scratch arrays as long
@@ -361,6 +364,27 @@ mod tests {
         }
         check_points([11, 7], 1);
         check_points([6, 5, 9], 2);
+    }
+
+    /// Built on a set that holds every flagged cell, the near cells are those of all flags,
+    /// and off the set nothing is flagged.
+    #[test]
+    fn near_cells_on_the_set_are_those_of_every_cell_2d_and_3d() {
+        fn check_near<const D: usize>(dims: [usize; D], seed: u64) {
+            let g = Grid::new(dims);
+            let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+            let flags: Vec<bool> = (0..g.num_cells()).map(|_| rng.random_bool(0.03)).collect();
+            let active = Active::around(&g, |c| flags[c], 0);
+            let near = active.near_cells(&g, |c| flags[c]);
+            let whole = NearCells::new(&g, flags.clone());
+            assert!(whole.lines.contains(&false) && whole.lines.contains(&true));
+            assert_eq!((&near.cells, &near.lines), (&whole.cells, &whole.lines));
+            assert_eq!(active.flags(&g, |_| true), active.near_cells(&g, |_| true).cells);
+            let on: usize = active.cells().iter().map(|r| r.len()).sum();
+            assert_eq!(active.flags(&g, |_| true).iter().filter(|&&f| f).count(), on);
+        }
+        check_near([23, 9], 5);
+        check_near([8, 7, 9], 6);
     }
 
     /// The numbers count the active cells in index order, and only them.

@@ -203,8 +203,9 @@ pub trait FluidMethod<const D: usize>: MethodRecording<D> + Send {
         None
     }
 
-    /// After new markings were computed (after emission and at the end of the step);
-    /// `previous` are the markings they replace.
+    /// After new markings and their active cells were computed (after emission and at the
+    /// end of the step); `previous` are the markings they replace. The method may change the
+    /// particles and their counts, not which cells are fluid.
     fn after_markings(&mut self, _s: &mut State<D>, _previous: &Markings) {}
 
     /// The invariants this method guarantees beyond those of every method.

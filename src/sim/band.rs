@@ -11,7 +11,6 @@ use crate::grid::{Cell, Grid, MacField, NearCells, Vector};
 use crate::sim::advect;
 use crate::sim::markings::{DepthLevel, Markings};
 use crate::sim::transfer::Known;
-use rayon::prelude::*;
 
 /// `R` when a scene file does not say (the paper: 3, and 6 for the dam scenes).
 pub const DEFAULT_BAND_R: u32 = 3;
@@ -46,24 +45,14 @@ impl Band {
         }
     }
 
-    /// The band interface and deep cells, `C_<=-R`.
-    pub fn at_or_below_interface(&self, m: &Markings) -> Vec<bool> {
-        (0..m.kind.len())
-            .into_par_iter()
-            .with_min_len(crate::PAR_GRAIN)
-            .map(|c| m.at_or_below_interface(c, self.r))
-            .collect()
-    }
-
     /// Cells that stay fluid without particles in the next markings: every fluid cell below
     /// the surface. The deep's particles are imaginary, the interface may lose all of its own,
     /// and a former deep cell can rise into the band with none (a bubble in the band): none of
     /// these may turn empty, or a hole would open inside the fluid. (Without the band, inner
-    /// cells keep their particles, so this changes nothing there.)
-    pub fn kept_cells(m: &Markings) -> Vec<bool> {
-        (0..m.kind.len())
-            .map(|c| m.is_fluid(c) && !m.surface[c])
-            .collect()
+    /// cells keep their particles, so this changes nothing there.) `active` holds every fluid
+    /// cell of `m`.
+    pub fn kept_cells<const D: usize>(grid: &Grid<D>, m: &Markings, active: &Active<D>) -> Vec<bool> {
+        active.flags(grid, |c| m.is_fluid(c) && !m.surface[c])
     }
 
     /// The particle count emitters see: deep cells hold imaginary particles, so they count as

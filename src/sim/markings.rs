@@ -206,8 +206,7 @@ impl Markings {
 /// Breadth-first depth over the von Neumann neighbourhood from the surface cells (def. depth).
 /// Fluid cells that no surface reaches (a closed, completely full container) get `i32::MIN`.
 fn depth<const D: usize>(grid: &Grid<D>, kind: &[CellKind], surface: &[bool]) -> Vec<i32> {
-    let mut depth: Vec<i32> = kind
-        .iter()
+    let mut depth: Vec<i32> = (kind.par_iter().with_min_len(crate::PAR_GRAIN))
         .map(|k| {
             if *k == CellKind::Fluid {
                 i32::MIN
@@ -217,12 +216,15 @@ fn depth<const D: usize>(grid: &Grid<D>, kind: &[CellKind], surface: &[bool]) ->
         })
         .collect();
     // Cells queued with their coordinates: no division per cell.
-    let mut queue: VecDeque<(usize, Cell<D>)> = VecDeque::new();
-    for c in 0..kind.len() {
-        if surface[c] {
-            depth[c] = 0;
-            queue.push_back((c, grid.cell_coords(c)));
-        }
+    let surface: Vec<usize> = (0..kind.len())
+        .into_par_iter()
+        .with_min_len(crate::PAR_GRAIN)
+        .filter(|&c| surface[c])
+        .collect();
+    let mut queue: VecDeque<(usize, Cell<D>)> = VecDeque::with_capacity(surface.len());
+    for c in surface {
+        depth[c] = 0;
+        queue.push_back((c, grid.cell_coords(c)));
     }
     while let Some((c, cc)) = queue.pop_front() {
         for a in 0..D {

@@ -142,6 +142,8 @@ pub struct ParticlesMut<'a, const D: usize> {
     pub grid: &'a Grid<D>,
     pub solids: &'a Solids<D>,
     pub markings: &'a Markings,
+    /// The active cells of `markings`.
+    pub active: &'a Active<D>,
     /// The grid velocity the step started from.
     pub velocity: &'a MacField<D>,
     /// Steps done before this one.
@@ -158,6 +160,7 @@ impl<const D: usize> State<D> {
             grid: &self.grid,
             solids: &self.solids,
             markings: &self.markings,
+            active: &self.active,
             velocity: &self.velocity,
             steps: self.steps,
             particles: &mut self.particles,
@@ -218,7 +221,8 @@ impl<const D: usize> State<D> {
         if self.target_volume == 0.0 {
             return 100.0;
         }
-        100.0 * metrics::volume_cells(&self.markings, self.config.mu()) / self.target_volume
+        let mu = self.config.mu();
+        100.0 * metrics::volume_cells(&self.markings, mu, &self.active) / self.target_volume
     }
 
     /// New markings from the particles; cells flagged in `keep` stay fluid without particles.

@@ -13,6 +13,7 @@
 //! and open a hole in the fluid. Such cells, former interface or deep cells that the new
 //! markings put above the interface, are filled from the excess along with the interface.
 
+use crate::grid::active::Active;
 use crate::grid::{Grid, MacField, Vector};
 use crate::particles::Particles;
 use crate::sim::advect::CELL_MARGIN;
@@ -52,15 +53,16 @@ impl DeepExchange {
 }
 
 /// Removes particles in deep cells (into `n_deep`) and fills the band interface from the
-/// deep's excess (alg. band, line 9), and with it the cells of `was_low` (the interface and
-/// deep of the previous markings) that are now above the interface. Keeps `markings.count` up
-/// to date; kinds and depths do not change.
+/// deep's excess (alg. band, line 9), and with it the cells that were interface or deep in the
+/// `previous` markings and are now above the interface. Keeps `markings.count` up to date;
+/// kinds and depths do not change. `active` holds every fluid cell of `markings`.
 #[allow(clippy::too_many_arguments)]
 pub fn exchange_with_deep<const D: usize>(
     grid: &Grid<D>,
+    active: &Active<D>,
     particles: &mut Particles<D>,
     markings: &mut Markings,
-    was_low: Option<&[bool]>,
+    previous: Option<&Markings>,
     band: Band,
     mu: u32,
     n_deep: &mut usize,
@@ -80,14 +82,16 @@ pub fn exchange_with_deep<const D: usize>(
     *n_deep += out.removed;
     // Former interface or deep cells now above the interface first, then the interface.
     let (mut risen, mut interface) = (vec![], vec![]);
-    for c in 0..markings.kind.len() {
+    for c in active.cells().iter().flat_map(|r| r.clone()) {
         match level(markings, c) {
             DepthLevel::Deep => {
                 out.deep_cells += 1;
                 markings.count[c] = 0;
             }
             DepthLevel::Interface => interface.push(c),
-            DepthLevel::Band | DepthLevel::Surface if was_low.is_some_and(|k| k[c]) => {
+            DepthLevel::Band | DepthLevel::Surface
+                if previous.is_some_and(|p| p.at_or_below_interface(c, band.r)) =>
+            {
                 risen.push(c)
             }
             _ => {}
@@ -149,6 +153,7 @@ mod tests {
         let u = MacField::zeros(&g);
         let x = exchange_with_deep(
             &g,
+            &Active::all(&g),
             &mut p,
             &mut m,
             None,
@@ -192,7 +197,8 @@ mod tests {
         let mut n_deep = 0;
         // The exchange at mu = 1, R = 1, with nothing risen from below the interface.
         let mut exchange = |p: &mut Particles<3>, m: &mut Markings, n_deep: &mut usize| {
-            exchange_with_deep(&g, p, m, None, Band { r: 1 }, 1, n_deep, &u, &mut rng)
+            let all = Active::all(&g);
+            exchange_with_deep(&g, &all, p, m, None, Band { r: 1 }, 1, n_deep, &u, &mut rng)
         };
         exchange(&mut p, &mut m, &mut n_deep);
         assert_eq!((p.len(), n_deep), (32, 64));

@@ -55,13 +55,14 @@ impl<const D: usize> CcpSim<D> {
     }
 
     /// Alg. band line 9: the exchange with the deep after new markings.
-    fn exchange(&mut self, s: &mut State<D>, was_low: Option<&[bool]>) -> Option<DeepExchange> {
+    fn exchange(&mut self, s: &mut State<D>, previous: Option<&Markings>) -> Option<DeepExchange> {
         let band = self.band()?;
         Some(exchange_with_deep(
             &s.grid,
+            &s.active,
             &mut s.particles,
             &mut s.markings,
-            was_low,
+            previous,
             band,
             s.config.mu(),
             &mut self.n_deep,
@@ -175,14 +176,13 @@ impl<const D: usize> FluidMethod<D> for CcpSim<D> {
     }
 
     fn before_markings(&mut self, s: ParticlesMut<'_, D>) -> Option<Vec<bool>> {
-        self.band().map(|_| Band::kept_cells(s.markings))
+        self.band().map(|_| Band::kept_cells(s.grid, s.markings, s.active))
     }
 
     fn after_markings(&mut self, s: &mut State<D>, previous: &Markings) {
-        let Some(band) = self.band() else { return };
-        let was_low = band.at_or_below_interface(previous);
-        let x = self.exchange(s, Some(&was_low)).expect("a band");
-        self.step.deep = Some(x.merged(self.step.deep));
+        if let Some(x) = self.exchange(s, Some(previous)) {
+            self.step.deep = Some(x.merged(self.step.deep));
+        }
     }
 
     /// With the band: every cell holds at most `mu` after the exchange, and no real particle
@@ -192,7 +192,8 @@ impl<const D: usize> FluidMethod<D> for CcpSim<D> {
             return Ok(());
         };
         let mu = s.config.mu();
-        if let Some(c) = (0..s.grid.num_cells()).find(|&c| s.markings.count[c] > mu) {
+        let mut cells = s.active.cells().iter().flat_map(|r| r.clone());
+        if let Some(c) = cells.find(|&c| s.markings.count[c] > mu) {
             return Err(InvariantViolation(format!(
                 "cell {:?} holds {} particles after the exchange with the deep (mu = {mu})",
                 s.grid.cell_coords(c),
