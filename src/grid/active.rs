@@ -181,7 +181,18 @@ impl<const D: usize> Active<D> {
             span[r.start / n0] = (r.start % n0, r.end - r.start, len);
             len += r.len();
         }
-        CellNumbers { n0, span, len }
+        let line_strides = (1..D).map(|k| grid.cell_stride(k) / n0).collect();
+        CellNumbers {
+            n0,
+            line_strides,
+            span,
+            len,
+        }
+    }
+
+    /// How many cells are active.
+    pub fn num_cells(&self) -> usize {
+        self.cells.iter().map(|r| r.len()).sum()
     }
 
     /// How many faces of component `axis` are active.
@@ -235,6 +246,8 @@ impl<const D: usize> Active<D> {
 /// The dense numbers of an [`Active`] set's cells ([`Active::numbers`]).
 pub struct CellNumbers {
     n0: usize,
+    /// Per axis from 1 on, the step between lines of cells along it.
+    line_strides: Vec<usize>,
     /// Per line of cells: its span's first cell along axis 0, its length and the number of
     /// that first cell.
     span: Vec<(usize, usize, usize)>,
@@ -253,8 +266,25 @@ impl CellNumbers {
 
     /// The number of cell `c`, if it is active.
     pub fn get(&self, c: usize) -> Option<usize> {
-        let (lo, len, first) = self.span[c / self.n0];
-        let at = (c % self.n0).wrapping_sub(lo);
+        self.in_line(c / self.n0, c % self.n0)
+    }
+
+    /// The numbered cells, in the order of their numbers.
+    pub fn cells(&self) -> impl Iterator<Item = usize> + '_ {
+        let n0 = self.n0;
+        (self.span.iter().enumerate())
+            .flat_map(move |(l, &(lo, len, _))| l * n0 + lo..l * n0 + lo + len)
+    }
+
+    /// [`Self::get`] of the cell at coordinates `c`, without a division.
+    pub fn at<const D: usize>(&self, c: Cell<D>) -> Option<usize> {
+        let line = (1..D).map(|k| c[k] * self.line_strides[k - 1]).sum();
+        self.in_line(line, c[0])
+    }
+
+    fn in_line(&self, line: usize, x: usize) -> Option<usize> {
+        let (lo, len, first) = self.span[line];
+        let at = x.wrapping_sub(lo);
         (at < len).then_some(first + at)
     }
 }
@@ -406,7 +436,9 @@ mod tests {
                     next - 1
                 });
                 assert_eq!(numbers.get(c), expect, "cell {c} of {dims:?}");
+                assert_eq!(numbers.at(g.cell_coords(c)), expect, "cell {c} of {dims:?}");
             }
+            assert!(numbers.cells().eq(listed));
         }
         check_numbers([17, 9], 3);
         check_numbers([6, 7, 9], 4);

@@ -10,7 +10,6 @@ use crate::sim::advect::CELL_MARGIN;
 use crate::solvers::cheapest::Cheapest;
 use crate::solvers::NONE;
 use std::collections::BinaryHeap;
-use std::ops::Range;
 
 /// What pushing particles along paths did.
 #[derive(Clone, Debug, Default)]
@@ -42,7 +41,6 @@ struct FoundPath {
 /// alg. find's per-cell arrays, over the only cells a search can reach: those that hold a
 /// particle when it starts and their neighbours that may take one.
 struct Search {
-    cells: Vec<Range<usize>>,
     numbers: CellNumbers,
     /// `gamma_c` of the current positions, per numbered cell `k`:
     /// `members[start[k]..start[k + 1]]`, in particle order.
@@ -65,7 +63,6 @@ impl Search {
         let numbers = active.numbers(grid);
         let n = numbers.len();
         Self {
-            cells: active.cells().to_vec(),
             numbers,
             start: vec![0; n + 1],
             members: vec![],
@@ -205,7 +202,7 @@ impl<'a, const D: usize> PathSearch<'a, D> {
         let grid = self.sc.grid;
         search.clear();
         let mut queue = BinaryHeap::new();
-        for (k, c) in search.cells.iter().flat_map(|r| r.clone()).enumerate() {
+        for (k, c) in search.numbers.cells().enumerate() {
             if self.is_source(c) && !search.gamma(k).is_empty() {
                 search.parent[k] = ROOT;
                 search.sigma[k] = 0.0;

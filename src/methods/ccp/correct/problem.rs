@@ -15,6 +15,7 @@
 //! whether it moves a particle into the interface-and-deep region `C_<=-R` or out of it (the sets
 //! `gamma_in` and `gamma_out` of eq. band_con).
 
+use crate::grid::active::{Active, CellNumbers};
 use crate::grid::{closest_along, Cell, Grid, Vector};
 use crate::sim::advect::CELL_MARGIN;
 use crate::sim::markings::{CellKind, DepthLevel, Markings};
@@ -208,6 +209,11 @@ fn offset_cell<const D: usize>(grid: &Grid<D>, c: Cell<D>, o: &[i64; D]) -> Opti
     Some(out)
 }
 
+/// The cell a move of `m` by offset `o` leads to, which stays in the grid.
+fn moved<const D: usize>(m: &Moves<D>, o: &[i64; D]) -> Cell<D> {
+    std::array::from_fn(|k| m.home[k].wrapping_add_signed(o[k] as isize))
+}
+
 /// The allowed moves of `m`, in order: each offset with the index of the cell it leads to.
 fn allowed<'a, const D: usize>(
     m: &Moves<D>,
@@ -272,7 +278,9 @@ pub fn build<const D: usize>(
         let x = (&x_bar[j], &x_hat[j]);
         particle_moves(grid, solid, &offsets, j, x)?;
     }
-    let (bin_cell, bin_of_cell) = number_bins(grid, &moves, &offsets);
+    // Every move ends within one cell of the particle's previous cell.
+    let near = Active::around_points(grid, x_bar, 1).numbers(grid);
+    let (bin_cell, bin_of) = number_bins(&moves, &offsets, &near);
     let (lower, upper) = bin_cell
         .par_iter()
         .map(|&c| cell_bounds(previous, c, mu, band_r))
@@ -311,7 +319,7 @@ pub fn build<const D: usize>(
                     })
                 });
                 for (o, ci) in allowed(m, &offsets) {
-                    bins[k] = bin_of_cell[ci];
+                    bins[k] = bin_of[near.at(moved(m, o)).expect("a cell near x_bar")];
                     costs[k] = match penalty.map(|p| p[ci]) {
                         Some(p) if p > 0.0 => p,
                         _ => (0..D).map(|a| gap[a][(o[a] + 1) as usize]).sum(),
@@ -346,28 +354,29 @@ pub fn build<const D: usize>(
 
 /// The bins: the cells that candidates reach, numbered in cell order so that neighbouring
 /// cells are near in memory (the solver's searches walk from cells to their neighbours).
-/// Returns the cell of each bin and the bin of each cell (`u32::MAX` for none).
+/// Returns the cell of each bin and the bin of each cell numbered by `near` (`u32::MAX` for
+/// none), which numbers every cell a move reaches.
 fn number_bins<const D: usize>(
-    grid: &Grid<D>,
     moves: &[Moves<D>],
     offsets: &MoveOffsets<D>,
+    near: &CellNumbers,
 ) -> (Vec<usize>, Vec<u32>) {
-    let reached: Vec<AtomicBool> = (0..grid.num_cells())
-        .map(|_| AtomicBool::new(false))
-        .collect();
+    let reached: Vec<AtomicBool> = (0..near.len()).map(|_| AtomicBool::new(false)).collect();
     moves
         .par_iter()
         .with_min_len(PAR_GRAIN_PARTICLES)
         .for_each(|m| {
-            for (_, c) in allowed(m, offsets) {
-                reached[c].store(true, Ordering::Relaxed);
+            for (o, _) in allowed(m, offsets) {
+                let k = near.at(moved(m, o)).expect("a cell near x_bar");
+                reached[k].store(true, Ordering::Relaxed);
             }
         });
     let mut bin_cell = vec![];
-    let bin_of_cell = reached
+    let mut cells = near.cells();
+    let bin_of = reached
         .iter()
-        .enumerate()
-        .map(|(c, r)| {
+        .zip(&mut cells)
+        .map(|(r, c)| {
             if !r.load(Ordering::Relaxed) {
                 return u32::MAX;
             }
@@ -375,7 +384,7 @@ fn number_bins<const D: usize>(
             bin_cell.len() as u32 - 1
         })
         .collect();
-    (bin_cell, bin_of_cell)
+    (bin_cell, bin_of)
 }
 
 #[cfg(test)]
