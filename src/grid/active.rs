@@ -91,19 +91,36 @@ impl<const D: usize> Active<D> {
         Self::from_spans(grid, dilate(grid, spans, margin))
     }
 
-    /// As [`Self::around`] with the cells that hold one of the points `pos` as seeds.
+    /// As [`Self::around`] with the cells that hold one of the points `pos` (inside the
+    /// domain) as seeds. In parallel: a few pieces of the points each find their spans, then
+    /// the pieces' spans are joined.
     pub fn around_points<'p>(
         grid: &Grid<D>,
-        pos: impl IntoIterator<Item = &'p Vector<D>>,
+        pos: impl IndexedParallelIterator<Item = &'p Vector<D>>,
         margin: usize,
     ) -> Self {
         let n0 = grid.dims[0];
-        let mut spans = vec![EMPTY; grid.num_cells() / n0];
-        for x in pos {
-            let c = grid.cell_index_of(x);
-            let (line, x0) = (c / n0, (c % n0) as u32);
-            spans[line] = hull(spans[line], [x0, x0 + 1]);
-        }
+        let lines = grid.num_cells() / n0;
+        let line_stride: [usize; D] = std::array::from_fn(|k| grid.cell_stride(k) / n0);
+        let pieces = 4 * rayon::current_num_threads();
+        let per_piece = pos.len().div_ceil(pieces).max(crate::PAR_GRAIN_PARTICLES);
+        let spans = (pos.with_min_len(per_piece))
+            .fold(
+                || vec![EMPTY; lines],
+                |mut spans, x| {
+                    let c = grid.cell_of(x).unwrap_or_else(|| {
+                        panic!("point {:?} is outside the domain", x.as_slice())
+                    });
+                    let line: usize = (1..D).map(|k| c[k] * line_stride[k]).sum();
+                    spans[line] = hull(spans[line], [c[0] as u32, c[0] as u32 + 1]);
+                    spans
+                },
+            )
+            .reduce_with(|mut a, b| {
+                a.iter_mut().zip(b).for_each(|(s, t)| *s = hull(*s, t));
+                a
+            })
+            .unwrap_or_else(|| vec![EMPTY; lines]);
         Self::from_spans(grid, dilate(grid, spans, margin))
     }
 
@@ -389,7 +406,7 @@ mod tests {
             let cells: Vec<usize> = pos.iter().map(|x| g.cell_index_of(x)).collect();
             for margin in [0, 1, 3] {
                 let by_cells = Active::around(&g, |c| cells.contains(&c), margin);
-                assert_eq!(Active::around_points(&g, &pos, margin), by_cells);
+                assert_eq!(Active::around_points(&g, pos.par_iter(), margin), by_cells);
             }
         }
         check_points([11, 7], 1);

@@ -81,7 +81,7 @@ fn splat<const D: usize>(
     }
     // Only the faces beside the points' cells and their neighbours got weight: the rest stay
     // zero and unknown, and their pages are never touched.
-    let reached = Active::around_points(grid, pos, 1);
+    let reached = Active::around_points(grid, pos.par_iter(), 1);
     let mut field = MacField::zeros(grid);
     let known = std::array::from_fn(|a| {
         let mut known = vec![false; grid.num_faces(a)];

@@ -9,6 +9,7 @@ use crate::grid::{Cell, Grid, Vector};
 use crate::sim::advect::CELL_MARGIN;
 use crate::solvers::cheapest::Cheapest;
 use crate::solvers::NONE;
+use rayon::prelude::*;
 use std::collections::BinaryHeap;
 
 /// What pushing particles along paths did.
@@ -23,12 +24,15 @@ pub struct PathOutcome<const D: usize> {
 const ROOT: u32 = u32::MAX - 1;
 
 /// A node of alg. find's priority queue (lowest cost first: [`Cheapest`]), ties broken by
-/// cell, root and edge, in that order.
+/// cell, root and edge, in that order. It carries the numbers ([`Search`]) of its cell and
+/// root, which follow from them and so break no tie.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
 struct Node {
     cell: u32,
     root: u32,
     edge: u32,
+    k: u32,
+    root_k: u32,
 }
 
 /// A path found by alg. find: the edge into its sink and the sink.
@@ -59,7 +63,7 @@ impl Search {
     /// `pos` until alg. update moves it, and alg. edge moves a particle only out of its previous
     /// cell or into it, so a cell a path enters is its previous cell or a neighbour of it.
     fn new<const D: usize>(grid: &Grid<D>, x_bar: &[Vector<D>], pos: &[Vector<D>]) -> Self {
-        let active = Active::around_points(grid, x_bar.iter().chain(pos), 1);
+        let active = Active::around_points(grid, x_bar.par_iter().chain(pos), 1);
         let numbers = active.numbers(grid);
         let n = numbers.len();
         Self {
@@ -210,6 +214,8 @@ impl<'a, const D: usize> PathSearch<'a, D> {
                     cell: c as u32,
                     root: c as u32,
                     edge: ROOT,
+                    k: k as u32,
+                    root_k: k as u32,
                 };
                 queue.push(Cheapest {
                     cost: 0.0,
@@ -219,19 +225,18 @@ impl<'a, const D: usize> PathSearch<'a, D> {
         }
         let mut paths = vec![];
         while let Some(Cheapest { cost, tie: a }) = queue.pop() {
-            let (c, k) = (a.cell as usize, search.number(a.cell));
+            let (c, k) = (a.cell as usize, a.k as usize);
             if search.parent[k] != NONE && search.parent[k] != ROOT {
                 continue; // visited
             }
-            if search.finished[search.number(a.root)] {
+            if search.finished[a.root_k as usize] {
                 continue;
             }
             search.parent[k] = a.edge;
             search.sigma[k] = cost;
             let gamma = search.gamma(k);
             if self.is_sink(c, allow_wanted) && (gamma.len() as u32) < self.sc.mu {
-                let root = search.number(a.root);
-                search.finished[root] = true;
+                search.finished[a.root_k as usize] = true;
                 paths.push(FoundPath {
                     edge: a.edge,
                     sink: a.cell,
@@ -251,7 +256,7 @@ impl<'a, const D: usize> PathSearch<'a, D> {
                     let c2 = grid.cell_index(nb);
                     // Off the numbered cells no particle of `c` may move to `c2` (see
                     // [`Search::new`]).
-                    let Some(k2) = search.numbers.get(c2) else {
+                    let Some(k2) = search.numbers.at(nb) else {
                         continue;
                     };
                     if search.parent[k2] != NONE || self.sc.solid[c2] {
@@ -283,6 +288,8 @@ impl<'a, const D: usize> PathSearch<'a, D> {
                         cell: c2 as u32,
                         root: a.root,
                         edge: j,
+                        k: k2 as u32,
+                        root_k: a.root_k,
                     };
                     queue.push(Cheapest { cost: t, tie: node });
                 }

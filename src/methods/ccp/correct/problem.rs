@@ -279,7 +279,7 @@ pub fn build<const D: usize>(
         particle_moves(grid, solid, &offsets, j, x)?;
     }
     // Every move ends within one cell of the particle's previous cell.
-    let near = Active::around_points(grid, x_bar, 1).numbers(grid);
+    let near = Active::around_points(grid, x_bar.par_iter(), 1).numbers(grid);
     let (bin_cell, bin_of) = number_bins(&moves, &offsets, &near);
     let (lower, upper) = bin_cell
         .par_iter()
