@@ -133,10 +133,11 @@ fn bench_dim<const D: usize>(
     if let (Some(m), Some(started)) = (peak_memory_mib(), started) {
         crate::outln!(
             "  peak memory (process so far): {m:.0} MiB ({started:.0} after seeding and the \
-             method's start); estimated up front {:.0} MiB (from {} cells, {} seeded fluid \
+             method's start); estimated up front {:.0} MiB (from {} cells{}, {} seeded fluid \
              cells, {:.0} particles seeded, {:.0} held, up to {:.0} once the liquid settles)",
             e.mib(),
             e.cells,
+            e.active_cells.map_or(String::new(), |a| format!(" ({a} active)")),
             e.fluid_cells,
             e.particles,
             e.held,

@@ -3,6 +3,11 @@
 //! cost model of `cellflip report --plan`, docs/cluster.md). Each method gives its measured
 //! figures through [`super::MethodType::footprint`] and [`super::MethodType::step_cost`].
 
+/// The cells of a grid whose per-cell array of `f64` fills glibc's largest heap block (its
+/// mmap threshold stops rising at 32 MiB): a larger array comes from fresh pages, resident only
+/// where a step writes it (the active cells), a smaller one from the heap, resident whole.
+pub const HEAP_CELLS: f64 = (32 << 20) as f64 / 8.0;
+
 /// A method's peak memory, measured: resident bytes per grid cell, per fluid cell and per
 /// particle held, the fit behind the up-front estimate ([`crate::scene::memory`]; the
 /// measurements and the command that repeats them are in docs/benchmarks/memory.md).
@@ -13,6 +18,14 @@ pub struct Footprint {
     /// the band's bookkeeping).
     pub per_fluid_cell: f64,
     pub per_particle: f64,
+    /// Per active cell of the seeded liquid's first markings (within `sim::ACTIVE_MARGIN` of
+    /// its cells, `sim::active_cells`): the fields a step writes only there once they are
+    /// larger than the allocator's mmap threshold (0 but for ccp's band in 3D; the other fits
+    /// count those in `per_cell`).
+    pub per_active_cell: f64,
+    /// Per cell up to [`HEAP_CELLS`]: the same fields while they are small enough to come from
+    /// the allocator's heap, which holds them whole.
+    pub per_heap_cell: f64,
     /// What a problem large enough to be solved in copies adds (none for most methods).
     pub large: Option<LargeProblem>,
     /// Which of the seeded particles the method holds.
@@ -77,6 +90,8 @@ impl Footprint {
             per_cell,
             per_fluid_cell,
             per_particle,
+            per_active_cell: 0.0,
+            per_heap_cell: 0.0,
             large: None,
             holds: Holds::Band {
                 layers,
@@ -92,9 +107,30 @@ impl Footprint {
             per_cell,
             per_fluid_cell: 0.0,
             per_particle,
+            per_active_cell: 0.0,
+            per_heap_cell: 0.0,
             large: None,
             holds: Holds::All,
         }
+    }
+
+    /// This footprint in `dim` dimensions with the measured `[2D, 3D]` pairs of bytes per
+    /// active cell and per cell up to [`HEAP_CELLS`].
+    pub fn with_active(self, dim: usize, measured: [(f64, f64); 2]) -> Self {
+        let (per_active_cell, per_heap_cell) = in_dim(dim, measured);
+        Self {
+            per_active_cell,
+            per_heap_cell,
+            ..self
+        }
+    }
+
+    /// Its bytes for a grid of `cells` of which `active` are active at the start.
+    pub fn cell_bytes(&self, cells: f64, fluid: f64, active: f64) -> f64 {
+        self.per_cell * cells
+            + self.per_fluid_cell * fluid
+            + self.per_active_cell * active
+            + self.per_heap_cell * cells.min(HEAP_CELLS)
     }
 
     /// This footprint in `dim` dimensions, plus the measured `[2D, 3D]` bytes per particle of a
@@ -177,6 +213,17 @@ mod tests {
             Footprint::all(0.0, 100.0).particle_bytes(1000.0, 1000.0),
             100_000.0
         );
+    }
+
+    /// The heap's share stops growing at [`HEAP_CELLS`]; the active cells' does not.
+    #[test]
+    fn cells_beyond_the_heap_cost_only_where_active() {
+        let f = Footprint::all(1.0, 0.0).with_active(3, [(0.0, 0.0), (2.0, 10.0)]);
+        let small = f.cell_bytes(1000.0, 0.0, 100.0);
+        assert_eq!(small, 1000.0 + 2.0 * 100.0 + 10.0 * 1000.0);
+        let large = f.cell_bytes(3.0 * HEAP_CELLS, 0.0, 100.0);
+        assert_eq!(large, 3.0 * HEAP_CELLS + 2.0 * 100.0 + 10.0 * HEAP_CELLS);
+        assert_eq!(Footprint::all(1.0, 0.0).cell_bytes(5.0, 7.0, 3.0), 5.0);
     }
 
     #[test]

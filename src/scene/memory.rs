@@ -20,7 +20,7 @@ use crate::grid::Grid;
 use crate::methods::Holds;
 use crate::sim::markings::Markings;
 use crate::sim::solids::Solids;
-use crate::sim::SimConfig;
+use crate::sim::{active_cells, SimConfig};
 
 /// The process before any simulation: code, the thread pool, the scene.
 const BASE_BYTES: f64 = 12.0 * MIB;
@@ -41,6 +41,9 @@ pub struct MemoryEstimate {
     pub cells: usize,
     /// Cells of the seeded liquid.
     pub fluid_cells: usize,
+    /// With a band, the active cells of the seeded liquid's first markings (`None` without:
+    /// those footprints do not count them).
+    pub active_cells: Option<usize>,
     /// Particles seeded, plus what the emitters may add (up to their fill, or a full tank).
     pub particles: f64,
     /// Of those, the particles the method holds after its start (a band method drops the
@@ -111,11 +114,15 @@ impl Scene {
         MemoryEstimate {
             cells,
             fluid_cells: seeded.cells,
+            active_cells: seeded.active_cells,
             particles,
             held,
             held_most,
-            cell_bytes: footprint.per_cell * cells as f64
-                + footprint.per_fluid_cell * seeded.cells as f64,
+            cell_bytes: footprint.cell_bytes(
+                cells as f64,
+                seeded.cells as f64,
+                seeded.active_cells.unwrap_or(cells) as f64,
+            ),
             particle_bytes: footprint.particle_bytes(held, held_most),
             start_bytes,
             recording_bytes: match recorded {
@@ -196,14 +203,16 @@ struct SeededLiquid {
     cells: usize,
     held_cells: usize,
     rest_cells: usize,
+    /// With a band, the active cells of the first markings.
+    active_cells: Option<usize>,
 }
 
 impl SeededLiquid {
     /// With a band of `layers`, the cells of the seeded liquid's first markings (the markings a
-    /// run starts from, from the cells instead of the particles) less than `layers` deep, and
-    /// the band of that liquid settled over the floor: `layers` cells deep across the tank's
-    /// section normal to gravity (along its largest component), at most the liquid's cells
-    /// (none without gravity).
+    /// run starts from, from the cells instead of the particles) less than `layers` deep and
+    /// their active cells, and the band of that liquid settled over the floor: `layers` cells
+    /// deep across the tank's section normal to gravity (along its largest component), at most
+    /// the liquid's cells (none without gravity).
     fn new<const D: usize>(config: &SimConfig<D>, grid: &Grid<D>, holds: Holds) -> Self {
         let solids = Solids::new(
             grid,
@@ -218,8 +227,8 @@ impl SeededLiquid {
                 .for_each(|c| liquid[c] |= !solids.solid[c]);
         }
         let cells = liquid.iter().filter(|&&l| l).count();
-        let held_cells = match holds {
-            Holds::All => cells,
+        let (held_cells, active_cells) = match holds {
+            Holds::All => (cells, None),
             Holds::Band { layers, .. } => {
                 let m = Markings::compute_keeping(
                     grid,
@@ -228,9 +237,10 @@ impl SeededLiquid {
                     Some(&liquid),
                     solids.moving_mask(),
                 );
-                (0..m.kind.len())
+                let held = (0..m.kind.len())
                     .filter(|&c| m.is_fluid(c) && m.depth[c] > -(layers as i32))
-                    .count()
+                    .count();
+                (held, Some(active_cells(grid, &m, &solids).num_cells()))
             }
         };
         let rest_cells = match holds {
@@ -241,6 +251,7 @@ impl SeededLiquid {
             cells,
             held_cells,
             rest_cells,
+            active_cells,
         }
     }
 }

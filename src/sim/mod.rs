@@ -100,7 +100,7 @@ pub const ACTIVE_MARGIN: usize = 6;
 
 /// The cells within [`ACTIVE_MARGIN`] of a fluid cell of `markings` or a moving obstacle's
 /// cell: a step's grid passes outside them would only write values no later pass reads.
-fn active_cells<const D: usize>(
+pub(crate) fn active_cells<const D: usize>(
     grid: &Grid<D>,
     markings: &Markings,
     solids: &Solids<D>,
