@@ -137,7 +137,8 @@ fn bench_dim<const D: usize>(
              cells, {:.0} particles seeded, {:.0} held, up to {:.0} once the liquid settles)",
             e.mib(),
             e.cells,
-            e.active_cells.map_or(String::new(), |a| format!(" ({a} active)")),
+            e.active_cells
+                .map_or(String::new(), |a| format!(" ({a} active)")),
             e.fluid_cells,
             e.particles,
             e.held,

@@ -426,9 +426,15 @@ mod tests {
             let whole = NearCells::new(&g, flags.clone());
             assert!(whole.lines.contains(&false) && whole.lines.contains(&true));
             assert_eq!((&near.cells, &near.lines), (&whole.cells, &whole.lines));
-            assert_eq!(active.flags(&g, |_| true), active.near_cells(&g, |_| true).cells);
+            assert_eq!(
+                active.flags(&g, |_| true),
+                active.near_cells(&g, |_| true).cells
+            );
             let on: usize = active.cells().iter().map(|r| r.len()).sum();
-            assert_eq!(active.flags(&g, |_| true).iter().filter(|&&f| f).count(), on);
+            assert_eq!(
+                active.flags(&g, |_| true).iter().filter(|&&f| f).count(),
+                on
+            );
         }
         check_near([23, 9], 5);
         check_near([8, 7, 9], 6);

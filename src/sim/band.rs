@@ -51,7 +51,11 @@ impl Band {
     /// these may turn empty, or a hole would open inside the fluid. (Without the band, inner
     /// cells keep their particles, so this changes nothing there.) `active` holds every fluid
     /// cell of `m`.
-    pub fn kept_cells<const D: usize>(grid: &Grid<D>, m: &Markings, active: &Active<D>) -> Vec<bool> {
+    pub fn kept_cells<const D: usize>(
+        grid: &Grid<D>,
+        m: &Markings,
+        active: &Active<D>,
+    ) -> Vec<bool> {
         active.flags(grid, |c| m.is_fluid(c) && !m.surface[c])
     }
 

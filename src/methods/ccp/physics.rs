@@ -176,7 +176,8 @@ impl<const D: usize> FluidMethod<D> for CcpSim<D> {
     }
 
     fn before_markings(&mut self, s: ParticlesMut<'_, D>) -> Option<Vec<bool>> {
-        self.band().map(|_| Band::kept_cells(s.grid, s.markings, s.active))
+        self.band()
+            .map(|_| Band::kept_cells(s.grid, s.markings, s.active))
     }
 
     fn after_markings(&mut self, s: &mut State<D>, previous: &Markings) {

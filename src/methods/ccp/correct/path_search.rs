@@ -78,7 +78,9 @@ impl Search {
 
     /// The number of cell `c`, which a search reaches.
     fn number(&self, c: u32) -> usize {
-        self.numbers.get(c as usize).expect("a cell a search reaches")
+        self.numbers
+            .get(c as usize)
+            .expect("a cell a search reaches")
     }
 
     /// Lists `gamma_c` of the particles' cells `cell_of` (a counting sort).
