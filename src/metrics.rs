@@ -11,8 +11,7 @@ use std::time::Duration;
 /// [`cell_volume`], summed in cell order over `active`, which holds every fluid cell (the
 /// others add exactly zero).
 pub fn volume_cells<const D: usize>(markings: &Markings, mu: u32, active: &Active<D>) -> f64 {
-    let cells = active.cells().iter().flat_map(|r| r.clone());
-    cells.fold(0.0, |v, c| v + cell_volume(markings, mu, c))
+    (active.each_cell()).fold(0.0, |v, c| v + cell_volume(markings, mu, c))
 }
 
 /// Cell `c`'s fluid volume `V_c` in cells (paper eq. volume): 0 for non-fluid cells (depth >

@@ -207,6 +207,11 @@ impl<const D: usize> Active<D> {
         }
     }
 
+    /// Every active cell's index, ascending.
+    pub fn each_cell(&self) -> impl Iterator<Item = usize> + '_ {
+        self.cells.iter().flat_map(|r| r.clone())
+    }
+
     /// How many cells are active.
     pub fn num_cells(&self) -> usize {
         self.cells.iter().map(|r| r.len()).sum()
@@ -338,18 +343,28 @@ mod tests {
         })
     }
 
+    /// A grid of `dims`, each cell a seed with probability `p`, and the set around the seeds
+    /// within `margin`.
+    fn random_set<const D: usize>(
+        dims: [usize; D],
+        p: f64,
+        margin: usize,
+        rng_seed: u64,
+    ) -> (Grid<D>, Vec<bool>, Active<D>) {
+        let g = Grid::new(dims);
+        let mut rng = rand::rngs::StdRng::seed_from_u64(rng_seed);
+        let seed: Vec<bool> = (0..g.num_cells()).map(|_| rng.random_bool(p)).collect();
+        let active = Active::around(&g, |c| seed[c], margin);
+        (g, seed, active)
+    }
+
     /// The active set holds every cell near a seed, each line's active cells are the hull of
     /// its cells near a seed, and the faces are the hull of the faces of the active cells on
     /// either side; checked against brute force on random seeds.
     fn check<const D: usize>(dims: [usize; D], seeds: f64, margin: usize, rng_seed: u64) {
-        let g = Grid::new(dims);
-        let mut rng = rand::rngs::StdRng::seed_from_u64(rng_seed);
-        let seed: Vec<bool> = (0..g.num_cells()).map(|_| rng.random_bool(seeds)).collect();
-        let active = Active::around(&g, |c| seed[c], margin);
+        let (g, seed, active) = random_set(dims, seeds, margin, rng_seed);
         let mut is = vec![false; g.num_cells()];
-        for r in active.cells() {
-            r.clone().for_each(|c| is[c] = true);
-        }
+        active.each_cell().for_each(|c| is[c] = true);
         let n0 = dims[0];
         for (l, line) in is.chunks(n0).enumerate() {
             let near: Vec<usize> = (0..n0)
@@ -418,23 +433,14 @@ mod tests {
     #[test]
     fn near_cells_on_the_set_are_those_of_every_cell_2d_and_3d() {
         fn check_near<const D: usize>(dims: [usize; D], seed: u64) {
-            let g = Grid::new(dims);
-            let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
-            let flags: Vec<bool> = (0..g.num_cells()).map(|_| rng.random_bool(0.03)).collect();
-            let active = Active::around(&g, |c| flags[c], 0);
+            let (g, flags, active) = random_set(dims, 0.03, 0, seed);
             let near = active.near_cells(&g, |c| flags[c]);
             let whole = NearCells::new(&g, flags.clone());
             assert!(whole.lines.contains(&false) && whole.lines.contains(&true));
             assert_eq!((&near.cells, &near.lines), (&whole.cells, &whole.lines));
-            assert_eq!(
-                active.flags(&g, |_| true),
-                active.near_cells(&g, |_| true).cells
-            );
-            let on: usize = active.cells().iter().map(|r| r.len()).sum();
-            assert_eq!(
-                active.flags(&g, |_| true).iter().filter(|&&f| f).count(),
-                on
-            );
+            // Every cell of the set is asked, and no other.
+            let asked = active.flags(&g, |_| true);
+            assert!((0..g.num_cells()).all(|c| asked[c] == active.each_cell().any(|a| a == c)));
         }
         check_near([23, 9], 5);
         check_near([8, 7, 9], 6);
@@ -444,12 +450,9 @@ mod tests {
     #[test]
     fn numbers_count_the_active_cells_in_order_2d_and_3d() {
         fn check_numbers<const D: usize>(dims: [usize; D], seed: u64) {
-            let g = Grid::new(dims);
-            let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
-            let seeds: Vec<bool> = (0..g.num_cells()).map(|_| rng.random_bool(0.02)).collect();
-            let active = Active::around(&g, |c| seeds[c], 1);
+            let (g, _, active) = random_set(dims, 0.02, 1, seed);
             let numbers = active.numbers(&g);
-            let listed: Vec<usize> = active.cells().iter().flat_map(|r| r.clone()).collect();
+            let listed: Vec<usize> = active.each_cell().collect();
             assert!(!listed.is_empty() && listed.len() < g.num_cells());
             assert_eq!(numbers.len(), listed.len());
             let mut next = 0;
@@ -473,10 +476,7 @@ mod tests {
             let g = Grid::new(dims);
             let all = Active::all(&g);
             assert_eq!(all, Active::around(&g, |_| true, 0));
-            assert_eq!(
-                all.cells().iter().map(|r| r.len()).sum::<usize>(),
-                g.num_cells()
-            );
+            assert_eq!(all.num_cells(), g.num_cells());
             (0..D).for_each(|a| assert_eq!(all.num_faces(a), g.num_faces(a)));
             let numbers = all.numbers(&g);
             assert_eq!(numbers.len(), g.num_cells());

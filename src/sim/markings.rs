@@ -216,13 +216,13 @@ fn depth<const D: usize>(grid: &Grid<D>, kind: &[CellKind], surface: &[bool]) ->
         })
         .collect();
     // Cells queued with their coordinates: no division per cell.
-    let surface: Vec<usize> = (0..kind.len())
+    let surface_cells: Vec<usize> = (0..kind.len())
         .into_par_iter()
         .with_min_len(crate::PAR_GRAIN)
         .filter(|&c| surface[c])
         .collect();
-    let mut queue: VecDeque<(usize, Cell<D>)> = VecDeque::with_capacity(surface.len());
-    for c in surface {
+    let mut queue: VecDeque<(usize, Cell<D>)> = VecDeque::with_capacity(surface_cells.len());
+    for c in surface_cells {
         depth[c] = 0;
         queue.push_back((c, grid.cell_coords(c)));
     }

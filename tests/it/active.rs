@@ -26,7 +26,7 @@ fn same_as_every_cell_active<const D: usize>(name: &str, cells: usize, method: M
     let n = whole.state.grid.num_cells();
     let mut fewest = n;
     for step in 1..=60 {
-        let active: usize = sparse.state.active.cells().iter().map(|r| r.len()).sum();
+        let active = sparse.state.active.num_cells();
         fewest = fewest.min(active);
         whole.state.active = all.clone();
         let (a, b) = (sparse.step().unwrap(), whole.step().unwrap());

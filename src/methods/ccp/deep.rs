@@ -82,7 +82,7 @@ pub fn exchange_with_deep<const D: usize>(
     *n_deep += out.removed;
     // Former interface or deep cells now above the interface first, then the interface.
     let (mut risen, mut interface) = (vec![], vec![]);
-    for c in active.cells().iter().flat_map(|r| r.clone()) {
+    for c in active.each_cell() {
         match level(markings, c) {
             DepthLevel::Deep => {
                 out.deep_cells += 1;

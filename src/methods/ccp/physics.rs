@@ -193,8 +193,7 @@ impl<const D: usize> FluidMethod<D> for CcpSim<D> {
             return Ok(());
         };
         let mu = s.config.mu();
-        let mut cells = s.active.cells().iter().flat_map(|r| r.clone());
-        if let Some(c) = cells.find(|&c| s.markings.count[c] > mu) {
+        if let Some(c) = s.active.each_cell().find(|&c| s.markings.count[c] > mu) {
             return Err(InvariantViolation(format!(
                 "cell {:?} holds {} particles after the exchange with the deep (mu = {mu})",
                 s.grid.cell_coords(c),
