@@ -25,21 +25,23 @@ fn hull(a: [u32; 2], b: [u32; 2]) -> [u32; 2] {
 }
 
 /// Each line's span widened by `margin` cells along axis 0, then made the hull of the spans of
-/// the lines within `margin` along each other axis, one axis at a time.
-fn dilate<const D: usize>(
-    grid: &Grid<D>,
+/// the lines within `margin` along each other axis, one axis at a time (`spans` has one entry
+/// per line of cells along axis 0 of a grid of `dims`).
+pub(crate) fn dilate<const D: usize>(
+    dims: &[usize; D],
     mut spans: Vec<[u32; 2]>,
     margin: usize,
 ) -> Vec<[u32; 2]> {
-    let n0 = grid.dims[0];
+    let n0 = dims[0];
     for s in spans.iter_mut().filter(|s| s[0] < s[1]) {
         *s = [
             s[0].saturating_sub(margin as u32),
             (s[1] as usize + margin).min(n0) as u32,
         ];
     }
+    let line_stride = super::strides(dims).map(|s| s / n0);
     for a in 1..D {
-        let (stride, len) = (grid.cell_stride(a) / n0, grid.dims[a]);
+        let (stride, len) = (line_stride[a], dims[a]);
         spans = (0..spans.len())
             .into_par_iter()
             .with_min_len(LINE_GRAIN)
@@ -54,6 +56,34 @@ fn dilate<const D: usize>(
             .collect();
     }
     spans
+}
+
+/// Per line of cells along axis 0 of a grid of `dims`, the hull of the cells of `cells` (each
+/// cell's coordinates, inside the grid) in it, [`EMPTY`] where there is none. In parallel: a
+/// few pieces of the cells each find their spans, then the pieces' spans are joined.
+pub(crate) fn line_spans<const D: usize>(
+    dims: &[usize; D],
+    cells: impl IndexedParallelIterator<Item = [usize; D]>,
+) -> Vec<[u32; 2]> {
+    let n0 = dims[0];
+    let lines = dims.iter().product::<usize>() / n0;
+    let line_stride = super::strides(dims).map(|s| s / n0);
+    let pieces = 4 * rayon::current_num_threads();
+    let per_piece = cells.len().div_ceil(pieces).max(crate::PAR_GRAIN_PARTICLES);
+    (cells.with_min_len(per_piece))
+        .fold(
+            || vec![EMPTY; lines],
+            |mut spans, c| {
+                let line: usize = (1..D).map(|k| c[k] * line_stride[k]).sum();
+                spans[line] = hull(spans[line], [c[0] as u32, c[0] as u32 + 1]);
+                spans
+            },
+        )
+        .reduce_with(|mut a, b| {
+            a.iter_mut().zip(b).for_each(|(s, t)| *s = hull(*s, t));
+            a
+        })
+        .unwrap_or_else(|| vec![EMPTY; lines])
 }
 
 /// The active cells of a grid and the faces beside them, as ascending index ranges.
@@ -88,7 +118,7 @@ impl<const D: usize> Active<D> {
                 }
             })
             .collect();
-        Self::from_spans(grid, dilate(grid, spans, margin))
+        Self::from_spans(grid, dilate(&grid.dims, spans, margin))
     }
 
     /// As [`Self::around`] with the cells that hold one of the points `pos` (inside the
@@ -99,29 +129,12 @@ impl<const D: usize> Active<D> {
         pos: impl IndexedParallelIterator<Item = &'p Vector<D>>,
         margin: usize,
     ) -> Self {
-        let n0 = grid.dims[0];
-        let lines = grid.num_cells() / n0;
-        let line_stride: [usize; D] = std::array::from_fn(|k| grid.cell_stride(k) / n0);
-        let pieces = 4 * rayon::current_num_threads();
-        let per_piece = pos.len().div_ceil(pieces).max(crate::PAR_GRAIN_PARTICLES);
-        let spans = (pos.with_min_len(per_piece))
-            .fold(
-                || vec![EMPTY; lines],
-                |mut spans, x| {
-                    let c = grid.cell_of(x).unwrap_or_else(|| {
-                        panic!("point {:?} is outside the domain", x.as_slice())
-                    });
-                    let line: usize = (1..D).map(|k| c[k] * line_stride[k]).sum();
-                    spans[line] = hull(spans[line], [c[0] as u32, c[0] as u32 + 1]);
-                    spans
-                },
-            )
-            .reduce_with(|mut a, b| {
-                a.iter_mut().zip(b).for_each(|(s, t)| *s = hull(*s, t));
-                a
-            })
-            .unwrap_or_else(|| vec![EMPTY; lines]);
-        Self::from_spans(grid, dilate(grid, spans, margin))
+        let cells = pos.map(|x| {
+            grid.cell_of(x)
+                .unwrap_or_else(|| panic!("point {:?} is outside the domain", x.as_slice()))
+        });
+        let spans = line_spans(&grid.dims, cells);
+        Self::from_spans(grid, dilate(&grid.dims, spans, margin))
     }
 
     /// The ranges from one span per line of cells.

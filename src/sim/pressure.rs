@@ -10,7 +10,7 @@ use crate::grid::active::{par_runs, Active};
 use crate::grid::{Grid, MacField, Vector};
 use crate::sim::markings::CellKind;
 use crate::sim::{transfer, State};
-use crate::solvers::multigrid::{CellClass, Multigrid};
+use crate::solvers::multigrid::{CellClass, Finest, Multigrid};
 use crate::solvers::pcg::{self, PcgSettings, PcgStats, Preconditioner, StencilMatrix};
 use crate::solvers::NONE;
 use crate::PAR_GRAIN;
@@ -140,7 +140,7 @@ pub fn project<const D: usize>(
 /// order. Solid cells and the domain walls are Neumann (no term), non-solid cells outside the
 /// set are Dirichlet (`x = 0`). Shared by the pressure projection and IDP's second solve, so
 /// that both use the same matrix.
-pub struct Poisson<const D: usize> {
+pub struct Poisson<'a, const D: usize> {
     dims: [usize; D],
     /// One more than the row of each cell, 0 outside the set (a fresh zeroed array costs
     /// memory only where the set is).
@@ -150,20 +150,19 @@ pub struct Poisson<const D: usize> {
     a: StencilMatrix<D>,
     /// Rows with a Dirichlet neighbour.
     dirichlet: Vec<bool>,
-    /// Each cell as the multigrid sees it: in the set, solid (Neumann) or else (Dirichlet).
-    class: Vec<CellClass>,
+    solid: &'a [bool],
 }
 
 /// A row of the matrix: its diagonal, its `+axis` and `-axis` neighbours' rows, its entries
 /// to the `+axis` ones, and whether it has a Dirichlet neighbour.
 type Row<const D: usize> = (f64, [u32; D], [u32; D], [f64; D], bool);
 
-impl<const D: usize> Poisson<D> {
+impl<'a, const D: usize> Poisson<'a, D> {
     /// The system for the cells where `in_set` holds, all of which must be `active`.
     pub fn new(
         grid: &Grid<D>,
         in_set: impl Fn(usize) -> bool + Sync,
-        solid: &[bool],
+        solid: &'a [bool],
         active: &Active<D>,
     ) -> Self {
         let n = grid.num_cells();
@@ -174,34 +173,25 @@ impl<const D: usize> Poisson<D> {
         for (r, &c) in cells.iter().enumerate() {
             row[c] = r as u32 + 1;
         }
-        let class = (0..n)
-            .into_par_iter()
-            .with_min_len(PAR_GRAIN)
-            .map(|c| match (row[c] != 0, solid[c]) {
-                (true, _) => CellClass::Unknown,
-                (false, true) => CellClass::Neumann,
-                (false, false) => CellClass::Dirichlet,
-            })
-            .collect();
         let rows: Vec<Row<D>> = (cells.par_iter().with_min_len(PAR_GRAIN / 8))
             .map(|&c| Self::row_at(grid, &row, solid, c))
             .collect();
-        let mut a = StencilMatrix::<D>::default();
-        let mut dirichlet = Vec::with_capacity(rows.len());
-        for (diag, plus, minus, off, d) in rows {
-            a.diag.push(diag);
-            a.plus.push(plus);
-            a.minus.push(minus);
-            a.off_plus.push(off);
-            dirichlet.push(d);
-        }
+        // Field by field, in parallel (pushing row by row was a third of this set-up at 300^3).
+        let rows = || rows.par_iter().with_min_len(PAR_GRAIN);
+        let a = StencilMatrix::<D> {
+            diag: rows().map(|r| r.0).collect(),
+            plus: rows().map(|r| r.1).collect(),
+            minus: rows().map(|r| r.2).collect(),
+            off_plus: rows().map(|r| r.3).collect(),
+        };
+        let dirichlet = rows().map(|r| r.4).collect();
         Self {
             dims: grid.dims,
             row,
             cells,
             a,
             dirichlet,
-            class,
+            solid,
         }
     }
 
@@ -233,6 +223,15 @@ impl<const D: usize> Poisson<D> {
         (diag, plus, minus, off, dirichlet)
     }
 
+    /// Cell `c` as the multigrid sees it: in the set, solid (Neumann) or else (Dirichlet).
+    fn class(&self, c: usize) -> CellClass {
+        match (self.row[c] != 0, self.solid[c]) {
+            (true, _) => CellClass::Unknown,
+            (false, true) => CellClass::Neumann,
+            (false, false) => CellClass::Dirichlet,
+        }
+    }
+
     /// Whether cell `c` has a row.
     pub fn has(&self, c: usize) -> bool {
         self.row[c] != 0
@@ -256,7 +255,12 @@ impl<const D: usize> Poisson<D> {
                 pcg::solve(&self.a, &rhs, &mut x, settings)
             }
             Preconditioner::Multigrid => pcg::solve_with(&self.a, &rhs, &mut x, settings, || {
-                Multigrid::new(self.dims, &self.class)
+                Multigrid::new(&Finest {
+                    dims: self.dims,
+                    class: &|c| self.class(c),
+                    unknowns: &self.cells,
+                    matrix: &self.a,
+                })
             }),
         };
         let mut per_cell = vec![0.0; self.row.len()];

@@ -86,11 +86,12 @@
 //! inverse of a positive definite matrix. So the V-cycle is symmetric positive definite even
 //! for singular (closed) systems, and CG stays valid.
 
-use crate::solvers::pcg::Precondition;
+use crate::grid::active::{dilate, line_spans, par_runs};
+use crate::solvers::pcg::{Precondition, StencilMatrix};
 use crate::solvers::NONE;
 use crate::PAR_GRAIN;
 use rayon::prelude::*;
-use std::borrow::Cow;
+use std::ops::Range;
 
 /// What a cell is to the system.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -101,6 +102,18 @@ pub enum CellClass {
     Dirichlet,
     /// No coupling (a solid cell; the outside of the grid counts as one).
     Neumann,
+}
+
+/// The system as [`Multigrid::new`] takes it: its grid, every cell's class, and its rows
+/// and matrix.
+pub struct Finest<'a, const D: usize> {
+    pub dims: [usize; D],
+    /// The class of any cell of the grid.
+    pub class: &'a (dyn Fn(usize) -> CellClass + Sync),
+    /// The [`CellClass::Unknown`] cells, ascending: the system's rows in order.
+    pub unknowns: &'a [usize],
+    /// The system's matrix on `class` (see the module doc).
+    pub matrix: &'a StencilMatrix<D>,
 }
 
 /// The largest coarsest level: its dense Cholesky factor costs `n^3 / 6` operations per
@@ -130,25 +143,22 @@ fn coords<const D: usize>(dims: &[usize; D], mut i: usize) -> [usize; D] {
     })
 }
 
-/// `f(cell, its coordinates)` for every cell of `shape`, in parallel, a line along axis 0
-/// at a time (one division per line).
-fn map_cells<const D: usize, T: Copy + Send + Sync>(
-    shape: &Shape<D>,
-    init: T,
-    f: impl Fn(usize, [usize; D]) -> T + Sync,
-) -> Vec<T> {
-    let n0 = shape.dims[0];
-    let mut out = vec![init; shape.cells()];
-    (out.par_chunks_mut(n0).with_min_len((PAR_GRAIN / n0).max(1)))
-        .enumerate()
-        .for_each(|(line, out)| {
-            let mut c = coords(&shape.dims, line * n0);
-            for (x, o) in out.iter_mut().enumerate() {
-                c[0] = x;
-                *o = f(line * n0 + x, c);
+/// The cells `c` with `lo <= c < hi` (every axis), axis 0 fastest.
+fn block_cells<const D: usize>(lo: [usize; D], hi: [usize; D]) -> impl Iterator<Item = [usize; D]> {
+    let mut next = (0..D).all(|a| lo[a] < hi[a]).then_some(lo);
+    std::iter::from_fn(move || {
+        let c = next?;
+        let mut n = c;
+        next = (0..D).find_map(|a| {
+            n[a] += 1;
+            if n[a] < hi[a] {
+                return Some(n);
             }
+            n[a] = lo[a];
+            None
         });
-    out
+        Some(c)
+    })
 }
 
 /// A level's grid: its dimensions and the linear index strides.
@@ -205,18 +215,18 @@ fn corners<const D: usize>(f: [usize; D], coarse: &Shape<D>) -> (usize, [isize; 
 
 /// The axes along which the corners of fine cell `f` may move ([`corners`]): those whose
 /// move stays inside the coarse grid and crosses an open face of `coarse`.
-fn movable<const D: usize>(f: [usize; D], coarse: &Shape<D>, cells: &Cells) -> u8 {
-    let (parent, step) = corners(f, coarse);
+fn movable<const D: usize>(f: [usize; D], coarse: &Cells<D>) -> u8 {
+    let (parent, step) = corners(f, &coarse.shape);
     let mut axes = 0;
     for a in 0..D {
         let mut lower = f.map(|v| v / 2);
         let i = match f[a] % 2 {
-            1 if lower[a] + 1 < coarse.dims[a] => parent,
+            1 if lower[a] + 1 < coarse.shape.dims[a] => parent,
             0 if lower[a] > 0 => parent.wrapping_add_signed(step[a]),
             _ => continue,
         };
         lower[a] -= 1 - f[a] % 2;
-        if cells.open(coarse, i, lower, a) {
+        if coarse.open(i, lower, a) {
             axes |= 1 << a;
         }
     }
@@ -257,30 +267,82 @@ struct Operator<const D: usize> {
     inverse: [f64; 7],
 }
 
-impl<const D: usize> Operator<D> {
-    fn new(shape: Shape<D>, cells: &Cells, scale: f64) -> Self {
-        let class = &cells.class;
-        let unknown: Vec<At<D>> = (0..class.len())
-            .into_par_iter()
-            .with_min_len(PAR_GRAIN)
-            .filter(|&c| class[c] == CellClass::Unknown)
-            .map(|c| coords(&shape.dims, c).map(|v| v as u16))
-            .collect();
-        let of_colour = |red: bool| {
-            (unknown.par_iter().with_min_len(PAR_GRAIN))
-                .filter(move |c| (c.iter().map(|&v| v as usize).sum::<usize>() % 2 == 0) == red)
-                .copied()
+/// A level's rows in their order: its unknown cells `cells` (ascending), the red ones (even
+/// coordinate sum) first, then the black ones, each colour ascending. Returns the index in
+/// `cells` of each row, how many rows are red, and the row of each of `cells`.
+fn red_black<const D: usize>(cells: &[At<D>]) -> (Vec<u32>, usize, Vec<u32>) {
+    let is_red = |c: &At<D>| c.iter().map(|&v| v as usize).sum::<usize>() % 2 == 0;
+    let red = cells
+        .par_iter()
+        .with_min_len(PAR_GRAIN)
+        .filter(|c| is_red(c))
+        .count();
+    let (mut order, mut row) = (vec![0; cells.len()], Vec::with_capacity(cells.len()));
+    let (mut next_red, mut next_black) = (0, red);
+    for (k, c) in cells.iter().enumerate() {
+        let next = if is_red(c) {
+            &mut next_red
+        } else {
+            &mut next_black
         };
-        let mut at: Vec<At<D>> = of_colour(true).collect();
-        let red = at.len();
-        at.par_extend(of_colour(false));
-        let mut row = vec![0u32; class.len()];
-        for (r, &c) in at.iter().enumerate() {
-            row[shape.index(widen(c))] = r as u32 + 1;
-        }
-        let stencil = (at.par_iter().with_min_len(ROW_GRAIN))
-            .map(|&c| Self::stencil_of(&shape, cells, &row, widen(c)))
+        order[*next] = k as u32;
+        row.push(*next as u32);
+        *next += 1;
+    }
+    (order, red, row)
+}
+
+impl<const D: usize> Operator<D> {
+    /// The finest level: the system's own matrix ([`Finest::matrix`]), its rows in the order
+    /// of [`red_black`]. Returns it with the level's row of each system row.
+    fn finest(finest: &Finest<D>) -> (Self, Vec<u32>) {
+        let shape = Shape::new(finest.dims);
+        let cells: Vec<At<D>> = (finest.unknowns.par_iter().with_min_len(PAR_GRAIN))
+            .map(|&c| coords(&shape.dims, c).map(|v| v as u16))
             .collect();
+        let (order, red, level_row) = red_black(&cells);
+        let a = finest.matrix;
+        let to_level = |r: u32| {
+            if r == NONE {
+                NONE
+            } else {
+                level_row[r as usize]
+            }
+        };
+        let stencil = (order.par_iter().with_min_len(ROW_GRAIN))
+            .map(|&j| Stencil {
+                plus: a.plus[j as usize].map(to_level),
+                minus: a.minus[j as usize].map(to_level),
+                count: a.diag[j as usize] as u8,
+            })
+            .collect();
+        let at: Vec<At<D>> = order.par_iter().map(|&j| cells[j as usize]).collect();
+        let row = Self::cell_rows(&shape, &at);
+        let op = Self::of(shape, row, at, red, stencil, 1.0);
+        (op, level_row)
+    }
+
+    /// A coarser level: the stencil of the module doc on `cells`, scaled by `scale`.
+    fn new(cells: &Cells<D>, scale: f64) -> Self {
+        let shape = cells.shape;
+        let unknown = cells.unknowns();
+        let (order, red, _) = red_black(&unknown);
+        let at: Vec<At<D>> = order.par_iter().map(|&k| unknown[k as usize]).collect();
+        let row = Self::cell_rows(&shape, &at);
+        let stencil = (at.par_iter().with_min_len(ROW_GRAIN))
+            .map(|&c| Self::stencil_of(cells, &row, widen(c)))
+            .collect();
+        Self::of(shape, row, at, red, stencil, scale)
+    }
+
+    fn of(
+        shape: Shape<D>,
+        row: Vec<u32>,
+        at: Vec<At<D>>,
+        red: usize,
+        stencil: Vec<Stencil<D>>,
+        scale: f64,
+    ) -> Self {
         Operator {
             shape,
             row,
@@ -292,8 +354,18 @@ impl<const D: usize> Operator<D> {
         }
     }
 
+    /// [`Operator::row`] of the rows at `at`.
+    fn cell_rows(shape: &Shape<D>, at: &[At<D>]) -> Vec<u32> {
+        let mut row = vec![0u32; shape.cells()];
+        for (r, &c) in at.iter().enumerate() {
+            row[shape.index(widen(c))] = r as u32 + 1;
+        }
+        row
+    }
+
     /// The row of cell `c`: its neighbours across open faces.
-    fn stencil_of(shape: &Shape<D>, cells: &Cells, row: &[u32], c: [usize; D]) -> Stencil<D> {
+    fn stencil_of(cells: &Cells<D>, row: &[u32], c: [usize; D]) -> Stencil<D> {
+        let shape = &cells.shape;
         let i = shape.index(c);
         let mut s = Stencil {
             plus: [NONE; D],
@@ -305,11 +377,11 @@ impl<const D: usize> Operator<D> {
             lower[a] = lower[a].wrapping_sub(1);
             let below = (c[a] > 0)
                 .then(|| i - shape.stride[a])
-                .filter(|&b| cells.open(shape, b, lower, a));
-            let above = cells.open(shape, i, c, a).then(|| i + shape.stride[a]);
+                .filter(|&b| cells.open(b, lower, a));
+            let above = cells.open(i, c, a).then(|| i + shape.stride[a]);
             for (nb, plus) in [(below, false), (above, true)] {
                 let Some(nb) = nb else { continue };
-                match cells.class[nb] {
+                match cells.class(nb) {
                     CellClass::Neumann => continue,
                     CellClass::Unknown if plus => s.plus[a] = row[nb] - 1,
                     CellClass::Unknown => s.minus[a] = row[nb] - 1,
@@ -323,23 +395,6 @@ impl<const D: usize> Operator<D> {
 
     fn len(&self) -> usize {
         self.at.len()
-    }
-
-    /// The rows in ascending cell order: the red rows and the black rows, each ascending,
-    /// merged.
-    fn rows_in_cell_order(&self) -> Vec<u32> {
-        let cell = |r: usize| self.shape.index(widen(self.at[r]));
-        let (mut red, mut black) = (0, self.red);
-        let mut rows = Vec::with_capacity(self.len());
-        while red < self.red || black < self.len() {
-            let r = match black == self.len() || (red < self.red && cell(red) < cell(black)) {
-                true => &mut red,
-                false => &mut black,
-            };
-            rows.push(*r as u32);
-            *r += 1;
-        }
-        rows
     }
 
     /// `scale` times the sum of `x` over row `i`'s unknown neighbours.
@@ -391,68 +446,193 @@ impl<const D: usize> Operator<D> {
     }
 }
 
-/// A level's cells as coarsening sees them: each one's class, and which of its faces are
-/// open: bit `a` for the face to the next cell along axis `a`, open if at least one face
-/// of the finest grid within it joins two cells that are not Neumann.
-struct Cells<'a> {
-    class: Cow<'a, [CellClass]>,
-    /// The open faces' bits per cell; `None` on the finest level, where a face is open when
-    /// neither cell is Neumann, read from the classes when asked (the finest grid is the
-    /// whole box: bits for every cell of it would cost a pass over all of them).
-    open: Option<Vec<u8>>,
+/// A coarse cell's class from two of its children's (or of two groups of them): Dirichlet if
+/// either is, else an unknown if either is, else Neumann.
+fn coarser_class(a: CellClass, b: CellClass) -> CellClass {
+    match (a, b) {
+        (CellClass::Dirichlet, _) | (_, CellClass::Dirichlet) => CellClass::Dirichlet,
+        (CellClass::Unknown, _) | (_, CellClass::Unknown) => CellClass::Unknown,
+        _ => CellClass::Neumann,
+    }
 }
 
-impl<'a> Cells<'a> {
-    fn finest(class: &'a [CellClass]) -> Self {
+/// The bits of a kept cell's entry in [`Cells::code`]: its class (never 0, which marks a cell
+/// not kept), then one bit per open face from [`OPEN_SHIFT`] on.
+const CLASS_BITS: u8 = 3;
+const OPEN_SHIFT: u32 = 2;
+
+fn class_code(class: CellClass) -> u8 {
+    match class {
+        CellClass::Unknown => 1,
+        CellClass::Dirichlet => 2,
+        CellClass::Neumann => 3,
+    }
+}
+
+fn class_of_code(code: u8) -> CellClass {
+    match code & CLASS_BITS {
+        1 => CellClass::Unknown,
+        2 => CellClass::Dirichlet,
+        _ => CellClass::Neumann,
+    }
+}
+
+/// A level's cells as coarsening sees them: each one's class, and which of its faces are
+/// open: the face to the next cell along axis `a` is open if at least one face of the finest
+/// grid within it joins two cells that are not Neumann. Both are functions of the finest cells
+/// a cell covers (its class: Dirichlet if any of them is, else an unknown if any is, else
+/// Neumann), so any cell's can be worked out from them; a coarse level keeps, in
+/// [`Cells::code`], those of the cells its levels ask about: within one cell of a parent of a
+/// finer row ([`Cells::coarsen`]).
+struct Cells<'a, const D: usize> {
+    finest: &'a Finest<'a, D>,
+    shape: Shape<D>,
+    /// The side of a cell, in finest cells: `2^level`.
+    side: usize,
+    /// The kept cells, one ascending index range per line of cells along axis 0 (none on the
+    /// finest level, which asks [`Finest::class`]).
+    kept: Vec<Range<usize>>,
+    /// Per cell, the class's code and the open faces' bits of a kept cell, 0 for any other
+    /// (a fresh zeroed array: it costs memory only where cells are kept).
+    code: Vec<u8>,
+}
+
+impl<'a, const D: usize> Cells<'a, D> {
+    fn finest(finest: &'a Finest<'a, D>) -> Self {
         Cells {
-            class: Cow::Borrowed(class),
-            open: None,
+            finest,
+            shape: Shape::new(finest.dims),
+            side: 1,
+            kept: vec![],
+            code: vec![],
         }
     }
 
-    /// Whether the face of cell `i` (coordinates `c`, on a level of `shape`) to the next
-    /// cell along axis `a` is open.
-    fn open<const D: usize>(&self, shape: &Shape<D>, i: usize, c: [usize; D], a: usize) -> bool {
-        match &self.open {
-            Some(bits) => bits[i] >> a & 1 == 1,
-            None => {
-                let wet = |c: usize| self.class[c] != CellClass::Neumann;
-                c[a] + 1 < shape.dims[a] && wet(i) && wet(i + shape.stride[a])
-            }
+    /// The class of cell `i`.
+    #[inline]
+    fn class(&self, i: usize) -> CellClass {
+        if self.side == 1 {
+            return (self.finest.class)(i);
+        }
+        match self.code[i] {
+            0 => self.far_class(coords(&self.shape.dims, i)),
+            code => class_of_code(code),
         }
     }
 
-    /// The next coarser grid's cells: a coarse cell is unknown if any of its children is,
-    /// else Dirichlet if any is, else Neumann; a coarse face is open if any fine face in it
-    /// is.
-    fn coarsen<const D: usize>(&self, fine: &Shape<D>) -> Cells<'static> {
-        let coarse = fine.coarser();
-        let (class, open) = map_cells(&coarse, (CellClass::Neumann, 0), |_, kc| {
-            let (mut class, mut open) = (CellClass::Neumann, 0);
-            for mask in 0..1usize << D {
-                let fc: [usize; D] = std::array::from_fn(|a| 2 * kc[a] + (mask >> a & 1));
-                if (0..D).any(|a| fc[a] >= fine.dims[a]) {
-                    continue;
-                }
-                let f = fine.index(fc);
-                class = match (class, self.class[f]) {
-                    (CellClass::Dirichlet, _) | (_, CellClass::Dirichlet) => CellClass::Dirichlet,
-                    (CellClass::Unknown, _) | (_, CellClass::Unknown) => CellClass::Unknown,
-                    _ => CellClass::Neumann,
-                };
-                // The child on the upper side of each axis carries that face.
-                for a in (0..D).filter(|&a| mask >> a & 1 == 1) {
-                    open |= (self.open(fine, f, fc, a) as u8) << a;
-                }
+    /// Whether the face of cell `i` (coordinates `c`) to the next cell along axis `a` is open.
+    #[inline]
+    fn open(&self, i: usize, c: [usize; D], a: usize) -> bool {
+        if c[a] + 1 >= self.shape.dims[a] {
+            return false;
+        }
+        if self.side == 1 {
+            let wet = |c: usize| (self.finest.class)(c) != CellClass::Neumann;
+            return wet(i) && wet(i + self.shape.stride[a]);
+        }
+        match self.code[i] {
+            0 => self.far_open(c, a),
+            code => code >> (OPEN_SHIFT as usize + a) & 1 == 1,
+        }
+    }
+
+    /// The finest cells that cell `c` covers, as the corners of a block.
+    fn block(&self, c: [usize; D]) -> ([usize; D], [usize; D]) {
+        let n = &self.finest.dims;
+        let lo = c.map(|v| v * self.side);
+        (lo, std::array::from_fn(|a| (lo[a] + self.side).min(n[a])))
+    }
+
+    /// [`Cells::class`] of a cell not kept, from the finest cells it covers (it stops at the
+    /// first Dirichlet one: most such cells are air).
+    #[cold]
+    fn far_class(&self, c: [usize; D]) -> CellClass {
+        let (lo, hi) = self.block(c);
+        let fine = Shape::new(self.finest.dims);
+        let mut class = CellClass::Neumann;
+        for f in block_cells(lo, hi) {
+            class = coarser_class(class, (self.finest.class)(fine.index(f)));
+            if class == CellClass::Dirichlet {
+                break;
             }
-            (class, open)
+        }
+        class
+    }
+
+    /// [`Cells::open`] of a cell not kept, below the grid's upper boundary along `a`: whether
+    /// any pair of finest cells across its face are both not Neumann.
+    #[cold]
+    fn far_open(&self, c: [usize; D], a: usize) -> bool {
+        let fine = Shape::new(self.finest.dims);
+        let (mut lo, mut hi) = self.block(c);
+        lo[a] = (c[a] + 1) * self.side - 1;
+        hi[a] = lo[a] + 1;
+        debug_assert!(hi[a] < fine.dims[a], "the next cell is inside the grid");
+        let wet = |f: usize| (self.finest.class)(f) != CellClass::Neumann;
+        block_cells(lo, hi).any(|f| {
+            let i = fine.index(f);
+            wet(i) && wet(i + fine.stride[a])
         })
-        .into_iter()
-        .unzip();
+    }
+
+    /// The unknown cells of a coarser level, ascending.
+    fn unknowns(&self) -> Vec<At<D>> {
+        let at = |c: usize| coords(&self.shape.dims, c).map(|v| v as u16);
+        let unknown = |&c: &usize| class_of_code(self.code[c]) == CellClass::Unknown;
+        (self.kept.par_iter())
+            .flat_map_iter(|r| r.clone().filter(unknown).map(at))
+            .collect()
+    }
+
+    /// The next coarser level's cells, keeping those within one cell (along every axis at
+    /// once) of a parent of one of `rows` (this level's): the rows of the coarser level, their
+    /// neighbours and the corners the rows interpolate from ([`corners`]). A coarse cell is
+    /// unknown if any of its children is, else Dirichlet if any is, else Neumann; a coarse face
+    /// is open if any fine face in it is.
+    fn coarsen(&self, rows: &[At<D>]) -> Cells<'a, D> {
+        let fine = &self.shape;
+        let coarse = fine.coarser();
+        let parents = rows.par_iter().map(|&f| widen(f).map(|v| v / 2));
+        let spans = dilate(&coarse.dims, line_spans(&coarse.dims, parents), 1);
+        let n0 = coarse.dims[0];
+        let kept: Vec<Range<usize>> = (spans.iter().enumerate())
+            .filter(|(_, s)| s[0] < s[1])
+            .map(|(l, s)| l * n0 + s[0] as usize..l * n0 + s[1] as usize)
+            .collect();
+        let mut code = vec![0u8; coarse.cells()];
+        par_runs(&kept, &mut code).for_each(|(r, run)| {
+            let mut kc = coords(&coarse.dims, r.start);
+            for (x, out) in (kc[0]..).zip(run) {
+                kc[0] = x;
+                *out = self.code_of_parent(kc);
+            }
+        });
         Cells {
-            class: Cow::Owned(class),
-            open: Some(open),
+            finest: self.finest,
+            shape: coarse,
+            side: 2 * self.side,
+            kept,
+            code,
         }
+    }
+
+    /// The [`Cells::code`] entry of coarse cell `kc` from its children on this level.
+    fn code_of_parent(&self, kc: [usize; D]) -> u8 {
+        let fine = &self.shape;
+        let (mut class, mut open) = (CellClass::Neumann, 0);
+        for mask in 0..1usize << D {
+            let fc: [usize; D] = std::array::from_fn(|a| 2 * kc[a] + (mask >> a & 1));
+            if (0..D).any(|a| fc[a] >= fine.dims[a]) {
+                continue;
+            }
+            let f = fine.index(fc);
+            class = coarser_class(class, self.class(f));
+            // The child on the upper side of each axis carries that face.
+            for a in (0..D).filter(|&a| mask >> a & 1 == 1) {
+                open |= (self.open(f, fc, a) as u8) << a;
+            }
+        }
+        class_code(class) | open << OPEN_SHIFT
     }
 }
 
@@ -505,11 +685,11 @@ struct Level<const D: usize> {
     /// Per row, the interpolation weight of the corners that are Neumann or cannot be
     /// reached, which `P` gives the parent (exact in `f32`: sums of products of 1/4 and 3/4).
     to_parent: Vec<f32>,
-    /// Per cell of the next coarser grid, whether every row among the `4^D` fine cells that
-    /// may interpolate from it ([`block`]) moves freely along all axes and gives its parent
-    /// nothing extra: there restriction is the plain full-weighting sum (empty on the
-    /// coarsest level).
-    plain: Vec<bool>,
+    /// Per cell of the next coarser grid, whether a row among the `4^D` fine cells that may
+    /// interpolate from it ([`block`]) does not move freely along all axes or gives its parent
+    /// something extra; where none does, restriction is the plain full-weighting sum (empty on
+    /// the coarsest level; a fresh zeroed array, touched only around the loose rows).
+    loose: Vec<bool>,
     x: Vec<f64>,
     b: Vec<f64>,
     r: Vec<f64>,
@@ -527,7 +707,7 @@ impl<const D: usize> Level<D> {
             op,
             movable: vec![],
             to_parent: vec![],
-            plain: vec![],
+            loose: vec![],
             x: vec![0.0; n],
             b: vec![0.0; n],
             r: vec![0.0; n],
@@ -546,18 +726,18 @@ impl<const D: usize> Level<D> {
         spread_rows(&mut self.dense, &self.op, v);
     }
 
-    /// Sets [`Level::movable`] and [`Level::to_parent`] from the next level's cells.
-    fn link(&mut self, coarse: &Cells) {
-        let shape = self.op.shape.coarser();
+    /// Sets [`Level::movable`], [`Level::to_parent`] and [`Level::loose`] from the next
+    /// level's cells.
+    fn link(&mut self, coarse: &Cells<D>) {
         let at = self.op.at.par_iter().with_min_len(ROW_GRAIN);
-        self.movable = at.map(|&f| movable(widen(f), &shape, coarse)).collect();
+        self.movable = at.map(|&f| movable(widen(f), coarse)).collect();
         let at = self.op.at.par_iter().with_min_len(ROW_GRAIN);
         self.to_parent = (at.zip(&self.movable))
             .map(|(&f, &axes)| {
-                let (parent, step) = corners(widen(f), &shape);
+                let (parent, step) = corners(widen(f), &coarse.shape);
                 let neumann = |m: usize| {
                     m & !axes as usize != 0
-                        || coarse.class[corner(parent, &step, m)] == CellClass::Neumann
+                        || coarse.class(corner(parent, &step, m)) == CellClass::Neumann
                 };
                 let w: f64 = (0..1 << D)
                     .filter(|&m| neumann(m))
@@ -573,7 +753,8 @@ impl<const D: usize> Level<D> {
             .with_min_len(PAR_GRAIN)
             .filter(|&i| self.movable[i] != full || self.to_parent[i] != 0.0)
             .collect();
-        self.plain = vec![true; shape.cells()];
+        let shape = &coarse.shape;
+        self.loose = vec![false; shape.cells()];
         for i in loose {
             let f = widen(self.op.at[i]);
             for m in 0..1usize << D {
@@ -583,7 +764,7 @@ impl<const D: usize> Level<D> {
                     _ => (f[a] / 2).checked_sub(1),
                 });
                 if k.iter().all(Option::is_some) {
-                    self.plain[shape.index(k.map(Option::unwrap))] = false;
+                    self.loose[shape.index(k.map(Option::unwrap))] = true;
                 }
             }
         }
@@ -607,10 +788,10 @@ impl<const D: usize> Level<D> {
     }
 
     /// `coarse.b = P^T r` (restriction of this level's residual), a gather over [`block`]:
-    /// from [`Level::dense`] alone where the block is [`Level::plain`], else row by row.
+    /// from [`Level::dense`] alone where the block is not [`Level::loose`], else row by row.
     fn restrict(&mut self, coarse: &mut Level<D>) {
         self.spread(true);
-        let (fine, cop, dense, plain) = (&self.op.shape, &coarse.op, &self.dense, &self.plain);
+        let (fine, cop, dense, loose) = (&self.op.shape, &coarse.op, &self.dense, &self.loose);
         let block = block(fine);
         (coarse.b.par_iter_mut().with_min_len(ROW_GRAIN / 4))
             .zip(&cop.at)
@@ -622,7 +803,7 @@ impl<const D: usize> Level<D> {
                         .all(|a| (2 * k[a] + (code >> (2 * a) & 3)).wrapping_sub(1) < fine.dims[a])
                 };
                 let interior = (0..D).all(|a| k[a] > 0 && 2 * k[a] + 2 < fine.dims[a]);
-                if interior && plain[cop.shape.index(k)] {
+                if interior && !loose[cop.shape.index(k)] {
                     let at = |offset: isize| dense[base.wrapping_add_signed(offset)];
                     *b = block.iter().map(|&(offset, w, _)| w * at(offset)).sum();
                     return;
@@ -789,35 +970,27 @@ pub struct Multigrid<const D: usize> {
 }
 
 impl<const D: usize> Multigrid<D> {
-    /// The hierarchy of the system whose cells are classed by `class` on a grid of `dims`
-    /// (see the module doc).
-    pub fn new(dims: [usize; D], class: &[CellClass]) -> Self {
-        assert_eq!(
-            class.len(),
-            dims.iter().product::<usize>(),
-            "one class per cell"
-        );
+    /// The hierarchy of the system of `finest` (see the module doc).
+    pub fn new(finest: &Finest<D>) -> Self {
         assert!(
-            dims.iter().all(|&d| d <= 1 << 16),
+            finest.dims.iter().all(|&d| d <= 1 << 16),
             "at most 2^16 cells per axis"
         );
-        let mut shape = Shape::new(dims);
-        let mut cells = Cells::finest(class);
-        let mut levels = vec![Level::new(Operator::new(shape, &cells, 1.0))];
+        let mut cells = Cells::finest(finest);
+        let (op, level_row) = Operator::finest(finest);
+        let mut levels = vec![Level::new(op)];
         let coarser = 2f64.powi(D as i32 - 2);
         loop {
             let fine = levels.last_mut().expect("the finest level");
             if fine.op.len() <= COARSEST_ROWS {
                 break;
             }
-            cells = cells.coarsen(&shape);
-            shape = shape.coarser();
+            cells = cells.coarsen(&fine.op.at);
             fine.link(&cells);
             let scale = fine.op.scale * coarser;
-            levels.push(Level::new(Operator::new(shape, &cells, scale)));
+            levels.push(Level::new(Operator::new(&cells, scale)));
         }
         let coarsest = Dense::new(&levels.last().expect("the coarsest level").op);
-        let level_row = levels[0].op.rows_in_cell_order();
         let mut system_row = vec![0; level_row.len()];
         for (i, &r) in level_row.iter().enumerate() {
             system_row[r as usize] = i as u32;
@@ -885,6 +1058,19 @@ mod tests {
         a
     }
 
+    /// The multigrid of the system of `class` (one per cell of `dims`).
+    fn multigrid<const D: usize>(dims: [usize; D], class: &[CellClass]) -> Multigrid<D> {
+        let unknowns: Vec<usize> = (0..class.len())
+            .filter(|&c| class[c] == CellClass::Unknown)
+            .collect();
+        Multigrid::new(&Finest {
+            dims,
+            class: &|c| class[c],
+            unknowns: &unknowns,
+            matrix: &system(dims, class),
+        })
+    }
+
     /// Each cell solid with probability `solid`, else empty with probability `air`, else
     /// fluid.
     fn random_classes(cells: usize, solid: f64, air: f64, rng: &mut StdRng) -> Vec<CellClass> {
@@ -923,7 +1109,7 @@ mod tests {
             tolerance,
             ..Default::default()
         };
-        let stats = pcg::solve_with(&a, b, &mut x, &settings, || Multigrid::new(dims, class));
+        let stats = pcg::solve_with(&a, b, &mut x, &settings, || multigrid(dims, class));
         assert!(stats.converged, "{stats:?}");
         let mut ax = vec![0.0; a.len()];
         a.apply(&x, &mut ax);
@@ -941,7 +1127,7 @@ mod tests {
             let mut rng = StdRng::seed_from_u64(seed);
             let class = random_classes(dims.iter().product(), 0.2, 0.2, &mut rng);
             let a = system(dims, &class);
-            let mg = Multigrid::new(dims, &class);
+            let mg = multigrid(dims, &class);
             let fine = &mg.levels[0].op;
             let x = random_vector(a.len(), &mut rng);
             let mut ax = vec![0.0; a.len()];
@@ -958,22 +1144,119 @@ mod tests {
         check([9, 8, 7], 2);
     }
 
+    /// The next coarser grid's classes and open faces' bits of every cell, by the module
+    /// doc's rule, from every cell of the finer grid's (the whole grid, as the hierarchy was
+    /// built before it kept only the cells near the rows).
+    fn coarsen_every_cell<const D: usize>(
+        fine: &Shape<D>,
+        class: &[CellClass],
+        open: &[u8],
+    ) -> (Vec<CellClass>, Vec<u8>) {
+        let coarse = fine.coarser();
+        (0..coarse.cells())
+            .map(|k| {
+                let kc = coords(&coarse.dims, k);
+                let (mut c, mut o) = (CellClass::Neumann, 0);
+                for mask in 0..1usize << D {
+                    let fc: [usize; D] = std::array::from_fn(|a| 2 * kc[a] + (mask >> a & 1));
+                    if (0..D).all(|a| fc[a] < fine.dims[a]) {
+                        let f = fine.index(fc);
+                        c = coarser_class(c, class[f]);
+                        o |= open[f] & mask as u8;
+                    }
+                }
+                (c, o)
+            })
+            .unzip()
+    }
+
+    /// Every cell's class and open faces on every level of the hierarchy, kept or worked out
+    /// from the finest cells, are those of coarsening every cell of every level; the levels
+    /// keep some cells and not others. The liquid is a pool in the lower third with air pockets
+    /// and a few drops above it, among solid cells sprinkled everywhere, so that far cells
+    /// (air, solid and mixed blocks) sit beside kept ones on every level.
+    #[test]
+    fn kept_and_far_cells_are_those_of_coarsening_every_cell_2d_and_3d() {
+        fn check<const D: usize>(dims: [usize; D], seed: u64) {
+            let mut rng = StdRng::seed_from_u64(seed);
+            let class: Vec<CellClass> = (0..dims.iter().product())
+                .map(|i| {
+                    let height = coords(&dims, i)[D - 1];
+                    let (low, high) = (3 * height < dims[D - 1], 2 * height >= dims[D - 1]);
+                    match rng.random::<f64>() {
+                        u if u < 0.2 => CellClass::Neumann,
+                        _ if high && i % 50 == 0 => CellClass::Unknown,
+                        u if !high && (u < 0.3 || (low && u < 0.97)) => CellClass::Unknown,
+                        _ => CellClass::Dirichlet,
+                    }
+                })
+                .collect();
+            let unknowns: Vec<usize> = (0..class.len())
+                .filter(|&c| class[c] == CellClass::Unknown)
+                .collect();
+            let matrix = system(dims, &class);
+            let finest = Finest {
+                dims,
+                class: &|c| class[c],
+                unknowns: &unknowns,
+                matrix: &matrix,
+            };
+            let mut shape = Shape::new(dims);
+            let open: Vec<u8> = (0..class.len())
+                .map(|i| {
+                    let c = coords(&dims, i);
+                    let wet = |i: usize| class[i] != CellClass::Neumann;
+                    (0..D)
+                        .filter(|&a| c[a] + 1 < dims[a] && wet(i) && wet(i + shape.stride[a]))
+                        .fold(0, |o, a| o | 1 << a)
+                })
+                .collect();
+            let (mut every_class, mut every_open) = (class.clone(), open);
+            let mut cells = Cells::finest(&finest);
+            let mut rows = Operator::finest(&finest).0.at;
+            let mut levels = 1;
+            while rows.len() > COARSEST_ROWS {
+                cells = cells.coarsen(&rows);
+                rows = Operator::new(&cells, 1.0).at;
+                (every_class, every_open) = coarsen_every_cell(&shape, &every_class, &every_open);
+                shape = shape.coarser();
+                levels += 1;
+                for i in 0..shape.cells() {
+                    let c = coords(&shape.dims, i);
+                    assert_eq!(cells.class(i), every_class[i], "level {levels} cell {c:?}");
+                    for a in 0..D {
+                        let want = every_open[i] >> a & 1 == 1;
+                        assert_eq!(cells.open(i, c, a), want, "level {levels} {c:?} axis {a}");
+                    }
+                }
+                let kept = cells.code.iter().filter(|&&k| k != 0).count();
+                assert!(
+                    kept > 0 && kept < shape.cells(),
+                    "level {levels}: {kept} kept"
+                );
+            }
+            assert!(levels >= 3, "{levels} levels");
+        }
+        check([150, 120], 11);
+        check([40, 36, 44], 12);
+    }
+
     #[test]
     fn restriction_is_the_transpose_of_prolongation_2d_and_3d() {
         fn check<const D: usize>(dims: [usize; D], seed: u64) {
             let mut rng = StdRng::seed_from_u64(seed);
             let class = random_classes(dims.iter().product(), 0.25, 0.2, &mut rng);
-            let mut mg = Multigrid::new(dims, &class);
+            let mut mg = multigrid(dims, &class);
             assert!(mg.levels.len() >= 3, "{} levels", mg.levels.len());
+            let (mut loose, mut rows) = (0, 0);
             for l in 0..mg.levels.len() - 1 {
                 let (fine, coarse) = mg.levels.split_at_mut(l + 1);
                 let (fine, coarse) = (&mut fine[l], &mut coarse[0]);
-                // Both ways of restricting are taken.
-                let plain = fine.plain.iter().filter(|&&p| p).count();
-                assert!(
-                    plain > 0 && plain < fine.plain.len(),
-                    "level {l}: {plain} plain"
-                );
+                let cop = &coarse.op;
+                loose += (cop.at.iter())
+                    .filter(|&&k| fine.loose[cop.shape.index(widen(k))])
+                    .count();
+                rows += cop.len();
                 fine.r = random_vector(fine.r.len(), &mut rng);
                 coarse.x = random_vector(coarse.x.len(), &mut rng);
                 fine.restrict(coarse);
@@ -982,6 +1265,11 @@ mod tests {
                 let (rt, pt) = (dot(&coarse.x, &coarse.b), dot(&fine.x, &fine.r));
                 assert!((rt - pt).abs() <= 1e-12 * rt.abs().max(1.0), "{rt} {pt}");
             }
+            // Both ways of restricting are taken.
+            assert!(
+                loose > 0 && loose < rows,
+                "{loose} loose of {rows} coarse rows"
+            );
         }
         check([70, 61], 3);
         check([21, 18, 23], 4);
@@ -1001,7 +1289,7 @@ mod tests {
                     *class = CellClass::Unknown;
                 }
             }
-            let mut mg = Multigrid::new(dims, &class);
+            let mut mg = multigrid(dims, &class);
             assert!(mg.levels.len() >= 3, "{} levels", mg.levels.len());
             let n = mg.level_row.len();
             let (x, y) = (random_vector(n, &mut rng), random_vector(n, &mut rng));
@@ -1170,7 +1458,7 @@ mod tests {
         let mut b = vec![1.0; n];
         let closed = around == CellClass::Neumann;
         b[row] = if closed { 0.0 } else { 3.0 };
-        assert!(Multigrid::new(dims, &class).levels.len() >= 2);
+        assert!(multigrid(dims, &class).levels.len() >= 2);
         let (x, _, _) = solve(dims, &class, &b, 1e-9);
         let want = 3.0 / (2 * D) as f64;
         match closed {
