@@ -225,6 +225,14 @@ impl<const D: usize> Active<D> {
         self.cells.iter().flat_map(|r| r.clone())
     }
 
+    /// The first active cell (in index order) where `f` holds, whatever the thread count: the
+    /// lines in parallel, each searched by a plain loop (rayon's per-item `find_first` costs
+    /// several times the reads).
+    pub fn first_cell(&self, f: impl Fn(usize) -> bool + Sync) -> Option<usize> {
+        (self.cells.par_iter().with_min_len(LINE_GRAIN))
+            .find_map_first(|r| r.clone().find(|&c| f(c)))
+    }
+
     /// How many cells are active.
     pub fn num_cells(&self) -> usize {
         self.cells.iter().map(|r| r.len()).sum()

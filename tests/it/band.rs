@@ -3,6 +3,7 @@
 //! exact-paths' second step against the simplex), and a known-answer case of fig. path.
 
 use crate::common::{ccp, load, run_sim, simulation};
+use cellflip::grid::active::Active;
 use cellflip::grid::{Grid, Vector};
 use cellflip::methods::ccp::correct::band::{BandContext, BandVariant};
 use cellflip::methods::ccp::correct::guarantees::check_cell_counts;
@@ -339,7 +340,7 @@ fn a_move_into_a_full_interface_is_undone<const D: usize>() {
         assert_eq!(b.alpha, 0, "{at}");
         assert!(b.failure.is_none(), "{at}: {:?}", b.failure);
         assert_eq!(b.net_in, 0, "{at}");
-        check_cell_counts(&g, &pos, &prev, &solid, mu, Some(1)).unwrap();
+        check_cell_counts(&g, &pos, &prev, &solid, mu, Some(1), &Active::all(&g)).unwrap();
         if variant != BandVariant::Full {
             assert_eq!((b.n_in, b.n_out, b.s_in, b.n_move), (1, 0, -1, 1), "{at}");
         }

@@ -155,6 +155,7 @@ impl<const D: usize> FluidMethod<D> for CcpSim<D> {
             solid,
             mu,
             ctx.map(|b| b.r),
+            s.active,
         )?;
         if let (Some(mps), Some((step, path))) = (rep.mps.take(), export) {
             std::fs::write(path, mps).map_err(|error| StepError::Write {

@@ -495,12 +495,17 @@ fn correct_band<const D: usize>(
     (out.first_cost, out.second_step)
 }
 
+/// How many cells hold more than `mu` of `pos`: each is counted as its count passes `mu`, so
+/// that no pass visits the cells.
 fn overfull_cells<const D: usize>(grid: &Grid<D>, pos: &[Vector<D>], mu: u32) -> usize {
     let mut count = vec![0u32; grid.num_cells()];
+    let mut overfull = 0;
     for x in pos {
-        count[grid.cell_index_of(x)] += 1;
+        let n = &mut count[grid.cell_index_of(x)];
+        *n += 1;
+        overfull += usize::from(*n == mu + 1);
     }
-    count.iter().filter(|&&n| n > mu).count()
+    overfull
 }
 
 fn apply<const D: usize>(
