@@ -4,7 +4,7 @@
 
 use crate::grid::{Cell, Grid, Vector};
 use rayon::prelude::*;
-use std::collections::VecDeque;
+use std::sync::atomic::{AtomicI32, Ordering::Relaxed};
 
 /// What occupies a cell (its number is how a checkpoint stores it).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -205,41 +205,54 @@ impl Markings {
 
 /// Breadth-first depth over the von Neumann neighbourhood from the surface cells (def. depth).
 /// Fluid cells that no surface reaches (a closed, completely full container) get `i32::MIN`.
+///
+/// Level by level, a large level's cells in parallel: each unvisited fluid neighbour is claimed
+/// once, by an atomic exchange, for the next level. A cell's depth is its distance from the
+/// surface, the same whichever cell claims it, so the result does not depend on the threads.
 fn depth<const D: usize>(grid: &Grid<D>, kind: &[CellKind], surface: &[bool]) -> Vec<i32> {
-    let mut depth: Vec<i32> = (kind.par_iter().with_min_len(crate::PAR_GRAIN))
-        .map(|k| {
-            if *k == CellKind::Fluid {
-                i32::MIN
-            } else {
-                DEPTH_NOT_FLUID
-            }
+    let mut depth: Vec<i32> = (kind.par_iter().zip(surface).with_min_len(crate::PAR_GRAIN))
+        .map(|(k, &s)| match (*k == CellKind::Fluid, s) {
+            (true, true) => 0,
+            (true, false) => i32::MIN,
+            (false, _) => DEPTH_NOT_FLUID,
         })
         .collect();
-    // Cells queued with their coordinates: no division per cell.
-    let surface_cells: Vec<usize> = (0..kind.len())
+    // Cells carry their coordinates: no division per cell.
+    let mut level: Vec<(usize, Cell<D>)> = (0..kind.len())
         .into_par_iter()
         .with_min_len(crate::PAR_GRAIN)
         .filter(|&c| surface[c])
+        .map(|c| (c, grid.cell_coords(c)))
         .collect();
-    let mut queue: VecDeque<(usize, Cell<D>)> = VecDeque::with_capacity(surface_cells.len());
-    for c in surface_cells {
-        depth[c] = 0;
-        queue.push_back((c, grid.cell_coords(c)));
-    }
-    while let Some((c, cc)) = queue.pop_front() {
-        for a in 0..D {
-            let stride = grid.cell_stride(a);
-            let lower = (cc[a] > 0).then(|| (c - stride, cc[a] - 1));
-            let upper = (cc[a] + 1 < grid.dims[a]).then(|| (c + stride, cc[a] + 1));
-            for (n, na) in lower.into_iter().chain(upper) {
-                if kind[n] == CellKind::Fluid && depth[n] == i32::MIN {
-                    depth[n] = depth[c] - 1;
-                    let mut nc = cc;
-                    nc[a] = na;
-                    queue.push_back((n, nc));
-                }
-            }
-        }
+    const _: () = assert!(std::mem::align_of::<AtomicI32>() == std::mem::align_of::<i32>());
+    // SAFETY: `AtomicI32` has the size and bit validity of `i32` and (asserted above) its
+    // alignment, and `depth` is borrowed mutably for as long as the view lives.
+    let claim: &[AtomicI32] =
+        unsafe { &*(depth.as_mut_slice() as *mut [i32] as *const [AtomicI32]) };
+    let mut beta = 0;
+    while !level.is_empty() {
+        beta -= 1;
+        let next = |&(c, cc): &(usize, Cell<D>)| {
+            (0..2 * D).filter_map(move |k| {
+                let (a, up) = (k / 2, k % 2 == 1);
+                let mut nc = cc;
+                nc[a] = match up {
+                    true => Some(cc[a] + 1).filter(|&v| v < grid.dims[a])?,
+                    false => cc[a].checked_sub(1)?,
+                };
+                let stride = grid.cell_stride(a);
+                let n = if up { c + stride } else { c - stride };
+                let claimed = kind[n] == CellKind::Fluid
+                    && (claim[n].compare_exchange(i32::MIN, beta, Relaxed, Relaxed)).is_ok();
+                claimed.then_some((n, nc))
+            })
+        };
+        level = match level.len() < crate::PAR_GRAIN / 8 {
+            true => level.iter().flat_map(next).collect(),
+            false => (level.par_iter().with_min_len(crate::PAR_GRAIN / 8))
+                .flat_map_iter(next)
+                .collect(),
+        };
     }
     depth
 }
@@ -311,5 +324,61 @@ mod tests {
         assert_eq!(m.depth[g.cell_index([0, 0, 0])], -3);
         assert_eq!(m.class(g.cell_index([0, 0, 0]), 2), MarkingClass::Bubble);
         assert_eq!(m.class(g.cell_index([0, 0, 0]), 1), MarkingClass::Inner);
+    }
+
+    /// The depth is each fluid cell's von Neumann distance from the nearest surface cell (by a
+    /// plain breadth-first search here), `i32::MIN` where none reaches, on one thread or two,
+    /// in 2D and 3D: random fluid with pockets of air and solid, large enough that levels run
+    /// in parallel.
+    #[test]
+    fn depth_is_the_distance_from_the_surface_on_any_thread_count_2d_and_3d() {
+        use rand::{Rng, SeedableRng};
+        fn check<const D: usize>(dims: [usize; D], seed: u64) {
+            let g = Grid::new(dims);
+            let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+            let kind: Vec<CellKind> = (0..g.num_cells())
+                .map(|_| match rng.random::<f64>() {
+                    u if u < 0.002 => CellKind::Empty,
+                    u if u < 0.01 => CellKind::Solid,
+                    _ => CellKind::Fluid,
+                })
+                .collect();
+            let surface: Vec<bool> = (0..g.num_cells())
+                .map(|c| kind[c] == CellKind::Fluid && rng.random::<f64>() < 0.001)
+                .collect();
+            let mut want: Vec<i32> = (0..g.num_cells())
+                .map(|c| match (kind[c], surface[c]) {
+                    (CellKind::Fluid, true) => 0,
+                    (CellKind::Fluid, false) => i32::MIN,
+                    _ => DEPTH_NOT_FLUID,
+                })
+                .collect();
+            let mut queue: std::collections::VecDeque<usize> =
+                (0..g.num_cells()).filter(|&c| surface[c]).collect();
+            while let Some(c) = queue.pop_front() {
+                for a in 0..D {
+                    for dir in [-1, 1] {
+                        let Some(n) = g.neighbor(g.cell_coords(c), a, dir) else {
+                            continue;
+                        };
+                        let n = g.cell_index(n);
+                        if kind[n] == CellKind::Fluid && want[n] == i32::MIN {
+                            want[n] = want[c] - 1;
+                            queue.push_back(n);
+                        }
+                    }
+                }
+            }
+            assert!(want.iter().any(|&d| d < -3), "deep enough to test");
+            for threads in [1, 2] {
+                let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build();
+                let got = pool
+                    .expect("a thread pool")
+                    .install(|| depth(&g, &kind, &surface));
+                assert_eq!(got, want, "{D}D, {threads} threads");
+            }
+        }
+        check([300, 280], 1);
+        check([60, 50, 70], 2);
     }
 }
