@@ -233,6 +233,8 @@ fn depth<const D: usize>(grid: &Grid<D>, kind: &[CellKind], surface: &[bool]) ->
     while !level.is_empty() {
         beta -= 1;
         let next = |&(c, cc): &(usize, Cell<D>)| {
+            // The step written out rather than `Grid::neighbor`, which measured 40-50 ms
+            // slower here at 300^3 (marked inline or not).
             (0..2 * D).filter_map(move |k| {
                 let (a, up) = (k / 2, k % 2 == 1);
                 let mut nc = cc;

@@ -293,57 +293,57 @@ fn red_black<const D: usize>(cells: &[At<D>]) -> (Vec<u32>, usize, Vec<u32>) {
 }
 
 impl<const D: usize> Operator<D> {
-    /// The finest level: the system's own matrix ([`Finest::matrix`]), its rows in the order
-    /// of [`red_black`]. Returns it with the level's row of each system row.
+    /// The finest level: the system's own matrix ([`Finest::matrix`]). Returns it with the
+    /// level's row of each system row.
     fn finest(finest: &Finest<D>) -> (Self, Vec<u32>) {
         let shape = Shape::new(finest.dims);
         let cells: Vec<At<D>> = (finest.unknowns.par_iter().with_min_len(PAR_GRAIN))
             .map(|&c| coords(&shape.dims, c).map(|v| v as u16))
             .collect();
-        let (order, red, level_row) = red_black(&cells);
         let a = finest.matrix;
-        let to_level = |r: u32| {
-            if r == NONE {
-                NONE
-            } else {
-                level_row[r as usize]
+        Self::build(shape, &cells, 1.0, |j, _, level_row| {
+            let to_level = |r: u32| {
+                if r == NONE {
+                    NONE
+                } else {
+                    level_row[r as usize]
+                }
+            };
+            Stencil {
+                plus: a.plus[j].map(to_level),
+                minus: a.minus[j].map(to_level),
+                count: a.diag[j] as u8,
             }
-        };
-        let stencil = (order.par_iter().with_min_len(ROW_GRAIN))
-            .map(|&j| Stencil {
-                plus: a.plus[j as usize].map(to_level),
-                minus: a.minus[j as usize].map(to_level),
-                count: a.diag[j as usize] as u8,
-            })
-            .collect();
-        let at: Vec<At<D>> = order.par_iter().map(|&j| cells[j as usize]).collect();
-        let row = Self::cell_rows(&shape, &at);
-        let op = Self::of(shape, row, at, red, stencil, 1.0);
-        (op, level_row)
+        })
     }
 
     /// A coarser level: the stencil of the module doc on `cells`, scaled by `scale`.
     fn new(cells: &Cells<D>, scale: f64) -> Self {
-        let shape = cells.shape;
         let unknown = cells.unknowns();
-        let (order, red, _) = red_black(&unknown);
-        let at: Vec<At<D>> = order.par_iter().map(|&k| unknown[k as usize]).collect();
-        let row = Self::cell_rows(&shape, &at);
-        let stencil = (at.par_iter().with_min_len(ROW_GRAIN))
-            .map(|&c| Self::stencil_of(cells, &row, widen(c)))
-            .collect();
-        Self::of(shape, row, at, red, stencil, scale)
+        let stencil =
+            |k: usize, row: &[u32], _: &[u32]| Self::stencil_of(cells, row, widen(unknown[k]));
+        Self::build(cells.shape, &unknown, scale, stencil).0
     }
 
-    fn of(
+    /// The level of `scale` whose rows are `cells` (ascending) in the order of [`red_black`],
+    /// the stencil of each from `stencil(k, row, level_row)`: `k` its index in `cells`, `row`
+    /// [`Operator::row`], `level_row` the row of each of `cells`. Returns it with `level_row`.
+    fn build(
         shape: Shape<D>,
-        row: Vec<u32>,
-        at: Vec<At<D>>,
-        red: usize,
-        stencil: Vec<Stencil<D>>,
+        cells: &[At<D>],
         scale: f64,
-    ) -> Self {
-        Operator {
+        stencil: impl Fn(usize, &[u32], &[u32]) -> Stencil<D> + Sync,
+    ) -> (Self, Vec<u32>) {
+        let (order, red, level_row) = red_black(cells);
+        let at: Vec<At<D>> = order.par_iter().map(|&k| cells[k as usize]).collect();
+        let mut row = vec![0u32; shape.cells()];
+        for (r, &c) in at.iter().enumerate() {
+            row[shape.index(widen(c))] = r as u32 + 1;
+        }
+        let stencil = (order.par_iter().with_min_len(ROW_GRAIN))
+            .map(|&k| stencil(k as usize, &row, &level_row))
+            .collect();
+        let op = Operator {
             shape,
             row,
             at,
@@ -351,16 +351,8 @@ impl<const D: usize> Operator<D> {
             stencil,
             scale,
             inverse: std::array::from_fn(|n| 1.0 / (scale * n.max(1) as f64)),
-        }
-    }
-
-    /// [`Operator::row`] of the rows at `at`.
-    fn cell_rows(shape: &Shape<D>, at: &[At<D>]) -> Vec<u32> {
-        let mut row = vec![0u32; shape.cells()];
-        for (r, &c) in at.iter().enumerate() {
-            row[shape.index(widen(c))] = r as u32 + 1;
-        }
-        row
+        };
+        (op, level_row)
     }
 
     /// The row of cell `c`: its neighbours across open faces.
@@ -527,8 +519,7 @@ impl<'a, const D: usize> Cells<'a, D> {
             return false;
         }
         if self.side == 1 {
-            let wet = |c: usize| (self.finest.class)(c) != CellClass::Neumann;
-            return wet(i) && wet(i + self.shape.stride[a]);
+            return self.wet(i) && self.wet(i + self.shape.stride[a]);
         }
         match self.code[i] {
             0 => self.far_open(c, a),
@@ -568,11 +559,15 @@ impl<'a, const D: usize> Cells<'a, D> {
         lo[a] = (c[a] + 1) * self.side - 1;
         hi[a] = lo[a] + 1;
         debug_assert!(hi[a] < fine.dims[a], "the next cell is inside the grid");
-        let wet = |f: usize| (self.finest.class)(f) != CellClass::Neumann;
         block_cells(lo, hi).any(|f| {
             let i = fine.index(f);
-            wet(i) && wet(i + fine.stride[a])
+            self.wet(i) && self.wet(i + fine.stride[a])
         })
+    }
+
+    /// Whether finest cell `f` is not Neumann.
+    fn wet(&self, f: usize) -> bool {
+        (self.finest.class)(f) != CellClass::Neumann
     }
 
     /// The unknown cells of a coarser level, ascending.

@@ -62,7 +62,6 @@ pub fn check_cell_counts<const D: usize>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::PAR_GRAIN;
 
     /// One particle per cell of a full tank, then one moved: the check names the first broken
     /// cell in index order, with the reason, whatever the thread count.
@@ -104,12 +103,11 @@ mod tests {
         cell_count_check_names_the_first_broken_cell::<3>();
     }
 
-    /// A grid of many lines, searched in parallel pieces: the first broken cell is found in
-    /// order across them, in the last line too, on one thread or two.
+    /// A grid of many lines, searched in parallel pieces (of 64 lines): the first broken cell
+    /// is found in order across them, in the last line too, on one thread or two.
     #[test]
     fn cell_count_check_searches_every_line_in_order() {
         let g = Grid::new([211, 211]);
-        assert!(g.num_cells() > 2 * PAR_GRAIN && g.num_cells() % PAR_GRAIN != 0);
         let centers: Vec<_> = (0..g.num_cells())
             .map(|c| g.center(g.cell_coords(c)))
             .collect();
@@ -123,7 +121,8 @@ mod tests {
             let check = || check_cell_counts(&g, &centers, &prev, &solid, 1, None, &all);
             pool.expect("a thread pool").install(check).unwrap_err().0
         };
-        let (late, early, last) = (2 * PAR_GRAIN + 5, PAR_GRAIN + 7, g.num_cells() - 1);
+        let (late, early) = (g.cell_index([5, 150]), g.cell_index([7, 70]));
+        let last = g.num_cells() - 1;
         for threads in [1, 2] {
             let named = |c: usize| format!("solid cell {:?} holds 1", g.cell_coords(c));
             assert!(first_broken(&[late, early], threads).contains(&named(early)));
