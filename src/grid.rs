@@ -64,6 +64,16 @@ impl NearCells {
         .collect();
         NearCells { cells, lines }
     }
+
+    /// Whether cell `c` is in the set.
+    pub fn holds(&self, c: usize) -> bool {
+        self.cells[c]
+    }
+
+    /// Whether line `l` of cells along axis 0 holds a cell of the set.
+    pub fn line_holds(&self, l: usize) -> bool {
+        self.lines[l]
+    }
 }
 
 impl<const D: usize> Grid<D> {

@@ -21,7 +21,7 @@ pub fn cell_volume(markings: &Markings, mu: u32, c: usize) -> f64 {
     if markings.kind[c] != CellKind::Fluid {
         return 0.0;
     }
-    match markings.depth[c] {
+    match markings.depth(c) {
         d if d >= -1 => (markings.count[c] as f64 / mu as f64).min(1.0),
         _ => 1.0,
     }
@@ -238,7 +238,7 @@ mod tests {
             }
         }
         let m = Markings::compute(&g, &pos, &[false; 36]);
-        assert_eq!(m.depth[g.cell_index([0, 0])], -3);
+        assert_eq!(m.depth(g.cell_index([0, 0])), -3);
         let v = volume_cells(&m, mu, &Active::all(&g));
         assert!((v - (24.0 - 0.5)).abs() < 1e-12, "{v}");
     }

@@ -72,7 +72,6 @@ impl<const D: usize> Simulation<D> {
         let mut state = State::new(config);
         let mut method = settings.kind.build::<D>(settings);
         method.start(&mut state);
-        state.activate();
         Self {
             state,
             method,
@@ -213,7 +212,6 @@ impl<const D: usize> Simulation<D> {
 /// fluid without particles, and acts on the new markings (the band's exchange with the deep).
 fn refresh_markings<const D: usize>(s: &mut State<D>, m: &mut dyn FluidMethod<D>) {
     let keep = m.before_markings(s.particles_mut());
-    let previous = s.remark(keep.as_deref());
-    s.activate();
+    let previous = s.remark(keep.as_ref());
     m.after_markings(s, &previous);
 }

@@ -17,11 +17,31 @@ use std::ops::Range;
 const LINE_GRAIN: usize = 64;
 
 /// An empty span: the identity of [`hull`].
-const EMPTY: [u32; 2] = [u32::MAX, 0];
+pub(crate) const EMPTY: [u32; 2] = [u32::MAX, 0];
 
 /// The smallest span holding both.
-fn hull(a: [u32; 2], b: [u32; 2]) -> [u32; 2] {
+pub(crate) fn hull(a: [u32; 2], b: [u32; 2]) -> [u32; 2] {
     [a[0].min(b[0]), a[1].max(b[1])]
+}
+
+/// Per line of cells along axis 0, the hull of its cells where `flag` holds, [`EMPTY`] where
+/// none does (one pass over every cell).
+pub(crate) fn line_hulls<const D: usize>(
+    grid: &Grid<D>,
+    flag: impl Fn(usize) -> bool + Sync,
+) -> Vec<[u32; 2]> {
+    let n0 = grid.dims[0];
+    (0..grid.num_cells() / n0)
+        .into_par_iter()
+        .with_min_len(LINE_GRAIN)
+        .map(|l| {
+            let line = l * n0..(l + 1) * n0;
+            match line.clone().position(&flag) {
+                None => EMPTY,
+                Some(lo) => [lo as u32, (n0 - line.rev().position(&flag).unwrap()) as u32],
+            }
+        })
+        .collect()
 }
 
 /// Each line's span widened by `margin` cells along axis 0, then made the hull of the spans of
@@ -106,19 +126,13 @@ impl<const D: usize> Active<D> {
     /// The cells within `margin` cells of a cell where `seed` holds (along every axis at
     /// once: the cube of side `2 margin + 1` around each), each line's as one span.
     pub fn around(grid: &Grid<D>, seed: impl Fn(usize) -> bool + Sync, margin: usize) -> Self {
-        let n0 = grid.dims[0];
-        let spans = (0..grid.num_cells() / n0)
-            .into_par_iter()
-            .with_min_len(LINE_GRAIN)
-            .map(|l| {
-                let line = l * n0..(l + 1) * n0;
-                match line.clone().position(&seed) {
-                    None => EMPTY,
-                    Some(lo) => [lo as u32, (n0 - line.rev().position(&seed).unwrap()) as u32],
-                }
-            })
-            .collect();
-        Self::from_spans(grid, dilate(&grid.dims, spans, margin))
+        Self::around_spans(grid, line_hulls(grid, seed), margin)
+    }
+
+    /// As [`Self::around`], from each line's hull of its seeds (one span per line of cells
+    /// along axis 0, [`EMPTY`] where it has none).
+    pub(crate) fn around_spans(grid: &Grid<D>, seeds: Vec<[u32; 2]>, margin: usize) -> Self {
+        Self::from_spans(grid, dilate(&grid.dims, seeds, margin))
     }
 
     /// As [`Self::around`] with the cells that hold one of the points `pos` (inside the
@@ -133,8 +147,7 @@ impl<const D: usize> Active<D> {
             grid.cell_of(x)
                 .unwrap_or_else(|| panic!("point {:?} is outside the domain", x.as_slice()))
         });
-        let spans = line_spans(&grid.dims, cells);
-        Self::from_spans(grid, dilate(&grid.dims, spans, margin))
+        Self::around_spans(grid, line_spans(&grid.dims, cells), margin)
     }
 
     /// The ranges from one span per line of cells.

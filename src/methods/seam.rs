@@ -8,7 +8,7 @@
 use super::cost::{Footprint, StepCost};
 use super::options::Flag;
 use crate::draw::{LayerView, Log, Panel};
-use crate::grid::{MacField, Vector};
+use crate::grid::{MacField, NearCells, Vector};
 use crate::metrics::InvariantViolation;
 use crate::sim::markings::Markings;
 use crate::sim::solids::ObstacleMode;
@@ -199,7 +199,7 @@ pub trait FluidMethod<const D: usize>: MethodRecording<D> + Send {
     /// Just before new markings are computed from the particles (`s.markings` are still the
     /// previous ones): the method may resample its particles (nbflip) and returns the cells
     /// that stay fluid even without particles.
-    fn before_markings(&mut self, _s: ParticlesMut<'_, D>) -> Option<Vec<bool>> {
+    fn before_markings(&mut self, _s: ParticlesMut<'_, D>) -> Option<NearCells> {
         None
     }
 

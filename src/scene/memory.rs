@@ -16,11 +16,11 @@
 
 use super::Scene;
 use super::{ErrorKind, SceneError};
-use crate::grid::Grid;
+use crate::grid::{Grid, NearCells};
 use crate::methods::Holds;
 use crate::sim::markings::Markings;
 use crate::sim::solids::Solids;
-use crate::sim::{active_cells, SimConfig};
+use crate::sim::SimConfig;
 
 /// The process before any simulation: code, the thread pool, the scene.
 const BASE_BYTES: f64 = 12.0 * MIB;
@@ -230,17 +230,13 @@ impl SeededLiquid {
         let (held_cells, active_cells) = match holds {
             Holds::All => (cells, None),
             Holds::Band { layers, .. } => {
-                let m = Markings::compute_keeping(
-                    grid,
-                    &[],
-                    &solids.solid,
-                    Some(&liquid),
-                    solids.moving_mask(),
-                );
-                let held = (0..m.kind.len())
-                    .filter(|&c| m.is_fluid(c) && m.depth[c] > -(layers as i32))
+                let liquid = NearCells::new(grid, liquid);
+                let (m, active) =
+                    Markings::compute_keeping(grid, &[], solids.cells(), Some(&liquid));
+                let held = (m.fluid_ranges().iter().flat_map(|r| r.clone()))
+                    .filter(|&c| m.is_fluid(c) && m.depth(c) > -(layers as i32))
                     .count();
-                (held, Some(active_cells(grid, &m, &solids).num_cells()))
+                (held, Some(active.num_cells()))
             }
         };
         let rest_cells = match holds {

@@ -55,8 +55,8 @@ impl Band {
         grid: &Grid<D>,
         m: &Markings,
         active: &Active<D>,
-    ) -> Vec<bool> {
-        active.flags(grid, |c| m.is_fluid(c) && !m.surface[c])
+    ) -> NearCells {
+        active.near_cells(grid, |c| m.is_fluid(c) && !m.surface[c])
     }
 
     /// The particle count emitters see: deep cells hold imaginary particles, so they count as

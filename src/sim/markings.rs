@@ -2,8 +2,10 @@
 //! def. surface, bubbles (def. bubble), the depth of def. depth and the band levels of
 //! sec. band_method (deep, band interface, band, surface).
 
-use crate::grid::{Cell, Grid, Vector};
+use crate::grid::active::{hull, line_hulls, line_spans, par_runs, Active, EMPTY};
+use crate::grid::{Cell, Grid, NearCells, Vector};
 use rayon::prelude::*;
+use std::ops::Range;
 use std::sync::atomic::{AtomicI32, Ordering::Relaxed};
 
 /// What occupies a cell (its number is how a checkpoint stores it).
@@ -99,6 +101,15 @@ impl DepthLevel {
 /// Depth assigned to non-fluid cells (def. depth: "an arbitrary positive number").
 pub const DEPTH_NOT_FLUID: i32 = 1;
 
+/// How far the active cells reach beyond the fluid cells. After the projection, a step reads
+/// the grid velocity within 2 cells of a fluid cell: a particle (always in a fluid cell) moves
+/// at most `cfl <= 1` cell and its interpolation stencil reaches one cell further, and the
+/// band's semi-Lagrangian trace back from a fluid cell's face reaches as far. Those faces take
+/// their values from the extrapolation's 2 rings, which read known flags one face further
+/// (5 cells); one cell more keeps them clear of the set's edge, where the passes stop and a
+/// ring misses the neighbours beyond.
+pub const ACTIVE_MARGIN: usize = 6;
+
 /// The markings of every cell, derived from particle positions and solids.
 #[derive(Clone, Debug, Default)]
 pub struct Markings {
@@ -107,9 +118,25 @@ pub struct Markings {
     pub count: Vec<u32>,
     /// Fluid cells with a non-fluid Moore neighbour inside the domain (def. surface).
     pub surface: Vec<bool>,
-    /// Signed discrete distance from the surface (def. depth): 0 on the surface, -1, -2, ...
-    /// inwards, [`DEPTH_NOT_FLUID`] elsewhere.
-    pub depth: Vec<i32>,
+    /// The depth of each fluid cell ([`Markings::depth`]); the entries of other cells are not
+    /// kept (a pass over the box would cost as much as the rest of the markings).
+    pub(super) depth: Vec<i32>,
+    /// One index range per line of cells along axis 0 that holds a fluid cell: the hull of its
+    /// fluid cells. A pass that asks only about fluid cells visits these.
+    fluid: Vec<Range<usize>>,
+}
+
+/// The solid cells markings are made around: every cell's flag, each line's hull of them (so
+/// that the markings find them without a pass over the box) and the moving obstacles' cells.
+#[derive(Clone, Copy)]
+pub struct SolidCells<'a> {
+    pub solid: &'a [bool],
+    /// Per line of cells along axis 0, the hull `[lo, hi)` of its solid cells along the line
+    /// (`lo >= hi` where there is none).
+    pub lines: &'a [[u32; 2]],
+    /// The moving obstacles' cells, when there are obstacles (without them nothing moves, and
+    /// the markings need not look at every fluid cell's neighbours for one).
+    pub moving: Option<&'a [bool]>,
 }
 
 impl Markings {
@@ -121,60 +148,86 @@ impl Markings {
         positions: &[Vector<D>],
         solid: &[bool],
     ) -> Self {
-        Self::compute_keeping(grid, positions, solid, None, None)
+        let lines = line_hulls(grid, |c| solid[c]);
+        let solids = SolidCells {
+            solid,
+            lines: &lines,
+            moving: None,
+        };
+        Self::compute_keeping(grid, positions, solids, None).0
     }
 
-    /// As [`Self::compute`], but cells flagged in `keep` are fluid even without particles: with
-    /// the band method (sec. band_method), the fluid cells below the surface of the previous
-    /// markings, among them the deep, whose particles are imaginary. Fluid cells touching a
-    /// cell of `moving` (a moving obstacle) are surface, to give it room (sec. 7).
+    /// As [`Self::compute`], with their active cells: those within [`ACTIVE_MARGIN`] of a
+    /// fluid cell or a moving obstacle's cell. Cells of `keep` are fluid even without
+    /// particles: with the band method (sec. band_method), the fluid cells below the surface
+    /// of the previous markings, among them the deep, whose particles are imaginary. Fluid
+    /// cells touching a moving obstacle's cell are surface, to give it room (sec. 7).
+    ///
+    /// No pass visits the box: kinds are found on each line's hull of its particles' cells
+    /// (the whole line where `keep` holds a cell) and of its solid cells, empty elsewhere
+    /// without a write; surface and depth on the active cells, which hold every fluid cell's
+    /// neighbours.
     pub fn compute_keeping<const D: usize>(
         grid: &Grid<D>,
         positions: &[Vector<D>],
-        solid: &[bool],
-        keep: Option<&[bool]>,
-        moving: Option<&[bool]>,
-    ) -> Self {
-        let n = grid.num_cells();
-        let mut count = vec![0u32; n];
+        solids: SolidCells,
+        keep: Option<&NearCells>,
+    ) -> (Self, Active<D>) {
+        let mut count = vec![0u32; grid.num_cells()];
         for x in positions {
             count[grid.cell_index_of(x)] += 1;
         }
-        let kind: Vec<CellKind> = (0..n)
-            .into_par_iter()
-            .with_min_len(crate::PAR_GRAIN)
-            .map(|c| {
-                if solid[c] {
-                    CellKind::Solid
-                } else if count[c] > 0 || keep.is_some_and(|k| k[c]) {
-                    CellKind::Fluid
-                } else {
-                    CellKind::Empty
-                }
-            })
-            .collect();
+        let (kind, fluid, seeds) = kinds(grid, positions, &count, solids, keep);
+        let active = Active::around_spans(grid, seeds, ACTIVE_MARGIN);
         let steps = moore_steps(grid);
-        let surface: Vec<bool> = (0..n)
-            .into_par_iter()
-            .with_min_len(crate::PAR_GRAIN)
-            .map(|c| {
-                kind[c] == CellKind::Fluid
-                    && any_moore_neighbour(grid, &steps, c, |m| {
-                        kind[m] == CellKind::Empty || moving.is_some_and(|mv| mv[m])
-                    })
-            })
-            .collect();
-        let depth = depth(grid, &kind, &surface);
+        let surface = active.flags(grid, |c| {
+            kind[c] == CellKind::Fluid
+                && any_moore_neighbour(grid, &steps, c, |m| {
+                    kind[m] == CellKind::Empty || solids.moving.is_some_and(|mv| mv[m])
+                })
+        });
+        let depth = depth(grid, &kind, &surface, &active);
+        let fluid = ranges(grid, &fluid);
+        let markings = Self {
+            kind,
+            count,
+            surface,
+            depth,
+            fluid,
+        };
+        (markings, active)
+    }
+
+    /// Markings of the given cells (from a checkpoint; `depth` must hold every fluid cell's).
+    pub fn from_cells<const D: usize>(
+        grid: &Grid<D>,
+        kind: Vec<CellKind>,
+        count: Vec<u32>,
+        surface: Vec<bool>,
+        depth: Vec<i32>,
+    ) -> Self {
+        let fluid = ranges(grid, &line_hulls(grid, |c| kind[c] == CellKind::Fluid));
         Self {
             kind,
             count,
             surface,
             depth,
+            fluid,
         }
     }
 
     pub fn is_fluid(&self, c: usize) -> bool {
         self.kind[c] == CellKind::Fluid
+    }
+
+    /// The signed discrete distance of cell `c` from the surface (def. depth): 0 on the
+    /// surface, -1, -2, ... inwards (`i32::MIN` in fluid no surface reaches, a closed, full
+    /// container), [`DEPTH_NOT_FLUID`] in other cells.
+    pub fn depth(&self, c: usize) -> i32 {
+        match self.is_fluid(c) {
+            true => self.depth[c],
+            false => DEPTH_NOT_FLUID,
+        }
     }
 
     pub fn class(&self, c: usize, mu: u32) -> MarkingClass {
@@ -189,39 +242,120 @@ impl Markings {
 
     /// The band level of cell `c` for band parameter `r`.
     pub fn level(&self, c: usize, r: u32) -> DepthLevel {
-        DepthLevel::of(self.depth[c], r)
+        DepthLevel::of(self.depth(c), r)
     }
 
     /// Whether `c` is in the band interface or the deep, `C_<=-R`: the region whose particle
     /// count the band constraint controls (eq. band_con).
     pub fn at_or_below_interface(&self, c: usize, r: u32) -> bool {
-        self.kind[c] == CellKind::Fluid && self.depth[c] <= -(r as i32)
+        self.is_fluid(c) && self.depth[c] <= -(r as i32)
+    }
+
+    /// Index ranges, ascending, that hold every fluid cell (one per line of cells along axis
+    /// 0 that holds any, the hull of its fluid cells).
+    pub fn fluid_ranges(&self) -> &[Range<usize>] {
+        &self.fluid
     }
 
     pub fn fluid_cells(&self) -> usize {
-        self.kind.iter().filter(|k| **k == CellKind::Fluid).count()
+        let fluid = self.fluid.par_iter().flat_map_iter(|r| r.clone());
+        fluid.filter(|&c| self.is_fluid(c)).count()
     }
 }
 
-/// Breadth-first depth over the von Neumann neighbourhood from the surface cells (def. depth).
-/// Fluid cells that no surface reaches (a closed, completely full container) get `i32::MIN`.
+/// Each cell's kind, with per line of cells along axis 0 the hull of its fluid cells and that
+/// of its fluid cells and moving obstacles' cells (the seeds of the active cells). A line is
+/// visited only on the hull of its particles' cells (the whole line where `keep` holds a
+/// cell) and on that of its solid cells: no other cell can be fluid or solid.
+fn kinds<const D: usize>(
+    grid: &Grid<D>,
+    positions: &[Vector<D>],
+    count: &[u32],
+    solids: SolidCells,
+    keep: Option<&NearCells>,
+) -> (Vec<CellKind>, Vec<[u32; 2]>, Vec<[u32; 2]>) {
+    let n0 = grid.dims[0];
+    let cells = positions
+        .par_iter()
+        .map(|x| grid.cell_of(x).expect("counted, so inside"));
+    let held = line_spans(&grid.dims, cells);
+    let mut kind = empty_kinds(grid.num_cells());
+    let (fluid, seeds) = (kind.par_chunks_mut(n0).enumerate())
+        .with_min_len(crate::PAR_GRAIN.div_ceil(n0))
+        .map(|(l, line)| {
+            let (at, [lo, hi]) = (l * n0, solids.lines[l]);
+            let mut moving = EMPTY;
+            for x in lo..hi {
+                let c = at + x as usize;
+                if solids.solid[c] {
+                    line[x as usize] = CellKind::Solid;
+                    if solids.moving.is_some_and(|m| m[c]) {
+                        moving = hull(moving, [x, x + 1]);
+                    }
+                }
+            }
+            let [lo, hi] = match keep {
+                Some(k) if k.line_holds(l) => [0, n0 as u32],
+                _ => held[l],
+            };
+            let mut fluid = EMPTY;
+            for x in lo..hi {
+                let c = at + x as usize;
+                let filled = count[c] > 0 || keep.is_some_and(|k| k.holds(c));
+                if filled && !solids.solid[c] {
+                    line[x as usize] = CellKind::Fluid;
+                    fluid = hull(fluid, [x, x + 1]);
+                }
+            }
+            (fluid, hull(fluid, moving))
+        })
+        .unzip();
+    (kind, fluid, seeds)
+}
+
+/// `n` empty cells, zeroed by the allocator: the pages no pass writes are never touched.
+fn empty_kinds(n: usize) -> Vec<CellKind> {
+    const _: () = assert!(CellKind::Empty as u8 == 0);
+    let mut bytes = std::mem::ManuallyDrop::new(vec![0u8; n]);
+    // SAFETY: `CellKind` is `repr(u8)`, so it has the size and alignment of `u8`, and a zero
+    // byte is `CellKind::Empty` (asserted above); the allocation passes whole, with its
+    // length and capacity, from the forgotten vector to the new one.
+    unsafe { Vec::from_raw_parts(bytes.as_mut_ptr().cast(), bytes.len(), bytes.capacity()) }
+}
+
+/// The index ranges of one span per line of cells along axis 0 (empty spans left out).
+fn ranges<const D: usize>(grid: &Grid<D>, spans: &[[u32; 2]]) -> Vec<Range<usize>> {
+    let n0 = grid.dims[0];
+    (spans.iter().enumerate())
+        .filter(|(_, s)| s[0] < s[1])
+        .map(|(l, s)| l * n0 + s[0] as usize..l * n0 + s[1] as usize)
+        .collect()
+}
+
+/// Breadth-first depth over the von Neumann neighbourhood from the surface cells (def. depth),
+/// over the cells of `active`, which holds every fluid cell. Fluid cells that no surface
+/// reaches (a closed, completely full container) get `i32::MIN`; other cells keep 0.
 ///
 /// Level by level, a large level's cells in parallel: each unvisited fluid neighbour is claimed
 /// once, by an atomic exchange, for the next level. A cell's depth is its distance from the
 /// surface, the same whichever cell claims it, so the result does not depend on the threads.
-fn depth<const D: usize>(grid: &Grid<D>, kind: &[CellKind], surface: &[bool]) -> Vec<i32> {
-    let mut depth: Vec<i32> = (kind.par_iter().zip(surface).with_min_len(crate::PAR_GRAIN))
-        .map(|(k, &s)| match (*k == CellKind::Fluid, s) {
-            (true, true) => 0,
-            (true, false) => i32::MIN,
-            (false, _) => DEPTH_NOT_FLUID,
-        })
-        .collect();
-    // Cells carry their coordinates: no division per cell.
-    let mut level: Vec<(usize, Cell<D>)> = (0..kind.len())
-        .into_par_iter()
-        .with_min_len(crate::PAR_GRAIN)
-        .filter(|&c| surface[c])
+fn depth<const D: usize>(
+    grid: &Grid<D>,
+    kind: &[CellKind],
+    surface: &[bool],
+    active: &Active<D>,
+) -> Vec<i32> {
+    let mut depth = vec![0; kind.len()];
+    par_runs(active.cells(), &mut depth).for_each(|(r, run)| {
+        for (c, d) in r.zip(run) {
+            if kind[c] == CellKind::Fluid && !surface[c] {
+                *d = i32::MIN;
+            }
+        }
+    });
+    // Cells carry their coordinates: no division per cell in the search.
+    let mut level: Vec<(usize, Cell<D>)> = (active.cells().par_iter())
+        .flat_map_iter(|r| r.clone().filter(|&c| surface[c]))
         .map(|c| (c, grid.cell_coords(c)))
         .collect();
     const _: () = assert!(std::mem::align_of::<AtomicI32>() == std::mem::align_of::<i32>());
@@ -304,10 +438,10 @@ mod tests {
         assert!(m.surface[g.cell_index([0, 3])]);
         assert!(!m.surface[g.cell_index([0, 0])]);
         assert!(!m.surface[g.cell_index([3, 2])]);
-        assert_eq!(m.depth[g.cell_index([3, 2])], -1);
-        assert_eq!(m.depth[g.cell_index([2, 1])], -2);
-        assert_eq!(m.depth[g.cell_index([0, 0])], -3);
-        assert_eq!(m.depth[g.cell_index([6, 6])], DEPTH_NOT_FLUID);
+        assert_eq!(m.depth(g.cell_index([3, 2])), -1);
+        assert_eq!(m.depth(g.cell_index([2, 1])), -2);
+        assert_eq!(m.depth(g.cell_index([0, 0])), -3);
+        assert_eq!(m.depth(g.cell_index([6, 6])), DEPTH_NOT_FLUID);
     }
 
     #[test]
@@ -323,9 +457,86 @@ mod tests {
         let m = Markings::compute(&g, &pos, &[false; 27]);
         assert!(m.surface[g.cell_index([1, 1, 1])]);
         assert!(!m.surface[g.cell_index([0, 0, 0])]);
-        assert_eq!(m.depth[g.cell_index([0, 0, 0])], -3);
+        assert_eq!(m.depth(g.cell_index([0, 0, 0])), -3);
         assert_eq!(m.class(g.cell_index([0, 0, 0]), 2), MarkingClass::Bubble);
         assert_eq!(m.class(g.cell_index([0, 0, 0]), 1), MarkingClass::Inner);
+    }
+
+    /// Markings found without a pass over the box are those of every cell, by brute force: the
+    /// kinds (solid cells far from any fluid among them), surface, depths and active cells, and
+    /// the fluid's line ranges hold every fluid cell; in 2D and 3D, with a blob of particles,
+    /// stray ones, solids everywhere, moving ones and cells kept without particles.
+    #[test]
+    fn markings_on_the_active_cells_are_those_of_every_cell_2d_and_3d() {
+        use rand::{Rng, SeedableRng};
+        fn check<const D: usize>(dims: [usize; D], seed: u64) {
+            let g = Grid::new(dims);
+            let n = g.num_cells();
+            let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+            let near_corner = |c: usize| (0..D).all(|k| g.cell_coords(c)[k] < dims[k] / 3);
+            let solid: Vec<bool> = (0..n).map(|_| rng.random::<f64>() < 0.02).collect();
+            let by_blob = |c: usize| (0..D).all(|k| (10..16).contains(&g.cell_coords(c)[k]));
+            let moving: Vec<bool> = (0..n).map(|c| solid[c] && by_blob(c)).collect();
+            let keep: Vec<bool> = (0..n).map(|c| near_corner(c) && c % 5 < 3).collect();
+            let mut pos: Vec<Vector<D>> = (0..n)
+                .filter(|&c| (0..D).all(|k| (g.cell_coords(c)[k] as f64 - 8.0).abs() < 5.0))
+                .map(|c| g.center(g.cell_coords(c)))
+                .collect();
+            let stray = |_| Vector::<D>::from_fn(|k, _| rng.random::<f64>() * dims[k] as f64);
+            pos.extend((0..3).map(stray));
+            let lines = line_hulls(&g, |c| solid[c]);
+            let solids = SolidCells {
+                solid: &solid,
+                lines: &lines,
+                moving: Some(&moving),
+            };
+            let near = NearCells::new(&g, keep.clone());
+            let (m, active) = Markings::compute_keeping(&g, &pos, solids, Some(&near));
+            // By brute force, every cell.
+            let mut count = vec![0u32; n];
+            pos.iter().for_each(|x| count[g.cell_index_of(x)] += 1);
+            let kind: Vec<CellKind> = (0..n)
+                .map(|c| match (solid[c], count[c] > 0 || keep[c]) {
+                    (true, _) => CellKind::Solid,
+                    (false, true) => CellKind::Fluid,
+                    (false, false) => CellKind::Empty,
+                })
+                .collect();
+            let surface: Vec<bool> = (0..n)
+                .map(|c| {
+                    let open = |m: Cell<D>| {
+                        let m = g.cell_index(m);
+                        kind[m] == CellKind::Empty || moving[m]
+                    };
+                    kind[c] == CellKind::Fluid && g.moore_neighbors(g.cell_coords(c)).any(open)
+                })
+                .collect();
+            let fluid = |c: usize| kind[c] == CellKind::Fluid;
+            let want = depth(&g, &kind, &surface, &Active::all(&g));
+            let at = format!("{D}D");
+            let differs = |c: &usize| m.kind[*c] != kind[*c] || m.surface[*c] != surface[*c];
+            let wrong = (0..n).find(differs).map(|c| g.cell_coords(c));
+            assert_eq!(
+                wrong, None,
+                "{at}: the first cell of another kind or surface"
+            );
+            for c in (0..n).filter(|&c| fluid(c)) {
+                assert_eq!(m.depth(c), want[c], "{at}: depth of {:?}", g.cell_coords(c));
+                assert!(
+                    m.fluid_ranges().iter().any(|r| r.contains(&c)),
+                    "{at}: {c} in a range"
+                );
+            }
+            let around = Active::around(&g, |c| fluid(c) || moving[c], ACTIVE_MARGIN);
+            assert_eq!(active, around, "{at}: active cells");
+            assert!(active.num_cells() < n, "{at}: some cells inactive");
+            assert!(
+                (0..n).any(|c| solid[c] && !around.each_cell().any(|a| a == c)),
+                "{at}: a solid cell off the active set"
+            );
+        }
+        check([64, 48], 3);
+        check([40, 30, 36], 4);
     }
 
     /// The depth is each fluid cell's von Neumann distance from the nearest surface cell (by a
@@ -376,7 +587,17 @@ mod tests {
                 let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build();
                 let got = pool
                     .expect("a thread pool")
-                    .install(|| depth(&g, &kind, &surface));
+                    .install(|| depth(&g, &kind, &surface, &Active::all(&g)));
+                // Only the fluid's depths are kept.
+                let got: Vec<i32> = (got.into_iter().zip(&kind))
+                    .map(|(d, &k)| {
+                        if k == CellKind::Fluid {
+                            d
+                        } else {
+                            DEPTH_NOT_FLUID
+                        }
+                    })
+                    .collect();
                 assert_eq!(got, want, "{D}D, {threads} threads");
             }
         }

@@ -16,11 +16,12 @@ pub mod timestep;
 pub mod transfer;
 
 use crate::grid::active::Active;
-use crate::grid::{Grid, MacField, Vector};
+use crate::grid::{Grid, MacField, NearCells, Vector};
 use crate::metrics;
 use crate::particles::{self, Particles, Region};
 use crate::solvers::pcg::Preconditioner;
 use emit::Emitter;
+pub use markings::ACTIVE_MARGIN;
 use markings::{CellKind, Markings};
 use rand::SeedableRng;
 use solids::{Obstacle, ObstacleMode, Solids};
@@ -78,7 +79,7 @@ pub struct State<const D: usize> {
     pub solids: Solids<D>,
     pub markings: Markings,
     /// Where the step's grid passes work: the cells within [`ACTIVE_MARGIN`] of a fluid cell
-    /// or a moving obstacle's cell, from the current markings ([`State::activate`]).
+    /// or a moving obstacle's cell of the current markings.
     pub active: Active<D>,
     pub time_secs: f64,
     pub steps: u64,
@@ -89,17 +90,9 @@ pub struct State<const D: usize> {
     pub rng: SimRng,
 }
 
-/// How far the active cells reach beyond the fluid cells. After the projection, a step reads
-/// the grid velocity within 2 cells of a fluid cell: a particle (always in a fluid cell) moves
-/// at most `cfl <= 1` cell and its interpolation stencil reaches one cell further, and the
-/// band's semi-Lagrangian trace back from a fluid cell's face reaches as far. Those faces take
-/// their values from the extrapolation's 2 rings, which read known flags one face further
-/// (5 cells); one cell more keeps them clear of the set's edge, where the passes stop and a
-/// ring misses the neighbours beyond.
-pub const ACTIVE_MARGIN: usize = 6;
-
 /// The cells within [`ACTIVE_MARGIN`] of a fluid cell of `markings` or a moving obstacle's
-/// cell: a step's grid passes outside them would only write values no later pass reads.
+/// cell, by a pass over the box: for markings read from a checkpoint (new markings come with
+/// theirs, [`Markings::compute_keeping`]).
 pub(crate) fn active_cells<const D: usize>(
     grid: &Grid<D>,
     markings: &Markings,
@@ -186,18 +179,13 @@ impl<const D: usize> State<D> {
             config.jitter,
             &mut rng,
         );
-        let markings = Markings::compute_keeping(
-            &grid,
-            &particles.pos,
-            &solids.solid,
-            None,
-            solids.moving_mask(),
-        );
+        let (markings, active) =
+            Markings::compute_keeping(&grid, &particles.pos, solids.cells(), None);
         let total = particles.len();
         State {
             target_volume: total as f64 / config.mu() as f64,
             velocity: MacField::zeros(&grid),
-            active: active_cells(&grid, &markings, &solids),
+            active,
             markings,
             time_secs: 0.0,
             steps: 0,
@@ -210,12 +198,6 @@ impl<const D: usize> State<D> {
         }
     }
 
-    /// Finds the active cells again ([`State::active`]), after the markings or obstacles
-    /// changed.
-    pub fn activate(&mut self) {
-        self.active = active_cells(&self.grid, &self.markings, &self.solids);
-    }
-
     /// The volume measure of eq. volume as a percentage of `V*`.
     pub fn volume_percent(&self) -> f64 {
         if self.target_volume == 0.0 {
@@ -225,16 +207,13 @@ impl<const D: usize> State<D> {
         100.0 * metrics::volume_cells(&self.markings, mu, &self.active) / self.target_volume
     }
 
-    /// New markings from the particles; cells flagged in `keep` stay fluid without particles.
-    /// Returns the markings they replace.
-    pub fn remark(&mut self, keep: Option<&[bool]>) -> Markings {
-        let new = Markings::compute_keeping(
-            &self.grid,
-            &self.particles.pos,
-            &self.solids.solid,
-            keep,
-            self.solids.moving_mask(),
-        );
+    /// New markings from the particles and the obstacles where they are now, with their
+    /// active cells; cells of `keep` stay fluid without particles. Returns the markings they
+    /// replace.
+    pub fn remark(&mut self, keep: Option<&NearCells>) -> Markings {
+        let (pos, solids) = (&self.particles.pos, self.solids.cells());
+        let (new, active) = Markings::compute_keeping(&self.grid, pos, solids, keep);
+        self.active = active;
         std::mem::replace(&mut self.markings, new)
     }
 }

@@ -25,7 +25,10 @@ impl<const D: usize> State<D> {
         w.owned("markings.kind", &[m.kind.len()], kinds);
         w.slice("markings.count", &m.count);
         w.bools("markings.surface", &m.surface);
-        w.slice("markings.depth", &m.depth);
+        // The depth of every cell, `DEPTH_NOT_FLUID` off the fluid (the markings keep only
+        // the fluid's).
+        let depth = (0..m.kind.len()).map(|c| m.depth(c)).collect();
+        w.owned("markings.depth", &[m.kind.len()], depth);
         let obstacles = &self.solids.obstacles;
         let offsets: Vec<_> = obstacles.iter().map(|o| o.offset).collect();
         let velocities: Vec<_> = obstacles.iter().map(|o| o.velocity).collect();
@@ -44,7 +47,6 @@ impl<const D: usize> State<D> {
     /// The state a checkpoint holds, for `config` (the scene it was written from).
     pub fn restore(config: SimConfig<D>, r: &Reader) -> Result<Self, SnapshotError> {
         let grid = Grid::new(config.dims);
-        let n = grid.num_cells();
         let mut solids = super::solids::Solids::new(
             &grid,
             &config.solids,
@@ -61,7 +63,7 @@ impl<const D: usize> State<D> {
         for (a, c) in velocity.comp.iter_mut().enumerate() {
             *c = r.slice(&format!("velocity.{a}"), Some(c.len()))?;
         }
-        let markings = restore_markings(r, n)?;
+        let markings = restore_markings(r, &grid)?;
         Ok(State {
             active: super::active_cells(&grid, &markings, &solids),
             markings,
@@ -79,7 +81,8 @@ impl<const D: usize> State<D> {
     }
 }
 
-fn restore_markings(r: &Reader, n: usize) -> Result<Markings, SnapshotError> {
+fn restore_markings<const D: usize>(r: &Reader, grid: &Grid<D>) -> Result<Markings, SnapshotError> {
+    let n = grid.num_cells();
     let kind = (r.slice::<u8>("markings.kind", Some(n))?.into_iter())
         .map(|b| KINDS.get(b as usize).copied())
         .collect::<Option<Vec<_>>>()
@@ -87,12 +90,13 @@ fn restore_markings(r: &Reader, n: usize) -> Result<Markings, SnapshotError> {
             name: "markings.kind".into(),
             reason: "a cell kind is not 0, 1 or 2".into(),
         })?;
-    Ok(Markings {
+    Ok(Markings::from_cells(
+        grid,
         kind,
-        count: r.slice("markings.count", Some(n))?,
-        surface: r.bools("markings.surface", Some(n))?,
-        depth: r.slice("markings.depth", Some(n))?,
-    })
+        r.slice("markings.count", Some(n))?,
+        r.bools("markings.surface", Some(n))?,
+        r.slice("markings.depth", Some(n))?,
+    ))
 }
 
 /// The generator at the word of its stream where it was saved.

@@ -15,9 +15,10 @@
 //!   volume until it passes.
 //! - `naive` (option 2): it waits until the cells it would enter hold no particle.
 
+use crate::grid::active::line_hulls;
 use crate::grid::{Grid, Vector};
 use crate::particles::Region;
-use crate::sim::markings::Markings;
+use crate::sim::markings::{Markings, SolidCells};
 use std::collections::VecDeque;
 
 /// `lambda_penalty` of eq. solid_penalty (the paper's 1000), in squared cells.
@@ -222,6 +223,8 @@ pub struct Solids<const D: usize> {
     pub velocity: Vec<Vector<D>>,
     /// Cells of moving obstacles (their fluid neighbours are surface).
     pub moving: Vec<bool>,
+    /// Per line of cells along axis 0, the hull of its solid cells ([`SolidCells::lines`]).
+    lines: Vec<[u32; 2]>,
     /// The obstacles, at their current offsets.
     pub obstacles: Vec<Obstacle<D>>,
     pub mode: ObstacleMode,
@@ -252,6 +255,7 @@ impl<const D: usize> Solids<D> {
             solid: vec![],
             velocity: vec![],
             moving: vec![],
+            lines: vec![],
             obstacles: obstacles.to_vec(),
             mode,
         };
@@ -277,6 +281,7 @@ impl<const D: usize> Solids<D> {
                 self.moving[c] = o.velocity != Vector::<D>::zeros();
             }
         }
+        self.lines = line_hulls(grid, |c| self.solid[c]);
     }
 
     /// Puts the obstacles at `offsets` with `velocities` (one each, in order), as a step
@@ -296,6 +301,15 @@ impl<const D: usize> Solids<D> {
     /// the markings need not look at every cell's neighbours).
     pub fn moving_mask(&self) -> Option<&[bool]> {
         (!self.obstacles.is_empty()).then_some(&self.moving[..])
+    }
+
+    /// The solid cells as the markings see them.
+    pub fn cells(&self) -> SolidCells<'_> {
+        SolidCells {
+            solid: &self.solid,
+            lines: &self.lines,
+            moving: self.moving_mask(),
+        }
     }
 
     /// Cells no particle may be in: every solid, or with `ignore` only the static ones

@@ -4,7 +4,7 @@
 
 use crate::common::{ccp, load, run_sim, simulation};
 use cellflip::grid::active::Active;
-use cellflip::grid::{Grid, Vector};
+use cellflip::grid::{Grid, NearCells, Vector};
 use cellflip::methods::ccp::correct::band::{BandContext, BandVariant};
 use cellflip::methods::ccp::correct::guarantees::check_cell_counts;
 use cellflip::methods::ccp::correct::{correct, CorrectionSettings};
@@ -15,6 +15,7 @@ use cellflip::runner::Limit;
 use cellflip::scene::Overrides;
 use cellflip::sim::band::Band;
 use cellflip::sim::markings::{DepthLevel, Markings};
+use cellflip::sim::solids::{ObstacleMode, Solids};
 use cellflip::simulation::Simulation;
 
 /// Runs `steps` steps of a scene with method ccp and the given band, checking every step: the
@@ -288,15 +289,16 @@ fn a_move_into_a_full_interface_is_undone<const D: usize>() {
     let g = Grid::new([6; D]);
     let mu = 1;
     let n = g.num_cells();
-    let solid = vec![false; n];
+    let solids = Solids::new(&g, &[], &[], ObstacleMode::Couple);
+    let solid = &solids.solid;
     let layer = |c: usize| g.cell_coords(c)[1];
     let x_bar: Vec<Vector<D>> = (0..n)
         .filter(|&c| (2..4).contains(&layer(c)))
         .map(|c| g.center(g.cell_coords(c)))
         .collect();
     // Markings as the band method keeps them: layers 0..=1 are deep, fluid without particles.
-    let keep: Vec<bool> = (0..n).map(|c| layer(c) < 2).collect();
-    let prev = Markings::compute_keeping(&g, &x_bar, &solid, Some(&keep), None);
+    let keep = NearCells::new(&g, (0..n).map(|c| layer(c) < 2).collect());
+    let (prev, _) = Markings::compute_keeping(&g, &x_bar, solids.cells(), Some(&keep));
     let column = |y: usize| g.cell_index(std::array::from_fn(|k| if k == 1 { y } else { 2 }));
     assert_eq!(prev.level(column(3), 1), DepthLevel::Surface);
     assert_eq!(prev.level(column(2), 1), DepthLevel::Interface);
@@ -312,7 +314,7 @@ fn a_move_into_a_full_interface_is_undone<const D: usize>() {
             y
         })
         .collect();
-    let n_deep = keep.iter().filter(|k| **k).count();
+    let n_deep = (0..n).filter(|&c| keep.holds(c)).count();
     let mut objectives = vec![];
     for variant in BandVariant::ALL {
         let mut pos = x_hat.clone();
@@ -326,7 +328,7 @@ fn a_move_into_a_full_interface_is_undone<const D: usize>() {
             &x_bar,
             &mut pos,
             &prev,
-            &solid,
+            solid,
             mu,
             &CorrectionSettings::default(),
             Some(ctx),
@@ -340,7 +342,7 @@ fn a_move_into_a_full_interface_is_undone<const D: usize>() {
         assert_eq!(b.alpha, 0, "{at}");
         assert!(b.failure.is_none(), "{at}: {:?}", b.failure);
         assert_eq!(b.net_in, 0, "{at}");
-        check_cell_counts(&g, &pos, &prev, &solid, mu, Some(1), &Active::all(&g)).unwrap();
+        check_cell_counts(&g, &pos, &prev, solid, mu, Some(1), &Active::all(&g)).unwrap();
         if variant != BandVariant::Full {
             assert_eq!((b.n_in, b.n_out, b.s_in, b.n_move), (1, 0, -1, 1), "{at}");
         }

@@ -157,7 +157,7 @@ pub fn digest_state<const D: usize>(d: &mut Digest, sim: &Simulation<D>) {
         d.u64(m.kind[c] as u64);
         d.u64(m.count[c] as u64);
         d.u64(m.surface[c] as u64);
-        d.u64(m.depth[c] as u64);
+        d.u64(m.depth(c) as u64);
     }
     for o in &s.solids.obstacles {
         o.offset

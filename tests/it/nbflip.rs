@@ -6,7 +6,7 @@
 
 use crate::common::{load, run, run_at_rest, with};
 use cellflip::grid::active::Active;
-use cellflip::grid::{Grid, MacField, Vector};
+use cellflip::grid::{Grid, MacField, NearCells, Vector};
 use cellflip::methods::nbflip::levelset::{particle_radius, LevelSet};
 use cellflip::methods::nbflip::region::Region;
 use cellflip::methods::nbflip::{combine, NbflipReport, Resampling};
@@ -14,6 +14,7 @@ use cellflip::methods::MethodKind;
 use cellflip::particles::Particles;
 use cellflip::scene::{Overrides, Scene};
 use cellflip::sim::markings::Markings;
+use cellflip::sim::solids::{ObstacleMode, Solids};
 use cellflip::sim::transfer::particles_to_grid;
 use cellflip::simulation::{Simulation, StepReport};
 use rand::rngs::StdRng;
@@ -233,8 +234,9 @@ fn the_combination_takes_particles_in_the_band_and_the_grid_below_3d() {
         }
     }
     let vel = vec![Vector::<3>::new(0.0, 0.0, 1.0); pos.len()];
-    let keep: Vec<bool> = phi.phi.iter().map(|&v| v < 0.0).collect();
-    let m = Markings::compute_keeping(&g, &pos, &vec![false; g.num_cells()], Some(&keep), None);
+    let keep = NearCells::new(&g, phi.phi.iter().map(|&v| v < 0.0).collect());
+    let solids = Solids::new(&g, &[], &[], ObstacleMode::Couple);
+    let (m, _) = Markings::compute_keeping(&g, &pos, solids.cells(), Some(&keep));
     let (mut u, mut known) = particles_to_grid(&g, &pos, &vel);
     let mut grid_u = MacField::zeros(&g);
     grid_u.comp[2].iter_mut().for_each(|v| *v = -7.0);

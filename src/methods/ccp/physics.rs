@@ -6,7 +6,7 @@ use super::deep::{exchange_with_deep, DeepExchange};
 use super::record::CcpReport;
 use super::settings::CcpSettings;
 use crate::draw::{depth_level_classes, Log};
-use crate::grid::{MacField, Vector};
+use crate::grid::{MacField, NearCells, Vector};
 use crate::methods::seam::{FluidMethod, MethodRecording, MethodReport};
 use crate::metrics::InvariantViolation;
 use crate::sim::band::Band;
@@ -176,7 +176,7 @@ impl<const D: usize> FluidMethod<D> for CcpSim<D> {
         Ok(())
     }
 
-    fn before_markings(&mut self, s: ParticlesMut<'_, D>) -> Option<Vec<bool>> {
+    fn before_markings(&mut self, s: ParticlesMut<'_, D>) -> Option<NearCells> {
         self.band()
             .map(|_| Band::kept_cells(s.grid, s.markings, s.active))
     }

@@ -4,7 +4,7 @@ use super::levelset::{particle_radius, LevelSet, March, Side};
 use super::region::{Margin, Region};
 use crate::draw::{depth_level_classes, Log};
 use crate::grid::active::Active;
-use crate::grid::{Cell, Grid, MacField, Vector};
+use crate::grid::{Cell, Grid, MacField, NearCells, Vector};
 use crate::methods::seam::{FluidMethod, MethodRecording, MethodReport};
 use crate::metrics::InvariantViolation;
 use crate::particles::Particles;
@@ -227,7 +227,7 @@ fn surface_layer(dim: usize) -> f64 {
 impl<const D: usize> FluidMethod<D> for NbflipSim<D> {
     fn start(&mut self, s: &mut State<D>) {
         let keep = self.before_markings(s.particles_mut());
-        s.remark(keep.as_deref());
+        s.remark(keep.as_ref());
         // The first resampling thins the seeded liquid to the band: not part of step 1.
         self.step = NbflipReport::default();
     }
@@ -303,7 +303,7 @@ impl<const D: usize> FluidMethod<D> for NbflipSim<D> {
     }
 
     /// Steps 4 and 5; the level set's inside stays fluid.
-    fn before_markings(&mut self, s: ParticlesMut<'_, D>) -> Option<Vec<bool>> {
+    fn before_markings(&mut self, s: ParticlesMut<'_, D>) -> Option<NearCells> {
         self.rebuild_level_set(&s);
         let mu = s.config.mu();
         let resampling = self.resampling(s.grid, &s.solids.solid, mu);
@@ -312,7 +312,7 @@ impl<const D: usize> FluidMethod<D> for NbflipSim<D> {
         self.first_seed = s.particles.len() - rep.seeded;
         self.step.add(&rep);
         let phi = self.phi.phi.par_iter().with_min_len(crate::PAR_GRAIN);
-        Some(phi.map(|&v| v < 0.0).collect())
+        Some(NearCells::new(s.grid, phi.map(|&v| v < 0.0).collect()))
     }
 
     /// What resampling guarantees: every particle it kept lies inside the liquid and at most

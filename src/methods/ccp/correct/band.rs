@@ -18,7 +18,7 @@
 //!   solve greedily to optimality, as a min-cost flow ([`super::exact_paths`]).
 
 use crate::grid::{Grid, Vector};
-use crate::sim::markings::{CellKind, DepthLevel, Markings};
+use crate::sim::markings::{DepthLevel, Markings};
 use crate::solvers::lp::{self, SideConstraint};
 use crate::solvers::min_cost_flow::FlowStats;
 use rayon::prelude::*;
@@ -208,20 +208,17 @@ fn first_solve<const D: usize>(
 }
 
 /// `alpha_<=-R = alpha_-R + alpha_<-R`: particles missing from the band interface cells of the
-/// previous markings plus the room in the deep, `mu |C_<-R| - n_deep` (sec. band_con).
+/// previous markings plus the room in the deep, `mu |C_<-R| - n_deep` (sec. band_con). Over
+/// the lines of fluid, in parallel (the sum is of integers: exact in any order).
 pub fn room_at_or_below_interface(previous: &Markings, r: u32, mu: u32, n_deep: usize) -> i64 {
-    let mut alpha = -(n_deep as i64);
-    for c in 0..previous.kind.len() {
-        if previous.kind[c] != CellKind::Fluid {
-            continue;
-        }
-        match previous.level(c, r) {
-            DepthLevel::Interface => alpha += mu as i64 - previous.count[c] as i64,
-            DepthLevel::Deep => alpha += mu as i64,
-            _ => {}
-        }
-    }
-    alpha
+    let room = |c: usize| match previous.level(c, r) {
+        DepthLevel::Interface => mu as i64 - previous.count[c] as i64,
+        DepthLevel::Deep => mu as i64,
+        _ => 0,
+    };
+    let lines = previous.fluid_ranges().par_iter();
+    let room: i64 = lines.map(|l| l.clone().map(room).sum::<i64>()).sum();
+    room - n_deep as i64
 }
 
 /// `(n_in, n_out)` of a choice: its candidates in `gamma_in` and in `gamma_out`.

@@ -355,12 +355,8 @@ mod tests {
             let (w, h) = (rows[0].len(), rows.len());
             let grid = Grid::<2>::new([w, h]);
             let n = grid.num_cells();
-            let mut m = Markings {
-                kind: vec![CellKind::Empty; n],
-                count: vec![0; n],
-                surface: vec![false; n],
-                depth: vec![DEPTH_NOT_FLUID; n],
-            };
+            let (mut kinds, mut counts) = (vec![CellKind::Empty; n], vec![0; n]);
+            let (mut surface, mut depths) = (vec![false; n], vec![DEPTH_NOT_FLUID; n]);
             let (mut solid, mut x) = (vec![false; n], vec![]);
             for (row, line) in rows.iter().enumerate() {
                 for (i, ch) in line.chars().enumerate() {
@@ -374,14 +370,14 @@ mod tests {
                         's' | 'S' => (CellKind::Fluid, 0, 1 + "sS".find(ch).unwrap()),
                         _ => panic!("unknown cell '{ch}'"),
                     };
-                    (m.kind[c], m.depth[c], m.count[c]) = (kind, depth, count as u32);
-                    (solid[c], m.surface[c]) = (ch == '#', depth == 0);
+                    (kinds[c], depths[c], counts[c]) = (kind, depth, count as u32);
+                    (solid[c], surface[c]) = (ch == '#', depth == 0);
                     x.extend(std::iter::repeat_n(grid.center(cell), count));
                 }
             }
             Self {
+                previous: Markings::from_cells(&grid, kinds, counts, surface, depths),
                 grid,
-                previous: m,
                 solid,
                 x,
                 penalty: None,
