@@ -246,6 +246,12 @@ impl<const D: usize> Active<D> {
             .find_map_first(|r| r.clone().find(|&c| f(c)))
     }
 
+    /// How many active cells satisfy `f`, the lines in parallel.
+    pub fn count_cells(&self, f: impl Fn(usize) -> bool + Sync) -> usize {
+        let lines = self.cells.par_iter().with_min_len(LINE_GRAIN);
+        lines.map(|r| r.clone().filter(|&c| f(c)).count()).sum()
+    }
+
     /// How many cells are active.
     pub fn num_cells(&self) -> usize {
         self.cells.iter().map(|r| r.len()).sum()

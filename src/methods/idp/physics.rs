@@ -1,7 +1,7 @@
 //! Method idp's step: the hooks it implements (see the module doc of `super`).
 
 use crate::draw::Log;
-use crate::grid::active::Active;
+use crate::grid::active::{par_runs, Active};
 use crate::grid::{for_each_cell_weight, Grid, MacField, Vector};
 use crate::methods::seam::{FluidMethod, MethodRecording, MethodReport};
 use crate::sim::advect::{displace, CELL_MARGIN};
@@ -12,6 +12,7 @@ use crate::solvers::pcg::{PcgSettings, PcgStats};
 use rand::seq::SliceRandom;
 use rand::Rng;
 use rayon::prelude::*;
+use std::collections::HashMap;
 
 /// Bound on the density error per step, `|s| <= 0.5` (reference `knComputeDensity`; "as
 /// suggested in the paper to avoid displacement of more than half a cell at a time", Blub).
@@ -105,8 +106,6 @@ pub struct Resample<'a, const D: usize, R: Rng> {
 #[derive(Clone, Debug, Default)]
 pub struct IdpReport<const D: usize> {
     pub pcg: PcgStats,
-    /// The density error of each cell as solved (clamped; 0 outside the solve).
-    pub error: Vec<f64>,
     /// Each cell's [`ErrorClass`], for recordings.
     pub class: Vec<u8>,
     /// `(before, after)` of every k-th particle, at most [`MAX_ARROWS`].
@@ -126,6 +125,10 @@ pub struct IdpReport<const D: usize> {
 }
 
 /// The projection: density error, surface rule, clamp, second solve, displacement, move.
+///
+/// Its grid passes visit the cells within one of a particle's cell ([`near_particles`]) and
+/// the faces beside them; the other cells' values are those of no particle (0, and class
+/// [`ErrorClass::NotFluid`]), left in fresh zeroed arrays.
 pub fn project_density<const D: usize, R: Rng>(
     inp: &Inputs<'_, D>,
     pos: &mut [Vector<D>],
@@ -134,36 +137,44 @@ pub fn project_density<const D: usize, R: Rng>(
 ) -> IdpReport<D> {
     let grid = inp.grid;
     let mu = inp.per_axis.pow(D as u32) as f64;
-    let fluid = fluid_cells(grid, inp.solid, pos);
+    let near = near_particles(grid, pos);
+    let fluid = fluid_cells(grid, inp.solid, pos, &near);
     let mut rep = IdpReport::default();
     let (push, pushed) = push_field(grid, inp.solid, pos);
     rep.pushed = pushed;
-    let mut s = density_error(inp, pos, &fluid, &push);
-    rep.overdense = s.iter().filter(|&&e| e < -1.0 / mu).count();
+    let mut s = density_error(inp, pos, &fluid, &push, &near);
+    rep.overdense = near.count_cells(|c| s[c] < -1.0 / mu);
     if let Some(r) = resample {
-        rep.resampled = resample_degenerate(grid, pos, vel, &mut s, &fluid, r);
+        rep.resampled = resample_degenerate(grid, pos, vel, &mut s, &fluid, &near, r);
     }
-    let in_solve = surface_rule(grid, inp.solid, &fluid, &mut s);
-    rep.surface = (0..s.len()).filter(|&c| fluid[c] && !in_solve[c]).count();
-    for e in s.iter_mut() {
-        if *e != RESAMPLE_BELOW && e.abs() > CLAMP {
-            rep.clamped += 1;
+    let in_solve = surface_rule(grid, inp.solid, &fluid, &mut s, &near);
+    rep.surface = near.count_cells(|c| fluid[c] && !in_solve[c]);
+    rep.clamped = near.count_cells(|c| s[c] != RESAMPLE_BELOW && s[c].abs() > CLAMP);
+    par_runs(near.cells(), &mut s).for_each(|(_, run)| {
+        for e in run.iter_mut().filter(|e| **e != RESAMPLE_BELOW) {
             *e = e.clamp(-CLAMP, CLAMP);
         }
-    }
-    let system = Poisson::new(grid, |c| in_solve[c], inp.solid, &Active::all(grid));
+    });
+    let system = Poisson::new(grid, |c| in_solve[c], inp.solid, &near);
     let rhs = system.cells().iter().map(|&c| s[c]).collect();
     let (phi, pcg) = system.solve(rhs, inp.pcg);
     rep.pcg = pcg;
-    let d = displacement(grid, inp.solid, &phi, push);
-    rep.class = (0..s.len())
-        .map(|c| ErrorClass::of(fluid[c], in_solve[c], s[c]) as u8)
-        .collect();
-    rep.error = (0..s.len())
-        .map(|c| if in_solve[c] { s[c] } else { 0.0 })
-        .collect();
+    let d = displacement(grid, inp.solid, &phi, push, &near);
+    rep.class = vec![ErrorClass::NotFluid as u8; s.len()];
+    par_runs(near.cells(), &mut rep.class).for_each(|(r, run)| {
+        for (c, v) in r.zip(run) {
+            *v = ErrorClass::of(fluid[c], in_solve[c], s[c]) as u8;
+        }
+    });
     move_particles(grid, inp.particle_free, &d, pos, &mut rep);
     rep
+}
+
+/// The cells within one of a particle's cell: every cell the tent weights reach, with the
+/// face neighbours the surface rule looks at, and the faces beside them hold every face a
+/// particle's displacement is interpolated from.
+fn near_particles<const D: usize>(grid: &Grid<D>, pos: &[Vector<D>]) -> Active<D> {
+    Active::around_points(grid, pos.par_iter(), 1)
 }
 
 /// The push-out field of step 2 and how many particles it pushes.
@@ -279,67 +290,75 @@ impl SolidShare {
 /// The density error `s` of every cell holding particles outside solids (0 elsewhere), as
 /// steps 1-3 compute it, before the surface rule and the clamp.
 pub fn density_errors<const D: usize>(inp: &Inputs<'_, D>, pos: &[Vector<D>]) -> Vec<f64> {
-    let fluid = fluid_cells(inp.grid, inp.solid, pos);
+    let near = near_particles(inp.grid, pos);
+    let fluid = fluid_cells(inp.grid, inp.solid, pos, &near);
     let (push, _) = push_field(inp.grid, inp.solid, pos);
-    density_error(inp, pos, &fluid, &push)
+    density_error(inp, pos, &fluid, &push, &near)
 }
 
-/// Step 1: non-solid cells holding a particle.
-fn fluid_cells<const D: usize>(grid: &Grid<D>, solid: &[bool], pos: &[Vector<D>]) -> Vec<bool> {
-    let mut fluid = vec![false; grid.num_cells()];
-    pos.iter().for_each(|x| fluid[grid.cell_index_of(x)] = true);
-    (0..fluid.len()).map(|c| fluid[c] && !solid[c]).collect()
+/// Step 1: non-solid cells holding a particle (all of them in `near`).
+fn fluid_cells<const D: usize>(
+    grid: &Grid<D>,
+    solid: &[bool],
+    pos: &[Vector<D>],
+    near: &Active<D>,
+) -> Vec<bool> {
+    let mut held = vec![false; grid.num_cells()];
+    pos.iter().for_each(|x| held[grid.cell_index_of(x)] = true);
+    near.flags(grid, |c| held[c] && !solid[c])
 }
 
-/// Step 3: the density error of every fluid cell (0 elsewhere).
+/// Step 3: the density error of every fluid cell (0 elsewhere; all of them in `near`).
 fn density_error<const D: usize>(
     inp: &Inputs<'_, D>,
     pos: &[Vector<D>],
     fluid: &[bool],
     push: &MacField<D>,
+    near: &Active<D>,
 ) -> Vec<f64> {
     let grid = inp.grid;
     let mu = inp.per_axis.pow(D as u32) as f64;
-    let density = tent_density(grid, pos);
+    let density = tent_density(grid, pos, near);
     let share = SolidShare::new(inp.per_axis, D);
     let offsets: Vec<[i64; D]> = (0..3usize.pow(D as u32))
         .map(|code| std::array::from_fn(|k| (code / 3usize.pow(k as u32) % 3) as i64 - 1))
         .filter(|o| o.iter().any(|&v| v != 0))
         .collect();
-    (0..grid.num_cells())
-        .into_par_iter()
-        .map(|c| {
-            if !fluid[c] {
-                return 0.0;
+    let mut s = vec![0.0; grid.num_cells()];
+    let error = |c: usize| {
+        let cc = grid.cell_coords(c);
+        let mut s = 1.0 - density[c] / mu;
+        for o in &offsets {
+            let nb: Option<usize> = (0..D).try_fold(0, |idx, k| {
+                let i = cc[k] as i64 + o[k];
+                (0..grid.dims[k] as i64)
+                    .contains(&i)
+                    .then(|| idx + i as usize * grid.cell_stride(k))
+            });
+            if nb.is_none_or(|n| inp.solid[n]) {
+                s -= share.of(o);
             }
-            let cc = grid.cell_coords(c);
-            let mut s = 1.0 - density[c] / mu;
-            for o in &offsets {
-                let nb: Option<usize> = (0..D).try_fold(0, |idx, k| {
-                    let i = cc[k] as i64 + o[k];
-                    (0..grid.dims[k] as i64)
-                        .contains(&i)
-                        .then(|| idx + i as usize * grid.cell_stride(k))
-                });
-                if nb.is_none_or(|n| inp.solid[n]) {
-                    s -= share.of(o);
-                }
-            }
-            // The push-out's divergence (right minus left faces).
-            for a in 0..D {
-                let mut f = cc;
-                let left = push.comp[a][grid.face_index(a, f)];
-                f[a] += 1;
-                s += push.comp[a][grid.face_index(a, f)] - left;
-            }
-            s
-        })
-        .collect()
+        }
+        // The push-out's divergence (right minus left faces).
+        for a in 0..D {
+            let mut f = cc;
+            let left = push.comp[a][grid.face_index(a, f)];
+            f[a] += 1;
+            s += push.comp[a][grid.face_index(a, f)] - left;
+        }
+        s
+    };
+    par_runs(near.cells(), &mut s).for_each(|(r, run)| {
+        for (c, v) in r.zip(run).filter(|(c, _)| fluid[*c]) {
+            *v = error(c);
+        }
+    });
+    s
 }
 
 /// `sum_p w_c(x_p)` per cell, in a fixed number of chunks summed in order (the same result
-/// whatever the thread count).
-fn tent_density<const D: usize>(grid: &Grid<D>, pos: &[Vector<D>]) -> Vec<f64> {
+/// whatever the thread count); the cells of `near` hold every weight.
+fn tent_density<const D: usize>(grid: &Grid<D>, pos: &[Vector<D>], near: &Active<D>) -> Vec<f64> {
     const CHUNKS: usize = 4;
     let chunk = pos.len().div_ceil(CHUNKS).max(1);
     let partials: Vec<Vec<f64>> = pos
@@ -351,52 +370,56 @@ fn tent_density<const D: usize>(grid: &Grid<D>, pos: &[Vector<D>]) -> Vec<f64> {
             acc
         })
         .collect();
-    (0..grid.num_cells())
-        .into_par_iter()
-        .map(|c| partials.iter().map(|p| p[c]).sum())
-        .collect()
+    let mut density = vec![0.0; grid.num_cells()];
+    par_runs(near.cells(), &mut density).for_each(|(r, run)| {
+        for (c, v) in r.zip(run) {
+            *v = partials.iter().map(|p| p[c]).sum();
+        }
+    });
+    density
 }
 
 /// Step 4: fluid cells with an empty face neighbour and `s > 0` leave the solve (`s = 0`).
-/// Returns which cells are in the solve. Tested against the fluid cells before the rule.
+/// Returns which cells are in the solve. Tested against the fluid cells before the rule (all
+/// of them in `near`).
 fn surface_rule<const D: usize>(
     grid: &Grid<D>,
     solid: &[bool],
     fluid: &[bool],
     s: &mut [f64],
+    near: &Active<D>,
 ) -> Vec<bool> {
-    let in_solve: Vec<bool> = (0..fluid.len())
-        .map(|c| {
-            let cc = grid.cell_coords(c);
-            let at_surface = (0..D).any(|a| {
-                [-1, 1].into_iter().any(|dir| {
-                    grid.neighbor(cc, a, dir).is_some_and(|nb| {
-                        let nb = grid.cell_index(nb);
-                        !fluid[nb] && !solid[nb]
-                    })
+    let in_solve = near.flags(grid, |c| {
+        let cc = grid.cell_coords(c);
+        let at_surface = (0..D).any(|a| {
+            [-1, 1].into_iter().any(|dir| {
+                grid.neighbor(cc, a, dir).is_some_and(|nb| {
+                    let nb = grid.cell_index(nb);
+                    !fluid[nb] && !solid[nb]
                 })
-            });
-            fluid[c] && !(at_surface && s[c] > 0.0)
-        })
-        .collect();
-    for c in 0..s.len() {
-        if !in_solve[c] {
-            s[c] = 0.0;
+            })
+        });
+        fluid[c] && !(at_surface && s[c] > 0.0)
+    });
+    par_runs(near.cells(), s).for_each(|(r, run)| {
+        for (_, e) in r.zip(run).filter(|(c, _)| !in_solve[*c]) {
+            *e = 0.0;
         }
-    }
+    });
     in_solve
 }
 
-/// Step 7's face field: `phi_R - phi_L` between two non-solid cells, the push-out elsewhere.
+/// Step 7's face field: `phi_R - phi_L` between two non-solid cells, the push-out elsewhere;
+/// on the faces beside `near`, which hold every row of `phi` and every push-out (0 beyond).
 fn displacement<const D: usize>(
     grid: &Grid<D>,
     solid: &[bool],
     phi: &[f64],
     mut push: MacField<D>,
+    near: &Active<D>,
 ) -> MacField<D> {
     for a in 0..D {
-        push.comp[a].par_iter_mut().enumerate().for_each(|(i, v)| {
-            let f = grid.face_coords(a, i);
+        near.par_for_each_face(grid, a, &mut push.comp[a], |_, f, v| {
             if f[a] == 0 || f[a] == grid.dims[a] {
                 return;
             }
@@ -450,28 +473,30 @@ fn resample_degenerate<const D: usize, R: Rng>(
     vel: &mut [Vector<D>],
     s: &mut [f64],
     fluid: &[bool],
+    near: &Active<D>,
     r: Resample<'_, D, R>,
 ) -> usize {
-    let degenerate: Vec<usize> = (0..s.len())
+    let degenerate: Vec<usize> = (near.each_cell())
         .filter(|&c| fluid[c] && s[c] < RESAMPLE_BELOW)
         .collect();
     if degenerate.is_empty() {
         return 0;
     }
-    let mut members: Vec<Vec<usize>> = vec![vec![]; s.len()];
+    let mut members: HashMap<usize, Vec<usize>> = HashMap::new();
     for (j, x) in pos.iter().enumerate() {
         let c = grid.cell_index_of(x);
         if s[c] < RESAMPLE_BELOW && fluid[c] {
-            members[c].push(j);
+            members.entry(c).or_default().push(j);
         }
     }
     for &c in &degenerate {
-        let n = members[c].len();
+        let members = &members[&c];
+        let n = members.len();
         let q = (1..).find(|q: &usize| q.pow(D as u32) >= n).unwrap();
         let mut sub: Vec<usize> = (0..q.pow(D as u32)).collect();
         sub.shuffle(r.rng);
         let cell = grid.cell_coords(c);
-        for (&j, &code) in members[c].iter().zip(&sub) {
+        for (&j, &code) in members.iter().zip(&sub) {
             let x = Vector::<D>::from_fn(|k, _| {
                 cell[k] as f64 + ((code / q.pow(k as u32)) % q) as f64 / q as f64 + 0.5 / q as f64
             });
