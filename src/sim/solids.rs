@@ -15,7 +15,7 @@
 //!   volume until it passes.
 //! - `naive` (option 2): it waits until the cells it would enter hold no particle.
 
-use crate::grid::active::line_hulls;
+use crate::grid::active::{hull, line_hulls};
 use crate::grid::{Grid, Vector};
 use crate::particles::Region;
 use crate::sim::markings::{Markings, SolidCells};
@@ -225,6 +225,10 @@ pub struct Solids<const D: usize> {
     pub moving: Vec<bool>,
     /// Per line of cells along axis 0, the hull of its solid cells ([`SolidCells::lines`]).
     lines: Vec<[u32; 2]>,
+    /// The same for the static solids alone.
+    fixed_lines: Vec<[u32; 2]>,
+    /// The cells the obstacles cover, where they are now (one list each).
+    covered: Vec<Vec<usize>>,
     /// The obstacles, at their current offsets.
     pub obstacles: Vec<Obstacle<D>>,
     pub mode: ObstacleMode,
@@ -256,12 +260,15 @@ impl<const D: usize> Solids<D> {
             velocity: vec![],
             moving: vec![],
             lines: vec![],
+            fixed_lines: vec![],
+            covered: vec![],
             obstacles: obstacles.to_vec(),
             mode,
         };
         for r in fixed {
             r.cells(grid).for_each(|c| s.fixed[c] = true);
         }
+        s.fixed_lines = line_hulls(grid, |c| s.fixed[c]);
         s.rasterise(grid);
         s
     }
@@ -273,15 +280,38 @@ impl<const D: usize> Solids<D> {
         self.solid = self.fixed.clone();
         self.velocity = vec![Vector::zeros(); n];
         self.moving = vec![false; n];
-        for (c, k) in owners(grid, &self.obstacles).into_iter().enumerate() {
-            if let Some(k) = k {
-                let o = &self.obstacles[k];
+        self.covered.clear();
+        self.cover(grid);
+    }
+
+    /// Marks the obstacles' cells where they are now, in order (where two overlap, the later
+    /// one's velocity), over the static solids alone.
+    fn cover(&mut self, grid: &Grid<D>) {
+        let n0 = grid.dims[0];
+        self.lines.clone_from(&self.fixed_lines);
+        for o in &self.obstacles {
+            let cells = o.cells_at(grid, &o.offset);
+            for &c in &cells {
                 self.solid[c] = true;
                 self.velocity[c] = o.boundary_velocity();
                 self.moving[c] = o.velocity != Vector::<D>::zeros();
+                let (l, x) = (c / n0, (c % n0) as u32);
+                self.lines[l] = hull(self.lines[l], [x, x + 1]);
             }
+            self.covered.push(cells);
         }
-        self.lines = line_hulls(grid, |c| self.solid[c]);
+    }
+
+    /// The obstacles' cells marked again after they moved: those they covered go back to the
+    /// static solids', then [`Self::cover`]. The same as rasterising the box, at the cost of
+    /// the obstacles' cells.
+    fn recover(&mut self, grid: &Grid<D>) {
+        for c in std::mem::take(&mut self.covered).into_iter().flatten() {
+            self.solid[c] = self.fixed[c];
+            self.velocity[c] = Vector::zeros();
+            self.moving[c] = false;
+        }
+        self.cover(grid);
     }
 
     /// Puts the obstacles at `offsets` with `velocities` (one each, in order), as a step
@@ -334,14 +364,14 @@ impl<const D: usize> Solids<D> {
         if self.obstacles.is_empty() {
             return plan;
         }
-        let mut owner = owners(grid, &self.obstacles);
+        let mut owner = Owners::of(grid, &self.obstacles);
         for (k, o) in self.obstacles.iter().enumerate() {
             let t = o.target(grid, dt, |c| {
-                self.fixed[c] || owner[c].is_some_and(|j| j != k)
+                self.fixed[c] || owner.get(c).is_some_and(|j| j != k)
             });
             o.cells_at(grid, &t)
                 .into_iter()
-                .for_each(|c| owner[c] = Some(k));
+                .for_each(|c| owner.set(c, k));
             plan.targets.push(t);
         }
         plan.wanted = self
@@ -354,18 +384,13 @@ impl<const D: usize> Solids<D> {
                 cells
             })
             .collect();
-        let mut new_solid = vec![false; grid.num_cells()];
-        plan.wanted
-            .iter()
-            .flatten()
-            .for_each(|&c| new_solid[c] = true);
+        let mut new_solid: Vec<usize> = plan.wanted.iter().flatten().copied().collect();
+        new_solid.sort_unstable();
+        new_solid.dedup();
         let clear = clearing_distance(grid, &new_solid, &self.solid);
-        plan.new_solid = (0..grid.num_cells())
-            .filter(|&c| new_solid[c])
-            .map(|c| (c, clear[c]))
-            .collect();
+        plan.new_solid = new_solid.into_iter().map(|c| (c, clear[c])).collect();
         if self.mode == ObstacleMode::Couple && !plan.new_solid.is_empty() {
-            plan.penalty = Some(penalties(&clear));
+            plan.penalty = Some(penalties(grid.num_cells(), &plan.new_solid));
         }
         plan
     }
@@ -420,41 +445,58 @@ impl<const D: usize> Solids<D> {
                 o.offset = *to;
             }
         }
-        let owner = owners(grid, &self.obstacles);
+        let owner = Owners::of(grid, &self.obstacles);
         let fixed = &self.fixed;
         for (k, o) in self.obstacles.iter_mut().enumerate() {
-            let others = |c: usize| owner[c].is_some_and(|j| j != k);
+            let others = |c: usize| owner.get(c).is_some_and(|j| j != k);
             o.accelerate(grid, g, dt, in_water[k], |c| fixed[c], others);
         }
-        self.rasterise(grid);
+        self.recover(grid);
         blocked
     }
 }
 
-/// Which obstacle covers each cell, if any.
-pub fn owners<const D: usize>(grid: &Grid<D>, obstacles: &[Obstacle<D>]) -> Vec<Option<usize>> {
-    let mut owner = vec![None; grid.num_cells()];
-    for (k, o) in obstacles.iter().enumerate() {
-        o.region_at(&o.offset)
-            .cells(grid)
-            .for_each(|c| owner[c] = Some(k));
+/// Which obstacle covers each cell, if any (the later one where two overlap): a fresh zeroed
+/// array written only at the obstacles' cells.
+struct Owners(Vec<u32>);
+
+impl Owners {
+    /// The obstacles where they are now.
+    fn of<const D: usize>(grid: &Grid<D>, obstacles: &[Obstacle<D>]) -> Self {
+        let mut owner = Owners(vec![0; grid.num_cells()]);
+        for (k, o) in obstacles.iter().enumerate() {
+            o.region_at(&o.offset)
+                .cells(grid)
+                .for_each(|c| owner.set(c, k));
+        }
+        owner
     }
-    owner
+
+    fn get(&self, c: usize) -> Option<usize> {
+        self.0[c].checked_sub(1).map(|k| k as usize)
+    }
+
+    fn set(&mut self, c: usize, k: usize) {
+        self.0[c] = k as u32 + 1;
+    }
 }
 
-/// The clearing distance of def. clear_dist: for each cell of `new_solid`, its breadth-first
-/// (von Neumann) distance from the nearest cell that is neither in `new_solid` nor solid: 1
-/// next to such a cell, 2 next to those, and so on. 0 outside `new_solid`. Cells of
-/// `new_solid` from which no such cell can be reached get `u32::MAX` (nothing can clear them).
+/// The clearing distance of def. clear_dist: for each cell of `cells` (`C_new_solid`,
+/// ascending), its breadth-first (von Neumann) distance from the nearest cell that is neither
+/// in `cells` nor solid: 1 next to such a cell, 2 next to those, and so on. 0 elsewhere (a
+/// fresh zeroed array written only at `cells`). Cells from which no such cell can be reached
+/// get `u32::MAX` (nothing can clear them).
 pub fn clearing_distance<const D: usize>(
     grid: &Grid<D>,
-    new_solid: &[bool],
+    cells: &[usize],
     solid: &[bool],
 ) -> Vec<u32> {
     let n = grid.num_cells();
     let mut dist = vec![0u32; n];
     let mut queue = VecDeque::new();
-    for c in (0..n).filter(|&c| new_solid[c]) {
+    let mut new_solid = vec![false; n];
+    cells.iter().for_each(|&c| new_solid[c] = true);
+    for &c in cells {
         dist[c] = u32::MAX;
         let cc = grid.cell_coords(c);
         let free = (0..D).any(|a| {
@@ -487,17 +529,18 @@ pub fn clearing_distance<const D: usize>(
     dist
 }
 
-/// The per-cell cost of a particle in `C_new_solid` (eq. solid_penalty2):
-/// `lambda_penalty * cdist`, 0 elsewhere (the ordinary `sigma_obj` applies there).
-pub fn penalties(clear: &[u32]) -> Vec<f64> {
-    clear
-        .iter()
-        .map(|&d| match d {
-            0 => 0.0,
-            u32::MAX => PENALTY * clear.len() as f64,
+/// The per-cell cost of a particle in `C_new_solid` (eq. solid_penalty2), from its cells and
+/// their clearing distances: `lambda_penalty * cdist`, 0 elsewhere (the ordinary `sigma_obj`
+/// applies there), for a grid of `n` cells (a cell nothing can clear counts `n` cells away).
+pub fn penalties(n: usize, new_solid: &[(usize, u32)]) -> Vec<f64> {
+    let mut penalty = vec![0.0; n];
+    for &(c, d) in new_solid {
+        penalty[c] = match d {
+            u32::MAX => PENALTY * n as f64,
             d => PENALTY * d as f64,
-        })
-        .collect()
+        };
+    }
+    penalty
 }
 
 #[cfg(test)]
@@ -510,16 +553,14 @@ mod tests {
         // the tank floor, open to fluid at its right end only.
         let g = Grid::new([6, 3]);
         let mut solid = vec![false; 18];
-        let mut new_solid = vec![false; 18];
-        for i in 0..5 {
-            new_solid[g.cell_index([i, 0])] = true;
+        let cells: Vec<usize> = (0..5).map(|i| g.cell_index([i, 0])).collect();
+        for i in 0..6 {
             solid[g.cell_index([i, 1])] = true;
         }
-        solid[g.cell_index([5, 1])] = true;
-        let d = clearing_distance(&g, &new_solid, &solid);
+        let d = clearing_distance(&g, &cells, &solid);
         let row: Vec<u32> = (0..6).map(|i| d[g.cell_index([i, 0])]).collect();
         assert_eq!(row, vec![5, 4, 3, 2, 1, 0]);
-        let p = penalties(&d);
+        let p = penalties(18, &cells.iter().map(|&c| (c, d[c])).collect::<Vec<_>>());
         assert_eq!(p[g.cell_index([4, 0])], PENALTY);
         assert_eq!(p[g.cell_index([0, 0])], 5.0 * PENALTY);
     }
@@ -529,12 +570,8 @@ mod tests {
         // A 3x3x3 box of new solid cells in a 5x5x5 grid: the outer shell is 1, the centre 2.
         let g = Grid::new([5, 5, 5]);
         let solid = vec![false; 125];
-        let mut new_solid = vec![false; 125];
-        for c in 0..125 {
-            let cc = g.cell_coords(c);
-            new_solid[c] =
-                (1..4).contains(&cc[0]) && (1..4).contains(&cc[1]) && (1..4).contains(&cc[2]);
-        }
+        let inner = |c: usize| g.cell_coords(c).iter().all(|k| (1..4).contains(k));
+        let new_solid: Vec<usize> = (0..125).filter(|&c| inner(c)).collect();
         let d = clearing_distance(&g, &new_solid, &solid);
         assert_eq!(d[g.cell_index([2, 2, 2])], 2);
         assert_eq!(d[g.cell_index([1, 2, 2])], 1);
@@ -542,8 +579,7 @@ mod tests {
         // Walled in by solids: nothing can clear it.
         let mut walls = vec![true; 125];
         walls[g.cell_index([2, 2, 2])] = false;
-        let mut one = vec![false; 125];
-        one[g.cell_index([2, 2, 2])] = true;
+        let one = [g.cell_index([2, 2, 2])];
         assert_eq!(
             clearing_distance(&g, &one, &walls)[g.cell_index([2, 2, 2])],
             u32::MAX

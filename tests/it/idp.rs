@@ -242,7 +242,8 @@ fn a_particle_in_a_solid_is_pushed_out_by_the_nearest_face_2d_and_3d() {
         let solid: Vec<bool> = (0..g.num_cells())
             .map(|c| (1..=2).contains(&g.cell_coords(c)[1]))
             .collect();
-        let depth = clearing_distance(&g, &solid, &vec![false; solid.len()]);
+        let cells_of = |f: &[bool]| (0..f.len()).filter(|&c| f[c]).collect::<Vec<_>>();
+        let depth = clearing_distance(&g, &cells_of(&solid), &vec![false; solid.len()]);
         let mut x = Vector::<D>::from_element(3.5);
         x[1] = 2.8; // 0.2 below the slab's top face
         let (axis, d) = push_out(&g, &solid, &depth, &x).unwrap();
@@ -256,7 +257,7 @@ fn a_particle_in_a_solid_is_pushed_out_by_the_nearest_face_2d_and_3d() {
         let thick: Vec<bool> = (0..g.num_cells())
             .map(|c| g.cell_coords(c)[1] < 4)
             .collect();
-        let depth = clearing_distance(&g, &thick, &vec![false; solid.len()]);
+        let depth = clearing_distance(&g, &cells_of(&thick), &vec![false; solid.len()]);
         x[1] = 1.5;
         assert_eq!(push_out(&g, &thick, &depth, &x), Some((1, 1.0)));
     }

@@ -11,7 +11,7 @@ use cellflip::methods::MethodFlags;
 use cellflip::methods::MethodKind;
 use cellflip::runner::Limit;
 use cellflip::scene::{Overrides, Scene};
-use cellflip::sim::solids::ObstacleMode;
+use cellflip::sim::solids::{Obstacle, ObstacleMode, Solids};
 use cellflip::simulation::Simulation;
 
 pub(crate) struct Run {
@@ -207,15 +207,32 @@ fn obstacles_come_to_rest_on_static_solids_and_on_each_other_2d_and_3d() {
 }
 
 /// Runs `scene`, checking after every step that no obstacle covers a cell of a static solid
-/// or of another obstacle; returns the simulation and the obstacles' offsets after each step.
+/// or of another obstacle, and that the solid cells, their velocities, the moving ones and
+/// each line's hull of them, kept up as the obstacles move, are those of rasterising the box
+/// with the obstacles where they are; returns the simulation and the obstacles' offsets after
+/// each step.
 pub(crate) fn run_apart<const D: usize>(scene: &Scene) -> (Simulation<D>, Vec<Vec<Vector<D>>>) {
     let mut offsets = vec![];
     let runner = common::run::<D>(scene, None, |sim, _| {
         let s = &sim.state;
+        let (c, at) = (&s.config, format!("{D}D step {}", s.steps));
+        let mut whole = Solids::new(&s.grid, &c.solids, &c.obstacles, c.obstacle_mode);
+        let placed = |f: fn(&Obstacle<D>) -> Vector<D>| s.solids.obstacles.iter().map(f);
+        let (at_now, speeds): (Vec<_>, Vec<_>) = (
+            placed(|o| o.offset).collect(),
+            placed(|o| o.velocity).collect(),
+        );
+        whole.place(&s.grid, &at_now, &speeds);
+        assert!(whole.solid == s.solids.solid, "{at}: solid cells");
+        assert!(
+            whole.velocity == s.solids.velocity,
+            "{at}: solid velocities"
+        );
+        assert!(whole.moving == s.solids.moving, "{at}: moving cells");
+        assert!(whole.cells().lines == s.solids.cells().lines, "{at}: lines");
         let mut owner = vec![usize::MAX; s.grid.num_cells()];
         for (k, o) in s.solids.obstacles.iter().enumerate() {
             for c in o.cells_at(&s.grid, &o.offset) {
-                let at = format!("{D}D step {}", s.steps);
                 assert!(!s.solids.fixed[c], "{at}: {} in a static solid", o.name);
                 assert_eq!(owner[c], usize::MAX, "{at}: overlap");
                 owner[c] = k;

@@ -193,7 +193,8 @@ fn push_field<const D: usize>(
     }
     // How far each solid cell is from the nearest non-solid one (1 next to it), for particles
     // deep inside.
-    let depth = clearing_distance(grid, solid, &vec![false; solid.len()]);
+    let solid_cells: Vec<usize> = (0..solid.len()).filter(|&c| solid[c]).collect();
+    let depth = clearing_distance(grid, &solid_cells, &vec![false; solid.len()]);
     let mut pushed = 0;
     for x in &inside {
         let Some((axis, d)) = push_out(grid, solid, &depth, x) else {
