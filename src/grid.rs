@@ -326,6 +326,15 @@ impl<const D: usize> Grid<D> {
     }
 
     /// All cells of the Moore neighbourhood of `c` inside the domain, `c` excluded.
+    /// The indices of the von Neumann neighbours of `c` inside the domain (one step along
+    /// each axis, either way).
+    pub fn face_neighbors(&self, c: Cell<D>) -> impl Iterator<Item = usize> + '_ {
+        (0..D)
+            .flat_map(move |a| [-1, 1].map(|dir| self.neighbor(c, a, dir)))
+            .flatten()
+            .map(|n| self.cell_index(n))
+    }
+
     pub fn moore_neighbors(&self, c: Cell<D>) -> impl Iterator<Item = Cell<D>> + '_ {
         let n = 3usize.pow(D as u32);
         (0..n).filter_map(move |code| {

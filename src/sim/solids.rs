@@ -498,31 +498,18 @@ pub fn clearing_distance<const D: usize>(
     cells.iter().for_each(|&c| new_solid[c] = true);
     for &c in cells {
         dist[c] = u32::MAX;
-        let cc = grid.cell_coords(c);
-        let free = (0..D).any(|a| {
-            [-1, 1].into_iter().any(|dir| {
-                grid.neighbor(cc, a, dir).is_some_and(|nb| {
-                    let nb = grid.cell_index(nb);
-                    !new_solid[nb] && !solid[nb]
-                })
-            })
-        });
+        let free =
+            (grid.face_neighbors(grid.cell_coords(c))).any(|nb| !new_solid[nb] && !solid[nb]);
         if free {
             dist[c] = 1;
             queue.push_back(c);
         }
     }
     while let Some(c) = queue.pop_front() {
-        let cc = grid.cell_coords(c);
-        for a in 0..D {
-            for dir in [-1, 1] {
-                if let Some(nb) = grid.neighbor(cc, a, dir) {
-                    let nb = grid.cell_index(nb);
-                    if new_solid[nb] && dist[nb] == u32::MAX {
-                        dist[nb] = dist[c] + 1;
-                        queue.push_back(nb);
-                    }
-                }
+        for nb in grid.face_neighbors(grid.cell_coords(c)) {
+            if new_solid[nb] && dist[nb] == u32::MAX {
+                dist[nb] = dist[c] + 1;
+                queue.push_back(nb);
             }
         }
     }

@@ -391,15 +391,8 @@ fn surface_rule<const D: usize>(
     near: &Active<D>,
 ) -> Vec<bool> {
     let in_solve = near.flags(grid, |c| {
-        let cc = grid.cell_coords(c);
-        let at_surface = (0..D).any(|a| {
-            [-1, 1].into_iter().any(|dir| {
-                grid.neighbor(cc, a, dir).is_some_and(|nb| {
-                    let nb = grid.cell_index(nb);
-                    !fluid[nb] && !solid[nb]
-                })
-            })
-        });
+        let at_surface =
+            (grid.face_neighbors(grid.cell_coords(c))).any(|nb| !fluid[nb] && !solid[nb]);
         fluid[c] && !(at_surface && s[c] > 0.0)
     });
     par_runs(near.cells(), s).for_each(|(r, run)| {
