@@ -86,14 +86,28 @@ macro_rules! elements {
 
 elements!(f64 => "<f8", u64 => "<u8", i64 => "<i8", u32 => "<u4", i32 => "<i4", u8 => "|u1");
 
-/// One array to write: borrowed from the state where its memory layout is the file's, owned
-/// where it had to be converted.
+/// One array to write, `len` bytes.
 struct Entry<'a> {
     name: String,
     dtype: &'static str,
     shape: Vec<usize>,
-    bytes: Cow<'a, [u8]>,
+    len: usize,
+    data: Data<'a>,
 }
+
+/// An array's bytes: borrowed from the state where its memory layout is the file's, owned
+/// where a small one had to be converted, or made while it is written where a large one has
+/// to be (a copy of it held beside the state would raise a paper-scale run's peak).
+enum Data<'a> {
+    Bytes(Cow<'a, [u8]>),
+    Made(Box<Made<'a>>),
+}
+
+/// Writes an array's bytes, a block at a time.
+type Made<'a> = dyn Fn(&mut dyn Write) -> std::io::Result<()> + 'a;
+
+/// Elements a made array converts at a time (512 KiB of `f64`).
+const BLOCK: usize = 1 << 16;
 
 /// A checkpoint being put together: its metadata and arrays, written by [`Writer::write_to`].
 #[derive(Default)]
@@ -110,12 +124,8 @@ impl<'a> Writer<'a> {
 
     /// An array of `shape` (its product is `data.len()`), borrowed.
     pub fn array<T: Element>(&mut self, name: &str, shape: &[usize], data: &'a [T]) {
-        self.entry::<T>(
-            name,
-            shape,
-            data.len(),
-            Cow::Borrowed(bytemuck::cast_slice(data)),
-        );
+        let bytes = Cow::Borrowed(bytemuck::cast_slice(data));
+        self.entry::<T>(name, shape, data.len(), Data::Bytes(bytes));
     }
 
     /// A one-dimensional array, borrowed.
@@ -123,11 +133,41 @@ impl<'a> Writer<'a> {
         self.array(name, &[data.len()], data);
     }
 
-    /// An array of `shape`, owned.
+    /// A small array of `shape`, owned (its bytes are copied once).
     pub fn owned<T: Element>(&mut self, name: &str, shape: &[usize], data: Vec<T>) {
-        let n = data.len();
-        let bytes = bytemuck::cast_slice::<T, u8>(&data).to_vec();
-        self.entry::<T>(name, shape, n, Cow::Owned(bytes));
+        let bytes = Cow::Owned(bytemuck::cast_slice::<T, u8>(&data).to_vec());
+        self.entry::<T>(name, shape, data.len(), Data::Bytes(bytes));
+    }
+
+    /// An array of `shape` whose elements `elements()` yields in order, converted a block at
+    /// a time while the file is written: a large array stored otherwise than the file stores
+    /// it (the particles' vectors, the markings' depths) is never copied whole.
+    pub fn made<T: Element, I: Iterator<Item = T>>(
+        &mut self,
+        name: &str,
+        shape: &[usize],
+        elements: impl Fn() -> I + 'a,
+    ) {
+        let (want, label) = (shape.iter().product::<usize>(), name.to_string());
+        let write = move |w: &mut dyn Write| {
+            let (mut block, mut n) = (Vec::with_capacity(BLOCK.min(want)), 0);
+            for x in elements() {
+                block.push(x);
+                if block.len() == BLOCK {
+                    w.write_all(bytemuck::cast_slice(&block))?;
+                    n += block.len();
+                    block.clear();
+                }
+            }
+            w.write_all(bytemuck::cast_slice(&block))?;
+            assert_eq!(
+                n + block.len(),
+                want,
+                "{label}: elements made for its shape"
+            );
+            Ok(())
+        };
+        self.entry::<T>(name, shape, want, Data::Made(Box::new(write)));
     }
 
     /// A scalar (a numpy array of shape `()`).
@@ -135,10 +175,11 @@ impl<'a> Writer<'a> {
         self.owned(name, &[], vec![x]);
     }
 
-    /// Vectors as an `n x D` array of `<f8`.
-    pub fn vectors<const D: usize>(&mut self, name: &str, v: &[Vector<D>]) {
-        let flat: Vec<f64> = v.iter().flat_map(|x| x.iter().copied()).collect();
-        self.owned(name, &[v.len(), D], flat);
+    /// Vectors as an `n x D` array of `<f8`, made while written.
+    pub fn vectors<const D: usize>(&mut self, name: &str, v: &'a [Vector<D>]) {
+        self.made(name, &[v.len(), D], || {
+            v.iter().flat_map(|x| x.iter().copied())
+        });
     }
 
     /// Flags as bytes 0 and 1, borrowed.
@@ -147,7 +188,7 @@ impl<'a> Writer<'a> {
         self.array(name, &[v.len()], bytes);
     }
 
-    fn entry<T: Element>(&mut self, name: &str, shape: &[usize], n: usize, bytes: Cow<'a, [u8]>) {
+    fn entry<T: Element>(&mut self, name: &str, shape: &[usize], n: usize, data: Data<'a>) {
         assert_eq!(
             shape.iter().product::<usize>(),
             n,
@@ -161,13 +202,9 @@ impl<'a> Writer<'a> {
             name: name.into(),
             dtype: T::DTYPE,
             shape: shape.to_vec(),
-            bytes,
+            len: n * std::mem::size_of::<T>(),
+            data,
         });
-    }
-
-    /// The bytes of the arrays' data and the file's total size.
-    pub fn data_bytes(&self) -> u64 {
-        self.arrays.iter().map(|e| e.bytes.len() as u64).sum()
     }
 
     /// The header, with every array's offset for a data section starting at `start`.
@@ -183,7 +220,7 @@ impl<'a> Writer<'a> {
             let shape = e.shape.iter().map(|&n| toml::Value::Integer(n as i64));
             a.insert("shape".into(), toml::Value::Array(shape.collect()));
             a.insert("offset".into(), toml::Value::Integer(at as i64));
-            at = align(at + e.bytes.len());
+            at = align(at + e.len);
             toml::Value::Table(a)
         });
         t.insert("array".into(), toml::Value::Array(arrays.collect()));
@@ -214,7 +251,10 @@ impl<'a> Writer<'a> {
         w.write_all(header.as_bytes())?;
         for e in &self.arrays {
             w.pad_to(align(w.len as usize))?;
-            w.write_all(&e.bytes)?;
+            match &e.data {
+                Data::Bytes(b) => w.write_all(b)?,
+                Data::Made(write) => write(&mut w)?,
+            }
         }
         let crc = w.crc.clone().finalize();
         w.inner.write_all(&crc.to_le_bytes())?;
@@ -498,13 +538,18 @@ mod tests {
     fn sample() -> Vec<u8> {
         let f = [1.5, -2.0, f64::MIN_POSITIVE, 0.1];
         let flags = [true, false, true];
+        let x = [Vector::<3>::new(1.0, 2.0, 3.0)];
         let mut w = Writer::default();
         w.meta("scene", "dam-2d");
         w.array("f", &[2, 2], &f);
         w.bools("flags", &flags);
         w.scalar("t", 0.3f64);
-        w.vectors::<3>("x", &[Vector::<3>::new(1.0, 2.0, 3.0)]);
+        w.vectors("x", &x);
         w.slice::<u32>("empty", &[]);
+        // Over two blocks, so that a block's end and a partial last block are both written.
+        w.made("made", &[2 * BLOCK + 3], || {
+            (0..2 * BLOCK as u32 + 3).map(|i| i ^ 0x5a5a)
+        });
         let mut out = vec![];
         let n = w.write_to(&mut out).unwrap();
         assert_eq!(n, out.len() as u64);
@@ -527,12 +572,27 @@ mod tests {
             Vector::<3>::new(1.0, 2.0, 3.0)
         );
         assert!(r.slice::<u32>("empty", Some(0)).unwrap().is_empty());
+        let made = r.slice::<u32>("made", Some(2 * BLOCK + 3)).unwrap();
+        assert!(made
+            .iter()
+            .enumerate()
+            .all(|(i, &x)| x == i as u32 ^ 0x5a5a));
         assert_eq!(
             r.meta("nothing"),
             Err(SnapshotError::Missing("meta.nothing".into()))
         );
         // Each array starts at a multiple of ALIGN.
         assert!(r.arrays.values().all(|a| a.offset % ALIGN == 0));
+    }
+
+    /// A made array yields exactly its shape's elements, or the write stops (a file whose
+    /// offsets no longer match its data would pass its checksum).
+    #[test]
+    #[should_panic(expected = "short: elements made for its shape")]
+    fn a_made_array_short_of_its_shape_is_not_written() {
+        let mut w = Writer::default();
+        w.made("short", &[3], || [1.0f64, 2.0].into_iter());
+        let _ = w.write_to(vec![]);
     }
 
     #[test]

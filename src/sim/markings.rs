@@ -9,7 +9,7 @@ use std::ops::Range;
 use std::sync::atomic::{AtomicI32, Ordering::Relaxed};
 
 /// What occupies a cell (its number is how a checkpoint stores it).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, bytemuck::NoUninit)]
 #[repr(u8)]
 pub enum CellKind {
     Empty = 0,
@@ -257,6 +257,19 @@ impl Markings {
         &self.fluid
     }
 
+    /// Every cell's depth ([`Markings::depth`]) in order, reading only the fluid's lines.
+    pub fn depths(&self) -> impl Iterator<Item = i32> + '_ {
+        let not_fluid = |n| std::iter::repeat_n(DEPTH_NOT_FLUID, n);
+        let mut at = 0;
+        let fluid_lines = self.fluid.iter().flat_map(move |r| {
+            let gap = not_fluid(r.start - at);
+            at = r.end;
+            gap.chain(r.clone().map(|c| self.depth(c)))
+        });
+        let end = self.fluid.last().map_or(0, |r| r.end);
+        fluid_lines.chain(not_fluid(self.kind.len() - end))
+    }
+
     pub fn fluid_cells(&self) -> usize {
         let fluid = self.fluid.par_iter().flat_map_iter(|r| r.clone());
         fluid.filter(|&c| self.is_fluid(c)).count()
@@ -464,7 +477,8 @@ mod tests {
 
     /// Markings found without a pass over the box are those of every cell, by brute force: the
     /// kinds (solid cells far from any fluid among them), surface, depths and active cells, and
-    /// the fluid's line ranges hold every fluid cell; in 2D and 3D, with a blob of particles,
+    /// the fluid's line ranges hold every fluid cell (and give every cell's depth in order); in
+    /// 2D and 3D, with a blob of particles,
     /// stray ones, solids everywhere, moving ones and cells kept without particles.
     #[test]
     fn markings_on_the_active_cells_are_those_of_every_cell_2d_and_3d() {
@@ -527,6 +541,9 @@ mod tests {
                     "{at}: {c} in a range"
                 );
             }
+            // Every cell's depth in order, as a checkpoint writes them.
+            let every: Vec<i32> = (0..n).map(|c| m.depth(c)).collect();
+            assert!(m.depths().eq(every), "{at}: depths in order");
             let around = Active::around(&g, |c| fluid(c) || moving[c], ACTIVE_MARGIN);
             assert_eq!(active, around, "{at}: active cells");
             assert!(active.num_cells() < n, "{at}: some cells inactive");

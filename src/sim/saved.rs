@@ -21,19 +21,21 @@ impl<const D: usize> State<D> {
             w.slice(&format!("velocity.{k}"), c);
         }
         let m = &self.markings;
-        let kinds = m.kind.iter().map(|&k| k as u8).collect();
-        w.owned("markings.kind", &[m.kind.len()], kinds);
+        let n = [m.kind.len()];
+        w.array::<u8>("markings.kind", &n, bytemuck::cast_slice(&m.kind));
         w.slice("markings.count", &m.count);
         w.bools("markings.surface", &m.surface);
         // The depth of every cell, `DEPTH_NOT_FLUID` off the fluid (the markings keep only
         // the fluid's).
-        let depth = (0..m.kind.len()).map(|c| m.depth(c)).collect();
-        w.owned("markings.depth", &[m.kind.len()], depth);
+        w.made("markings.depth", &n, || m.depths());
         let obstacles = &self.solids.obstacles;
-        let offsets: Vec<_> = obstacles.iter().map(|o| o.offset).collect();
-        let velocities: Vec<_> = obstacles.iter().map(|o| o.velocity).collect();
-        w.vectors("obstacles.offset", &offsets);
-        w.vectors("obstacles.velocity", &velocities);
+        let each = [obstacles.len(), D];
+        w.made("obstacles.offset", &each, || {
+            obstacles.iter().flat_map(|o| o.offset.iter().copied())
+        });
+        w.made("obstacles.velocity", &each, || {
+            obstacles.iter().flat_map(|o| o.velocity.iter().copied())
+        });
         w.scalar("time_secs", self.time_secs);
         w.scalar("steps", self.steps);
         w.scalar("total_particles", self.total_particles as u64);
