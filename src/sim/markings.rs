@@ -478,8 +478,8 @@ mod tests {
     /// Markings found without a pass over the box are those of every cell, by brute force: the
     /// kinds (solid cells far from any fluid among them), surface, depths and active cells, and
     /// the fluid's line ranges hold every fluid cell (and give every cell's depth in order); in
-    /// 2D and 3D, with a blob of particles,
-    /// stray ones, solids everywhere, moving ones and cells kept without particles.
+    /// 2D and 3D, with a blob of particles, stray ones, solids everywhere, moving ones and cells
+    /// kept without particles.
     #[test]
     fn markings_on_the_active_cells_are_those_of_every_cell_2d_and_3d() {
         use rand::{Rng, SeedableRng};
