@@ -325,16 +325,21 @@ impl<const D: usize> Grid<D> {
         Vector::<D>::from_fn(|k, _| c[k] as f64 + 0.5)
     }
 
-    /// All cells of the Moore neighbourhood of `c` inside the domain, `c` excluded.
-    /// The indices of the von Neumann neighbours of `c` inside the domain (one step along
-    /// each axis, either way).
-    pub fn face_neighbors(&self, c: Cell<D>) -> impl Iterator<Item = usize> + '_ {
-        (0..D)
-            .flat_map(move |a| [-1, 1].map(|dir| self.neighbor(c, a, dir)))
-            .flatten()
-            .map(|n| self.cell_index(n))
+    /// The von Neumann neighbours of cell `c` inside the domain, axis by axis, the lower one
+    /// first (nbflip's re-march sums them in this order); by strides, from one conversion to
+    /// coordinates.
+    pub fn face_neighbors(&self, c: usize) -> impl Iterator<Item = usize> + '_ {
+        let cc = self.cell_coords(c);
+        (0..2 * D).filter_map(move |j| {
+            let (a, s) = (j / 2, self.cell_stride(j / 2));
+            match j % 2 {
+                0 => (cc[a] > 0).then(|| c - s),
+                _ => (cc[a] + 1 < self.dims[a]).then(|| c + s),
+            }
+        })
     }
 
+    /// All cells of the Moore neighbourhood of `c` inside the domain, `c` excluded.
     pub fn moore_neighbors(&self, c: Cell<D>) -> impl Iterator<Item = Cell<D>> + '_ {
         let n = 3usize.pow(D as u32);
         (0..n).filter_map(move |code| {

@@ -411,15 +411,10 @@ mod tests {
         );
         queue.iter().for_each(|&c| dist[c] = 0);
         while let Some(c) = queue.pop_front() {
-            for a in 0..2 {
-                for dir in [-1, 1] {
-                    if let Some(nb) = g.neighbor(g.cell_coords(c), a, dir) {
-                        let nb = g.cell_index(nb);
-                        if !solid[nb] && dist[nb] == usize::MAX {
-                            dist[nb] = dist[c] + 1;
-                            queue.push_back(nb);
-                        }
-                    }
+            for nb in g.face_neighbors(c) {
+                if !solid[nb] && dist[nb] == usize::MAX {
+                    dist[nb] = dist[c] + 1;
+                    queue.push_back(nb);
                 }
             }
         }

@@ -175,11 +175,14 @@ impl<'a> Writer<'a> {
         self.owned(name, &[], vec![x]);
     }
 
-    /// Vectors as an `n x D` array of `<f8`, made while written.
-    pub fn vectors<const D: usize>(&mut self, name: &str, v: &'a [Vector<D>]) {
-        self.made(name, &[v.len(), D], || {
-            v.iter().flat_map(|x| x.iter().copied())
-        });
+    /// The `n` vectors `v()` yields as an `n x D` array of `<f8`, made while written.
+    pub fn vectors<const D: usize, I: Iterator<Item = &'a Vector<D>>>(
+        &mut self,
+        name: &str,
+        n: usize,
+        v: impl Fn() -> I + 'a,
+    ) {
+        self.made(name, &[n, D], move || v().flat_map(|x| x.iter().copied()));
     }
 
     /// Flags as bytes 0 and 1, borrowed.
@@ -544,7 +547,7 @@ mod tests {
         w.array("f", &[2, 2], &f);
         w.bools("flags", &flags);
         w.scalar("t", 0.3f64);
-        w.vectors("x", &x);
+        w.vectors("x", x.len(), || x.iter());
         w.slice::<u32>("empty", &[]);
         // Over two blocks, so that a block's end and a partial last block are both written.
         w.made("made", &[2 * BLOCK + 3], || {

@@ -586,16 +586,10 @@ mod tests {
             let mut queue: std::collections::VecDeque<usize> =
                 (0..g.num_cells()).filter(|&c| surface[c]).collect();
             while let Some(c) = queue.pop_front() {
-                for a in 0..D {
-                    for dir in [-1, 1] {
-                        let Some(n) = g.neighbor(g.cell_coords(c), a, dir) else {
-                            continue;
-                        };
-                        let n = g.cell_index(n);
-                        if kind[n] == CellKind::Fluid && want[n] == i32::MIN {
-                            want[n] = want[c] - 1;
-                            queue.push_back(n);
-                        }
+                for n in g.face_neighbors(c) {
+                    if kind[n] == CellKind::Fluid && want[n] == i32::MIN {
+                        want[n] = want[c] - 1;
+                        queue.push_back(n);
                     }
                 }
             }

@@ -15,8 +15,9 @@ const KINDS: [CellKind; 3] = [CellKind::Empty, CellKind::Fluid, CellKind::Solid]
 impl<const D: usize> State<D> {
     /// Writes what the next step reads.
     pub fn save<'a>(&'a self, w: &mut Writer<'a>) {
-        w.vectors("particles.pos", &self.particles.pos);
-        w.vectors("particles.vel", &self.particles.vel);
+        let (pos, vel) = (&self.particles.pos, &self.particles.vel);
+        w.vectors("particles.pos", pos.len(), || pos.iter());
+        w.vectors("particles.vel", vel.len(), || vel.iter());
         for (k, c) in self.velocity.comp.iter().enumerate() {
             w.slice(&format!("velocity.{k}"), c);
         }
@@ -29,12 +30,12 @@ impl<const D: usize> State<D> {
         // the fluid's).
         w.made("markings.depth", &n, || m.depths());
         let obstacles = &self.solids.obstacles;
-        let each = [obstacles.len(), D];
-        w.made("obstacles.offset", &each, || {
-            obstacles.iter().flat_map(|o| o.offset.iter().copied())
+        let k = obstacles.len();
+        w.vectors("obstacles.offset", k, || {
+            obstacles.iter().map(|o| &o.offset)
         });
-        w.made("obstacles.velocity", &each, || {
-            obstacles.iter().flat_map(|o| o.velocity.iter().copied())
+        w.vectors("obstacles.velocity", k, || {
+            obstacles.iter().map(|o| &o.velocity)
         });
         w.scalar("time_secs", self.time_secs);
         w.scalar("steps", self.steps);

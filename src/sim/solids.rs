@@ -498,15 +498,16 @@ pub fn clearing_distance<const D: usize>(
     cells.iter().for_each(|&c| new_solid[c] = true);
     for &c in cells {
         dist[c] = u32::MAX;
-        let free =
-            (grid.face_neighbors(grid.cell_coords(c))).any(|nb| !new_solid[nb] && !solid[nb]);
+        let free = grid
+            .face_neighbors(c)
+            .any(|nb| !new_solid[nb] && !solid[nb]);
         if free {
             dist[c] = 1;
             queue.push_back(c);
         }
     }
     while let Some(c) = queue.pop_front() {
-        for nb in grid.face_neighbors(grid.cell_coords(c)) {
+        for nb in grid.face_neighbors(c) {
             if new_solid[nb] && dist[nb] == u32::MAX {
                 dist[nb] = dist[c] + 1;
                 queue.push_back(nb);

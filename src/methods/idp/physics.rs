@@ -391,8 +391,7 @@ fn surface_rule<const D: usize>(
     near: &Active<D>,
 ) -> Vec<bool> {
     let in_solve = near.flags(grid, |c| {
-        let at_surface =
-            (grid.face_neighbors(grid.cell_coords(c))).any(|nb| !fluid[nb] && !solid[nb]);
+        let at_surface = grid.face_neighbors(c).any(|nb| !fluid[nb] && !solid[nb]);
         fluid[c] && !(at_surface && s[c] > 0.0)
     });
     par_runs(near.cells(), s).for_each(|(r, run)| {

@@ -196,7 +196,7 @@ impl LevelSet {
         let mut ring: Vec<usize> = cells
             .par_iter()
             .copied()
-            .filter(|&c| layer[c] == 0 && neighbours(grid, c).any(other))
+            .filter(|&c| layer[c] == 0 && grid.face_neighbors(c).any(other))
             .collect();
         ring.iter().for_each(|&c| layer[c] = 2);
         for d in 2..=march.layers {
@@ -205,7 +205,7 @@ impl LevelSet {
             // only, so the order in which the cells are found does not change it.
             let mut next = vec![];
             for &c in &ring {
-                for n in neighbours(grid, c) {
+                for n in grid.face_neighbors(c) {
                     if layer[n] == 0 {
                         layer[n] = d + 1;
                         self.phi[n] = mean_of_layer(grid, &self.phi, layer, n, d) + sign;
@@ -235,7 +235,7 @@ impl LevelSet {
         let liquid = |c: usize| !solid[c] && self.phi[c] < 0.0;
         (cells.par_iter().with_min_len(crate::PAR_GRAIN))
             .copied()
-            .filter(|&c| liquid(c) && neighbours(grid, c).any(|n| !liquid(n)))
+            .filter(|&c| liquid(c) && grid.face_neighbors(c).any(|n| !liquid(n)))
             .collect()
     }
 }
@@ -312,7 +312,7 @@ fn lower_by_sphere<const D: usize>(
 }
 
 /// The mean of `phi` over the von Neumann neighbours of cell `c` in layer `d` of a re-march
-/// (`layer`), summed in [`neighbours`]' order.
+/// (`layer`), summed in [`Grid::face_neighbors`]' order.
 fn mean_of_layer<const D: usize>(
     grid: &Grid<D>,
     phi: &[f64],
@@ -320,24 +320,11 @@ fn mean_of_layer<const D: usize>(
     c: usize,
     d: u32,
 ) -> f64 {
-    let (sum, n) = neighbours(grid, c)
+    let (sum, n) = grid
+        .face_neighbors(c)
         .filter(|&n| layer[n] == d)
         .fold((0.0, 0), |(s, k), n| (s + phi[n], k + 1));
     sum / n as f64
-}
-
-/// The von Neumann neighbours of cell `c` inside the domain, axis by axis, the lower one
-/// first (the re-march sums them in this order); by strides, from one conversion to
-/// coordinates.
-fn neighbours<const D: usize>(grid: &Grid<D>, c: usize) -> impl Iterator<Item = usize> + '_ {
-    let cc = grid.cell_coords(c);
-    (0..2 * D).filter_map(move |j| {
-        let (a, s) = (j / 2, grid.cell_stride(j / 2));
-        match j % 2 {
-            0 => (cc[a] > 0).then(|| c - s),
-            _ => (cc[a] + 1 < grid.dims[a]).then(|| c + s),
-        }
-    })
 }
 
 #[cfg(test)]
