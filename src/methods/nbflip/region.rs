@@ -160,18 +160,18 @@ fn for_each_in_box<const D: usize>(
 }
 
 /// The cells of the active tiles, ascending: row by row along axis 0, a row's runs of active
-/// tiles (work per row of cells, not per cell outside the region).
+/// tiles, read from a list per row of tiles (work per row of cells and per active tile, not
+/// per tile of every row).
 fn cells_of_tiles<const D: usize>(grid: &Grid<D>, tiles: &Grid<D>, active: &[bool]) -> Vec<usize> {
+    let n0 = tiles.dims[0];
+    let in_row: Vec<Vec<usize>> = (active.chunks(n0))
+        .map(|row| (0..n0).filter(|&t| row[t]).collect())
+        .collect();
     let mut out = vec![];
-    let rows = grid.num_cells() / grid.dims[0];
-    for row in 0..rows {
-        let first = row * grid.dims[0];
-        let tile_row = tile_of(grid, tiles, first);
-        for t in 0..tiles.dims[0] {
-            if active[tile_row + t] {
-                let start = first + t * TILE;
-                out.extend(start..(start + TILE).min(first + grid.dims[0]));
-            }
+    for first in (0..grid.num_cells()).step_by(grid.dims[0]) {
+        for &t in &in_row[tile_of(grid, tiles, first) / n0] {
+            let start = first + t * TILE;
+            out.extend(start..(start + TILE).min(first + grid.dims[0]));
         }
     }
     out
