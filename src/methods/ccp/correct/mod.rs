@@ -146,7 +146,11 @@ pub(crate) struct Solved {
 /// start changes the solver's work, not the optimum.
 #[derive(Clone, Debug, Default)]
 pub struct PriceMemory {
+    /// Per cell up to the last solve's highest bin cell, its price; 0 off its bins.
     cell_price: Vec<f64>,
+    /// The cells given a price (those to set back to 0 before the next solve's, rather than
+    /// the whole prefix, which covers nearly the box under a pool).
+    priced: Vec<usize>,
 }
 
 /// How much of the last step's prices a warm start takes. At full strength they overshoot:
@@ -167,7 +171,8 @@ impl PriceMemory {
 
     /// The memory of a checkpoint's [`cell_prices`](Self::cell_prices).
     pub fn from_cell_prices(cell_price: Vec<f64>) -> Self {
-        Self { cell_price }
+        let priced = (0..cell_price.len()).collect();
+        Self { cell_price, priced }
     }
 
     /// The warm prices of the bins `bin_cell` (0, the sink's price, for a cell that had none),
@@ -180,19 +185,24 @@ impl PriceMemory {
     /// Remembers the prices of `solved` (a problem with bins `bin_cell`), or forgets them all
     /// when it has none (the simplex, or a failed solve).
     fn remember(&mut self, bin_cell: &[usize], solved: Option<&Solved>) {
-        self.cell_price.clear();
-        if let Some(Solved {
+        for c in self.priced.drain(..) {
+            self.cell_price[c] = 0.0;
+        }
+        let Some(Solved {
             prices: Some(prices),
             sink_price,
             ..
         }) = solved
-        {
-            let cells = bin_cell.iter().max().map_or(0, |&c| c + 1);
-            self.cell_price.resize(cells, 0.0);
-            for (&c, &p) in bin_cell.iter().zip(prices) {
-                self.cell_price[c] = p - sink_price;
-            }
+        else {
+            self.cell_price.clear();
+            return;
+        };
+        let cells = bin_cell.iter().max().map_or(0, |&c| c + 1);
+        self.cell_price.resize(cells, 0.0);
+        for (&c, &p) in bin_cell.iter().zip(prices) {
+            self.cell_price[c] = p - sink_price;
         }
+        self.priced.extend_from_slice(bin_cell);
     }
 }
 
@@ -525,4 +535,44 @@ fn apply<const D: usize>(
             (grid.cell_index_of(x) != grid.cell_index_of(&x_hat)).then_some((x_hat, *x))
         })
         .collect();
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A solve with prices `p` (relative to a sink priced 1).
+    fn solved(p: &[f64]) -> Solved {
+        Solved {
+            choice: vec![],
+            work: FlowStats::default(),
+            prices: Some(p.iter().map(|p| p + 1.0).collect()),
+            sink_price: 1.0,
+        }
+    }
+
+    #[test]
+    fn the_price_memory_holds_the_last_solve_s_prices_alone() {
+        let mut m = PriceMemory::from_cell_prices(vec![0.0, 7.0, 0.0, 8.0]);
+        m.remember(&[2, 5, 9], Some(&solved(&[1.0, 2.0, 3.0])));
+        let first = [0.0, 0.0, 1.0, 0.0, 0.0, 2.0, 0.0, 0.0, 0.0, 3.0];
+        assert_eq!(m.cell_prices(), first);
+        m.remember(&[1, 5], Some(&solved(&[4.0, 5.0])));
+        assert_eq!(m.cell_prices(), [0.0, 4.0, 0.0, 0.0, 0.0, 5.0]);
+        let h = WARM_PRICE_SCALE;
+        assert_eq!(
+            m.prices_of(&[1, 3, 5, 40]),
+            Some(vec![4.0 * h, 0.0, 5.0 * h, 0.0])
+        );
+        m.remember(&[3, 4, 8], Some(&solved(&[6.0, 7.0, 8.0])));
+        assert_eq!(
+            m.cell_prices(),
+            [0.0, 0.0, 0.0, 6.0, 7.0, 0.0, 0.0, 0.0, 8.0]
+        );
+        m.remember(&[1, 2], None);
+        assert_eq!(m.cell_prices(), [0.0; 0]);
+        assert_eq!(m.prices_of(&[1]), None);
+        m.remember(&[0, 2], Some(&solved(&[9.0, 10.0])));
+        assert_eq!(m.cell_prices(), [9.0, 0.0, 10.0]);
+    }
 }
