@@ -124,7 +124,7 @@ impl<const D: usize> Simulation<D> {
         let mut dt = timestep::planned(s);
         rep.emitted = rep
             .times
-            .time(Stage::Emit, || emit::emit(s, |s| m.emitter_counts(s)));
+            .time(Stage::Emit, || emit::emit(s, |s, c| m.emitter_count(s, c)));
         if rep.emitted > 0 {
             // New fluid changes the depths the correction reads.
             refresh_markings(s, m.as_mut());

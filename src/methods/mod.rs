@@ -7,7 +7,7 @@
 //! | hook | alg. flip / alg. band | who uses it |
 //! |---|---|---|
 //! | [`FluidMethod::start`] | after the first markings | ccp with the band: first exchange with the deep |
-//! | [`FluidMethod::emitter_counts`] | emission | the band methods: the deep counts as full |
+//! | [`FluidMethod::emitter_count`] | emission | the band methods: the deep counts as full |
 //! | [`FluidMethod::particles_not_held`] | the particle-count invariant | ccp's deep, nbflip's resampling |
 //! | [`FluidMethod::particles_to_grid`] | line 1 | ccp with the band: the velocity combination |
 //! | [`FluidMethod::grid_to_particles`] | line 4 | FLIP/PIC blend by default |

@@ -134,10 +134,10 @@ pub trait FluidMethod<const D: usize>: MethodRecording<D> + Send {
     /// After seeding and the first markings.
     fn start(&mut self, _s: &mut State<D>) {}
 
-    /// The particle count per cell that emitters top up to `mu`, when it is not the markings'
-    /// count.
-    fn emitter_counts(&self, _s: &State<D>) -> Option<Vec<u32>> {
-        None
+    /// The particle count of cell `c` that emitters top up to `mu` (asked for the cells of
+    /// emitters that emit this step only).
+    fn emitter_count(&self, s: &State<D>, c: usize) -> u32 {
+        s.markings.count[c]
     }
 
     /// Particles seeded or emitted that the method accounts for without holding them: the

@@ -59,10 +59,10 @@ impl Band {
         active.near_cells(grid, |c| m.is_fluid(c) && !m.surface[c])
     }
 
-    /// The particle count emitters see: deep cells hold imaginary particles, so they count as
-    /// full (`mu`).
-    pub fn emitter_counts(&self, m: &Markings, mu: u32) -> Vec<u32> {
-        counts_with_full_deep(m, mu, |c| self.level(m, c))
+    /// The particle count emitters see in cell `c`: deep cells hold imaginary particles, so
+    /// they count as full (`mu`).
+    pub fn emitter_count(&self, m: &Markings, mu: u32, c: usize) -> u32 {
+        count_with_full_deep(m, mu, self.level(m, c), c)
     }
 
     /// A real particle in the deep, if there is one (there must be none after the exchange
@@ -109,19 +109,13 @@ impl Band {
     }
 }
 
-/// The markings' particle counts with every cell whose `level` is deep counted as full (`mu`):
-/// what emitters see under a band method, whose deep holds no particles.
-pub fn counts_with_full_deep(
-    m: &Markings,
-    mu: u32,
-    level: impl Fn(usize) -> DepthLevel,
-) -> Vec<u32> {
-    (0..m.kind.len())
-        .map(|c| match level(c) {
-            DepthLevel::Deep => mu,
-            _ => m.count[c],
-        })
-        .collect()
+/// The markings' particle count of cell `c`, or full (`mu`) if its `level` is deep: what
+/// emitters see under a band method, whose deep holds no particles.
+pub fn count_with_full_deep(m: &Markings, mu: u32, level: DepthLevel, c: usize) -> u32 {
+    match level {
+        DepthLevel::Deep => mu,
+        _ => m.count[c],
+    }
 }
 
 /// The velocity combination of the band methods (paper alg. band line 1; Ferstl et al. 2016,

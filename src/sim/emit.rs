@@ -6,26 +6,24 @@ use crate::particles::{stratified_samples, Particles, Region};
 use crate::sim::State;
 use rand::Rng;
 
-/// The emission stage: every emitter tops up its cells to `mu` (by `counts`, the particle
-/// count per cell the method says emitters see, or the markings' when it gives `None`; asked
-/// only when there are emitters), and the particle total and `V*` grow with what was added.
-/// Returns how many particles were added.
-pub fn emit<const D: usize>(
-    s: &mut State<D>,
-    counts: impl FnOnce(&State<D>) -> Option<Vec<u32>>,
-) -> usize {
-    if s.config.emitters.is_empty() {
-        return 0;
-    }
-    let counts = counts(s);
-    let count = counts.as_deref().unwrap_or(&s.markings.count);
+/// The emission stage: every emitter that emits now tops up its cells to `mu` (by `count`, the
+/// particle count of a cell the method says emitters see, asked for those cells alone, before
+/// any is added), and the particle total and `V*` grow with what was added. Returns how many
+/// particles were added.
+pub fn emit<const D: usize>(s: &mut State<D>, count: impl Fn(&State<D>, usize) -> u32) -> usize {
+    let counts: Vec<Option<Vec<u32>>> = (s.config.emitters.iter())
+        .map(|e| {
+            let cells = e.emits_at(s.time_secs).then(|| e.region.cells(&s.grid))?;
+            Some(cells.map(|c| count(s, c)).collect())
+        })
+        .collect();
     let c = &s.config;
     let mut added = 0;
-    for e in &c.emitters {
+    for (e, counts) in c.emitters.iter().zip(&counts) {
+        let Some(counts) = counts else { continue };
         added += e.emit(
             &s.grid,
-            s.time_secs,
-            count,
+            counts,
             s.total_particles + added,
             &s.solids.solid,
             c.per_axis,
@@ -52,14 +50,19 @@ pub struct Emitter<const D: usize> {
 }
 
 impl<const D: usize> Emitter<D> {
+    /// Whether it emits at time `time_secs`: from `start_secs` until before `stop_secs`.
+    pub fn emits_at(&self, time_secs: f64) -> bool {
+        (self.start_secs..self.stop_secs).contains(&time_secs)
+    }
+
     /// Tops up the emitter's non-solid cells to `mu` particles each (jittered sub-cell
-    /// samples), without the particles ever seeded or emitted (`total`, held or not) exceeding
+    /// samples; `count` holds their particle counts, in the order of its region's cells),
+    /// without the particles ever seeded or emitted (`total`, held or not) exceeding
     /// `until_particles`. Returns how many were added.
     #[allow(clippy::too_many_arguments)]
     pub fn emit(
         &self,
         grid: &Grid<D>,
-        time_secs: f64,
         count: &[u32],
         total: usize,
         solid: &[bool],
@@ -68,22 +71,19 @@ impl<const D: usize> Emitter<D> {
         particles: &mut Particles<D>,
         rng: &mut impl Rng,
     ) -> usize {
-        if time_secs < self.start_secs || time_secs >= self.stop_secs {
-            return 0;
-        }
         let mu = per_axis.pow(D as u32);
         let mut room = self
             .until_particles
             .map_or(usize::MAX, |n| n.saturating_sub(total));
         let mut added = 0;
-        for c in self.region.cells(grid) {
+        for (c, &n) in self.region.cells(grid).zip(count) {
             if room == 0 {
                 break;
             }
-            if solid[c] || count[c] as usize >= mu {
+            if solid[c] || n as usize >= mu {
                 continue;
             }
-            let want = (mu - count[c] as usize).min(room);
+            let want = (mu - n as usize).min(room);
             let samples = stratified_samples(grid.cell_coords(c), per_axis, jitter, rng);
             for x in samples.into_iter().take(want) {
                 particles.push(x, self.velocity);

@@ -77,8 +77,11 @@ impl<const D: usize> FluidMethod<D> for CcpSim<D> {
         self.exchange(s, None);
     }
 
-    fn emitter_counts(&self, s: &State<D>) -> Option<Vec<u32>> {
-        Some(self.band()?.emitter_counts(&s.markings, s.config.mu()))
+    fn emitter_count(&self, s: &State<D>, c: usize) -> u32 {
+        match self.band() {
+            Some(b) => b.emitter_count(&s.markings, s.config.mu(), c),
+            None => s.markings.count[c],
+        }
     }
 
     fn particles_not_held(&self) -> isize {

@@ -8,7 +8,7 @@ use crate::grid::{Cell, Grid, MacField, NearCells, Vector};
 use crate::methods::seam::{FluidMethod, MethodRecording, MethodReport};
 use crate::metrics::InvariantViolation;
 use crate::particles::Particles;
-use crate::sim::band::{combine_velocities, counts_with_full_deep, Band};
+use crate::sim::band::{combine_velocities, count_with_full_deep, Band};
 use crate::sim::markings::{DepthLevel, Markings};
 use crate::sim::transfer::{self, Known};
 use crate::sim::{ParticlesMut, State, StepError};
@@ -232,14 +232,10 @@ impl<const D: usize> FluidMethod<D> for NbflipSim<D> {
         self.step = NbflipReport::default();
     }
 
-    /// Cells deeper than the band count as full: emitters must not fill the deep. (Without
-    /// emitters, nothing: no pass over the grid.)
-    fn emitter_counts(&self, s: &State<D>) -> Option<Vec<u32>> {
-        if s.config.emitters.is_empty() {
-            return None;
-        }
-        let level = |c| level::<D>(&self.phi, &s.solids.solid, self.r(), c);
-        Some(counts_with_full_deep(&s.markings, s.config.mu(), level))
+    /// Cells deeper than the band count as full: emitters must not fill the deep.
+    fn emitter_count(&self, s: &State<D>, c: usize) -> u32 {
+        let level = level::<D>(&self.phi, &s.solids.solid, self.r(), c);
+        count_with_full_deep(&s.markings, s.config.mu(), level, c)
     }
 
     fn particles_not_held(&self) -> isize {
