@@ -339,6 +339,26 @@ impl<const D: usize> Grid<D> {
         })
     }
 
+    /// The cells of `member` that `seeds` (cells of `member`) reach by faces through cells of
+    /// `member`, ascending: their connected components, at the cost of those alone.
+    pub fn components_of(
+        &self,
+        seeds: impl IntoIterator<Item = usize>,
+        member: impl Fn(usize) -> bool,
+    ) -> Vec<usize> {
+        let mut seen = std::collections::HashSet::new();
+        let mut stack: Vec<usize> = seeds.into_iter().filter(|&c| seen.insert(c)).collect();
+        while let Some(c) = stack.pop() {
+            let new = self
+                .face_neighbors(c)
+                .filter(|&n| member(n) && seen.insert(n));
+            stack.extend(new);
+        }
+        let mut cells: Vec<usize> = seen.into_iter().collect();
+        cells.sort_unstable();
+        cells
+    }
+
     /// All cells of the Moore neighbourhood of `c` inside the domain, `c` excluded.
     pub fn moore_neighbors(&self, c: Cell<D>) -> impl Iterator<Item = Cell<D>> + '_ {
         let n = 3usize.pow(D as u32);
@@ -928,6 +948,34 @@ mod tests {
                 let total: f64 = st.weights().map(|(_, w)| w).sum();
                 assert!((total - 1.0).abs() < 1e-15);
             }
+        }
+    }
+
+    #[test]
+    fn components_are_the_member_cells_the_seeds_reach_2d_and_3d() {
+        /// Members: a slab x < 2, a slab x > 4 joined to it along the last axis' first layer
+        /// only when `joined`, and nothing else.
+        fn check<const D: usize>(joined: bool) {
+            let g = Grid::<D>::new([8; D]);
+            let at = |c: usize| g.cell_coords(c);
+            let bridge = |c: usize| joined && at(c)[D - 1] == 0;
+            let member = |c: usize| at(c)[0] < 2 || at(c)[0] > 4 || bridge(c);
+            let left = |c: usize| at(c)[0] < 2;
+            let seeds = [
+                g.cell_index([1; D]),
+                g.cell_index([0; D]),
+                g.cell_index([1; D]),
+            ];
+            let got = g.components_of(seeds, member);
+            let want: Vec<usize> = (0..g.num_cells())
+                .filter(|&c| member(c) && (joined || left(c)))
+                .collect();
+            assert_eq!(got, want, "D = {D}, joined = {joined}");
+            assert!(g.components_of([], member).is_empty());
+        }
+        for joined in [false, true] {
+            check::<2>(joined);
+            check::<3>(joined);
         }
     }
 

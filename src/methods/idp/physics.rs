@@ -192,8 +192,11 @@ fn push_field<const D: usize>(
         return (push, 0);
     }
     // How far each solid cell is from the nearest non-solid one (1 next to it), for particles
-    // deep inside.
-    let solid_cells: Vec<usize> = (0..solid.len()).filter(|&c| solid[c]).collect();
+    // deep inside: over the solids that hold particles, as far as they are connected (the
+    // distance of a cell depends on its own solid's cells alone, and a push reads the
+    // particle's cell and its solid neighbours).
+    let held = inside.iter().map(|x| grid.cell_index_of(x));
+    let solid_cells = grid.components_of(held, |c| solid[c]);
     let depth = clearing_distance(grid, &solid_cells, &vec![false; solid.len()]);
     let mut pushed = 0;
     for x in &inside {
