@@ -10,7 +10,7 @@
 use crate::frames::{FrameError, FrameWorker};
 use crate::record::Recorder;
 use crate::simulation::Simulation;
-use crate::snapshot::{Reader, SnapshotError, Writer};
+use crate::snapshot::{self, Reader, SnapshotError, Writer};
 use std::fs::File;
 use std::path::{Path, PathBuf};
 
@@ -73,27 +73,13 @@ pub const KEEP: usize = 2;
 /// report's kept run from another build may not continue or equal what this one computes.
 pub fn build() -> &'static str {
     static BUILD: std::sync::LazyLock<String> = std::sync::LazyLock::new(|| {
-        let exe = std::env::current_exe().and_then(crc_of_file);
+        let exe = std::env::current_exe()
+            .and_then(File::open)
+            .and_then(snapshot::crc_of);
         let crc = exe.map_or_else(|_| "unknown".into(), |c| format!("{c:08x}"));
         format!("cellflip {} ({crc})", env!("CARGO_PKG_VERSION"))
     });
     &BUILD
-}
-
-/// The CRC-32 of a file, read a MiB at a time (the binary is hundreds of MB with its debug
-/// information, which read whole would be the peak of a run's first checkpoint).
-fn crc_of_file(path: PathBuf) -> std::io::Result<u32> {
-    use std::io::{ErrorKind, Read};
-    let (mut file, mut crc) = (File::open(path)?, crc32fast::Hasher::new());
-    let mut block = vec![0; 1 << 20];
-    loop {
-        match file.read(&mut block) {
-            Ok(0) => return Ok(crc.finalize()),
-            Ok(n) => crc.update(&block[..n]),
-            Err(e) if e.kind() == ErrorKind::Interrupted => {}
-            Err(e) => return Err(e),
-        }
-    }
 }
 
 /// Where a run's recording stood when a checkpoint was written, for the resumed run to go on
@@ -450,17 +436,6 @@ pub fn default_dir(recording: Option<&Path>, scene: &str) -> PathBuf {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// A file's CRC read a block at a time is that of its bytes read whole.
-    #[test]
-    fn a_files_crc_is_that_of_its_bytes() {
-        let path = std::env::temp_dir().join(format!("cellflip-crc-{}", std::process::id()));
-        let bytes: Vec<u8> = (0..5u32 << 19).map(|i| ((i * 7919) >> 3) as u8).collect();
-        std::fs::write(&path, &bytes).unwrap();
-        let crc = crc_of_file(path.clone()).unwrap();
-        std::fs::remove_file(path).unwrap();
-        assert_eq!(crc, crc32fast::hash(&bytes));
-    }
 
     #[test]
     fn only_whole_checkpoint_names_count() {

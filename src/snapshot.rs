@@ -243,11 +243,7 @@ impl<'a> Writer<'a> {
             }
             start = need;
         };
-        let mut w = Summing {
-            inner: w,
-            crc: crc32fast::Hasher::new(),
-            len: 0,
-        };
+        let mut w = Summing::new(w);
         w.write_all(MAGIC)?;
         w.write_all(&VERSION.to_le_bytes())?;
         w.write_all(&(header.len() as u32).to_le_bytes())?;
@@ -297,6 +293,14 @@ fn align(at: usize) -> usize {
     at.div_ceil(ALIGN) * ALIGN
 }
 
+/// The CRC-32 of what `r` reads, a MiB at a time (the binary's, hundreds of MB with its debug
+/// information, read whole would be the peak of a run's first checkpoint).
+pub fn crc_of(r: impl std::io::Read) -> std::io::Result<u32> {
+    let mut sum = Summing::new(std::io::sink());
+    std::io::copy(&mut std::io::BufReader::with_capacity(1 << 20, r), &mut sum)?;
+    Ok(sum.crc.finalize())
+}
+
 /// A writer that sums what passes through it.
 struct Summing<W: Write> {
     inner: W,
@@ -305,6 +309,11 @@ struct Summing<W: Write> {
 }
 
 impl<W: Write> Summing<W> {
+    fn new(inner: W) -> Self {
+        let crc = crc32fast::Hasher::new();
+        Self { inner, crc, len: 0 }
+    }
+
     fn pad_to(&mut self, at: usize) -> std::io::Result<()> {
         let zeros = vec![0u8; at - self.len as usize];
         self.write_all(&zeros)
@@ -586,6 +595,13 @@ mod tests {
         );
         // Each array starts at a multiple of ALIGN.
         assert!(r.arrays.values().all(|a| a.offset % ALIGN == 0));
+    }
+
+    /// A CRC read a block at a time is that of the bytes read whole.
+    #[test]
+    fn a_readers_crc_is_that_of_its_bytes() {
+        let bytes: Vec<u8> = (0..5u32 << 19).map(|i| ((i * 7919) >> 3) as u8).collect();
+        assert_eq!(crc_of(&bytes[..]).unwrap(), crc32fast::hash(&bytes));
     }
 
     /// A made array yields exactly its shape's elements, or the write stops (a file whose
