@@ -58,12 +58,40 @@ impl Image {
     /// `value` of every cell of a grid of `dims` cells: the whole grid in 2D, the layer through
     /// the middle of the third axis in 3D.
     pub fn of_cells<const D: usize>(dims: [usize; D], value: impl Fn(usize) -> f32) -> Self {
+        Self {
+            size: [dims[0], dims[1]],
+            values: Self::layer(dims).map(value).collect(),
+        }
+    }
+
+    /// [`Self::of_cells`] of a value given at some cells alone: `value(k)` at `cells[k]`
+    /// (ascending), 0 at the others; the work is per listed cell, not per cell of the grid.
+    pub fn of_listed_cells<const D: usize>(
+        dims: [usize; D],
+        cells: &[u32],
+        value: impl Fn(usize) -> f32,
+    ) -> Self {
+        let layer = Self::layer(dims);
+        let mut image = Self {
+            size: [dims[0], dims[1]],
+            values: vec![0.0; layer.len()],
+        };
+        let first = cells.partition_point(|&c| (c as usize) < layer.start);
+        for (k, &c) in cells.iter().enumerate().skip(first) {
+            match image.values.get_mut(c as usize - layer.start) {
+                Some(v) => *v = value(k),
+                None => break,
+            }
+        }
+        image
+    }
+
+    /// The cells drawn of a grid of `dims`: every one in 2D, the layer through the middle of
+    /// the third axis in 3D.
+    fn layer<const D: usize>(dims: [usize; D]) -> std::ops::Range<usize> {
         let (w, h) = (dims[0], dims[1]);
         let offset = if D == 3 { dims[2] / 2 * w * h } else { 0 };
-        Self {
-            size: [w, h],
-            values: (offset..offset + w * h).map(value).collect(),
-        }
+        offset..offset + w * h
     }
 }
 
@@ -113,4 +141,31 @@ pub struct LayerView {
     pub layers: &'static [&'static str],
     pub marks: &'static [&'static str],
     pub needs: Needs,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_image_of_listed_cells_is_the_image_of_their_values_and_zero_elsewhere_2d_and_3d() {
+        // Every third cell listed, valued by its place in the list; the 3D layer is the one
+        // through the middle of the third axis, so listed cells below and above it are skipped.
+        fn check<const D: usize>(dims: [usize; D]) {
+            let n: usize = dims.iter().product();
+            let cells: Vec<u32> = (0..n as u32).filter(|c| c % 3 == 1).collect();
+            let value = |k: usize| 1.0 + k as f32;
+            let listed = Image::of_listed_cells(dims, &cells, value);
+            let whole = Image::of_cells(dims, |c| match cells.binary_search(&(c as u32)) {
+                Ok(k) => value(k),
+                Err(_) => 0.0,
+            });
+            assert_eq!(listed.size, whole.size);
+            assert_eq!(listed.values, whole.values, "{D}D");
+            assert!(listed.values.iter().any(|&v| v > 0.0));
+        }
+        check([7, 5]);
+        check([7, 5, 4]);
+        check([6, 4, 3]);
+    }
 }

@@ -327,6 +327,12 @@ impl<const D: usize> Solids<D> {
         self.rasterise(grid);
     }
 
+    /// The cells the obstacles cover where they are now (a cell two of them cover, twice):
+    /// the only cells whose solidity a step changes.
+    pub fn obstacle_cells(&self) -> impl Iterator<Item = usize> + '_ {
+        self.covered.iter().flatten().copied()
+    }
+
     /// The moving obstacles' cells, when there are obstacles (without them nothing moves, and
     /// the markings need not look at every cell's neighbours).
     pub fn moving_mask(&self) -> Option<&[bool]> {

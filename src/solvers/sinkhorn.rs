@@ -52,7 +52,15 @@
 //! windows of cells, added in chunk order: results are the same whatever the thread count.
 //! A solve may start from the previous one's plan ([`Transport::solve`]): from its scalings,
 //! the points' carried with them, and into its storage.
+//!
+//! **What a solve costs of the grid.** Only the cells near the points: the cells within the
+//! kernel's reach of a point's cell (the cube of side `2 ceil(r / h) + 1` around it, each line
+//! of cells along axis 0 as one span, [`Active`]) are numbered densely, the rows list those
+//! numbers, and the reached cells are found among them. A cell's air baseline is asked for
+//! only where some point reaches ([`AirCost`]). What a solve reads of the whole grid is a
+//! span per line of cells and a flag per cell (free or blocked), which its owner keeps up.
 
+use crate::grid::active::{line_spans, Active, CellNumbers};
 use crate::grid::{Grid, Vector};
 use rayon::prelude::*;
 use std::ops::{AddAssign, Mul, Range};
@@ -102,67 +110,82 @@ impl SinkhornSettings {
     }
 }
 
-/// The cost of a cell's empty part (see the module doc).
+/// The cost of a cell's empty part (see the module doc), with the baselines `b_j` as `B`: a
+/// function of the cell for a solve ([`AirCost`]), one value per slot in its plan.
 #[derive(Clone, Debug, PartialEq)]
-pub enum Air {
+pub enum Air<B> {
     /// Free: a cell holds at most its capacity.
     Capacity,
-    /// `eta eps KL(a_j | b_j)`: the air pulled towards `baseline[j]` (one per cell).
-    Baseline { eta: f64, baseline: Vec<f64> },
+    /// `eta eps KL(a_j | b_j)`: the air pulled towards the baseline `b_j`.
+    Baseline { eta: f64, baseline: B },
+}
+
+/// The air's cost as a solve takes it: `baseline(j)` is cell `j`'s `b_j` (`0 <= b_j <= V_j`),
+/// asked for only at the cells some point reaches.
+pub type AirCost<'a> = Air<&'a (dyn Fn(usize) -> f64 + Sync)>;
+
+impl<B: Fn(usize) -> f64 + Sync> Air<B> {
+    /// This air's cost for a solve.
+    pub fn cost(&self) -> AirCost<'_> {
+        match self {
+            Air::Capacity => Air::Capacity,
+            Air::Baseline { eta, baseline } => Air::Baseline {
+                eta: *eta,
+                baseline,
+            },
+        }
+    }
 }
 
 /// The cells points are transported to: a regular grid of cells of side `h` (in the points'
-/// units; cell `c` covers `[c h, (c + 1) h)`), the capacity of each (zero: not available) and
-/// the cost of their air.
+/// units; cell `c` covers `[c h, (c + 1) h)`), each free, with the capacity `V_j = h^d`, or
+/// blocked (in a solid), without any.
 #[derive(Clone, Debug)]
 pub struct TransportGrid<const D: usize> {
     pub grid: Grid<D>,
     pub h: f64,
-    pub capacity: Vec<f64>,
-    pub air: Air,
+    free: Vec<bool>,
+    free_cells: usize,
 }
 
 impl<const D: usize> TransportGrid<D> {
+    /// The grid `grid` of cells of side `h`, every cell free.
+    pub fn new(grid: Grid<D>, h: f64) -> Self {
+        let n = grid.num_cells();
+        Self {
+            grid,
+            h,
+            free: vec![true; n],
+            free_cells: n,
+        }
+    }
+
     pub fn center(&self, j: usize) -> Vector<D> {
         self.grid.center(self.grid.cell_coords(j)) * self.h
     }
 
-    /// The cell of `grid` (the grid the transport grid refines) that holds each transport
-    /// cell's centre.
-    pub fn cells_on(&self, grid: &Grid<D>) -> Vec<u32> {
-        (0..self.capacity.len())
-            .into_par_iter()
-            .map(|j| grid.cell_index_of(&self.center(j)) as u32)
-            .collect()
+    /// `V_j` of a free cell, `h^d`.
+    pub fn cell_volume(&self) -> f64 {
+        self.h.powi(D as i32)
     }
 
-    /// The column scaling `v_j` that makes cell `j`'s column meet its marginal, given
-    /// `C_j = sum_p K_pj u_p > 0` (the module doc derives it); `v` is the current one, kept
-    /// where the marginal says nothing (an empty baseline and no kernel).
-    fn column_scaling(&self, j: usize, c: f64, v: f64) -> f64 {
-        let cap = self.capacity[j];
-        match &self.air {
-            Air::Capacity => (cap / c).min(1.0),
-            Air::Baseline { eta, baseline } => match (baseline[j], *eta) {
-                (b, _) if c == 0.0 && b == 0.0 => v,
-                (b, 1.0) => cap / (c + b),
-                (b, eta) => baseline_newton(cap, c, b, eta),
-            },
-        }
+    pub fn is_free(&self, j: usize) -> bool {
+        self.free[j]
     }
 
-    /// Cell `j`'s relative column error when its kernels fill `fill = v_j C_j` of it and its
-    /// column scaling is `v`.
-    pub fn column_error(&self, j: usize, fill: f64, v: f64) -> f64 {
-        let ratio = fill / self.capacity[j];
-        match &self.air {
-            Air::Capacity if v < 1.0 => (ratio - 1.0).abs(),
-            Air::Capacity => (ratio - 1.0).max(0.0),
-            Air::Baseline { eta, baseline } => {
-                let air = baseline[j] * if *eta == 1.0 { v } else { v.powf(1.0 / eta) };
-                (ratio + air / self.capacity[j] - 1.0).abs()
-            }
+    /// Frees or blocks cell `j`.
+    pub fn set_free(&mut self, j: usize, free: bool) {
+        match (self.free[j], free) {
+            (false, true) => self.free_cells += 1,
+            (true, false) => self.free_cells -= 1,
+            _ => return,
         }
+        self.free[j] = free;
+    }
+
+    /// The free cells' capacity together (their count times `h^d`).
+    pub fn free_volume(&self) -> f64 {
+        self.free_cells as f64 * self.cell_volume()
     }
 }
 
@@ -238,6 +261,10 @@ pub struct Transport<const D: usize> {
     pub converged: bool,
     /// The points' volume `V_p`.
     pub volume: f64,
+    /// `V_j` of a free cell.
+    cell_volume: f64,
+    /// The air's cost, with each slot's baseline.
+    air: Air<Vec<f64>>,
     /// `u_p`, one per point, and `v_j`, one per slot.
     u: Vec<f64>,
     v: Vec<f64>,
@@ -266,6 +293,8 @@ impl<const D: usize> Transport<D> {
             error: 0.0,
             converged: false,
             volume: 0.0,
+            cell_volume: 0.0,
+            air: Air::Capacity,
             u,
             v,
             rows: vec![],
@@ -276,17 +305,18 @@ impl<const D: usize> Transport<D> {
         }
     }
 
-    /// Solves the transport of `points`, each of volume `volume`, to `tg`, starting from a
-    /// previous plan `warm` on the same grid ([`Self::start_from`]; `u = v = 1` if none),
-    /// whose storage it reuses.
+    /// Solves the transport of `points`, each of volume `volume`, to `tg` with its air costed
+    /// by `air`, starting from a previous plan `warm` on the same grid ([`Self::start_from`];
+    /// `u = v = 1` if none), whose storage it reuses.
     pub fn solve(
         tg: &TransportGrid<D>,
+        air: &AirCost,
         points: &[Vector<D>],
         volume: f64,
         s: &SinkhornSettings,
         mut warm: Option<Self>,
     ) -> Result<Self, SinkhornError> {
-        let capacity: f64 = tg.capacity.iter().sum();
+        let capacity = tg.free_volume();
         let total = volume * points.len() as f64;
         if total > capacity {
             return Err(SinkhornError::Overfull {
@@ -295,16 +325,16 @@ impl<const D: usize> Transport<D> {
             });
         }
         let storage = warm.as_mut().map(|w| std::mem::take(&mut w.rows));
-        let mut t = Self::rows(tg, points, volume, s, storage.unwrap_or_default())?;
+        let mut t = Self::rows(tg, air, points, volume, s, storage.unwrap_or_default())?;
         if let Some(w) = warm {
-            t.start_from(tg, w)?;
+            t.start_from(w)?;
         }
         let mut next = vec![];
         loop {
             t.update_rows()?;
             let c = t.kernel_columns(0.0, |p| t.u[p]);
             let normal;
-            (t.error, normal) = t.column_update(tg, &c, &mut next);
+            (t.error, normal) = t.column_update(&c, &mut next);
             t.converged = t.error <= s.delta;
             if t.converged || t.iterations >= s.max_iterations {
                 break;
@@ -321,7 +351,7 @@ impl<const D: usize> Transport<D> {
     /// point's `u_p` moves with the point, so where a cell that few kernels reach moves with
     /// the liquid (a deep cell that must be full), the carried `u_p` already hold it (our
     /// choice; Qu et al. and Levi say nothing of warm starts).
-    fn start_from(&mut self, tg: &TransportGrid<D>, w: Self) -> Result<(), SinkhornError> {
+    fn start_from(&mut self, w: Self) -> Result<(), SinkhornError> {
         let mut at = 0;
         for (&j, v) in self.active.iter().zip(&mut self.v) {
             while w.active.get(at).is_some_and(|&i| i < j) {
@@ -340,41 +370,36 @@ impl<const D: usize> Transport<D> {
             .collect();
         let c = self.kernel_columns(0.0, |p| self.u[p]);
         let mut next = vec![];
-        let (_, normal) = self.column_update(tg, &c, &mut next);
+        let (_, normal) = self.column_update(&c, &mut next);
         self.adopt(&mut next, normal)
     }
 
-    /// Every point's row: the cells with capacity in the ball of its kernel, with their
-    /// `K_pj`, listed into `rows` (a previous plan's, whose capacity is reused); then the
-    /// slots and the chunks of the column sums.
+    /// Every point's row: the free cells in the ball of its kernel, with their `K_pj`, listed
+    /// into `rows` (a previous plan's, whose capacity is reused); then the slots, their
+    /// baselines, and the chunks of the column sums.
     fn rows(
         tg: &TransportGrid<D>,
+        air: &AirCost,
         points: &[Vector<D>],
         volume: f64,
         s: &SinkhornSettings,
         mut rows: Vec<Rows>,
     ) -> Result<Self, SinkhornError> {
-        rows.resize_with(points.len().div_ceil(LIST_POINTS), Rows::default);
-        (rows.par_iter_mut().zip(points.par_chunks(LIST_POINTS))).for_each(|(r, chunk)| {
-            r.row.clear();
-            r.row.push(0);
-            r.slot.clear();
-            r.kernel.clear();
-            let mut axes = Axes::default();
-            for x in chunk {
-                axes.ball(tg, x, s, |j, k| {
-                    r.slot.push(j as u32);
-                    r.kernel.push(k);
-                });
-                r.row.push(r.slot.len());
-            }
-        });
+        let near = near_cells(tg, points, s).numbers(&tg.grid);
+        list_rows(tg, &near, points, s, &mut rows);
         let empty = |p: usize| row_of(&rows, p).0.is_empty();
         if let Some(p) = (0..points.len()).into_par_iter().find_first(|&p| empty(p)) {
             return Err(SinkhornError::KernelVanishes { point: p });
         }
-        let active = reached_cells(tg.grid.num_cells(), &mut rows);
+        let active = reached_cells(&near, &mut rows);
         let centre = active.iter().map(|&j| tg.center(j as usize)).collect();
+        let air = match air {
+            Air::Capacity => Air::Capacity,
+            Air::Baseline { eta, baseline } => Air::Baseline {
+                eta: *eta,
+                baseline: active.par_iter().map(|&j| baseline(j as usize)).collect(),
+            },
+        };
         let order = sorted_by_cell(tg, points);
         let size = (points.len() / MIN_CHUNKS).clamp(CHUNK_POINTS.start, CHUNK_POINTS.end);
         let chunks = (order.par_chunks(size).enumerate())
@@ -393,6 +418,8 @@ impl<const D: usize> Transport<D> {
             error: f64::INFINITY,
             converged: false,
             volume,
+            cell_volume: tg.cell_volume(),
+            air,
             u: vec![0.0; points.len()],
             v: vec![1.0; active.len()],
             rows,
@@ -440,15 +467,44 @@ impl<const D: usize> Transport<D> {
     /// The column update, every cell's marginal met, from `C_j` (per slot in `c`), into
     /// `next`; returns the largest relative column error of the current scalings and whether
     /// the new ones are all finite and positive (one pass for both).
-    fn column_update(&self, tg: &TransportGrid<D>, c: &[f64], next: &mut Vec<f64>) -> (f64, bool) {
+    fn column_update(&self, c: &[f64], next: &mut Vec<f64>) -> (f64, bool) {
         next.resize(self.v.len(), 0.0);
-        (next.par_iter_mut().zip(&self.v).zip(c).zip(&self.active))
+        (next.par_iter_mut().zip(&self.v).zip(c).enumerate())
             .with_min_len(SLOTS_PER_TASK)
-            .map(|(((next, &v), &c), &j)| {
-                *next = tg.column_scaling(j as usize, c, v);
-                (tg.column_error(j as usize, v * c, v), next.is_normal())
+            .map(|(k, ((next, &v), &c))| {
+                *next = self.column_scaling(k, c, v);
+                (self.column_error(k, v * c, v), next.is_normal())
             })
             .reduce(|| (0.0, true), |(a, p), (b, q)| (a.max(b), p && q))
+    }
+
+    /// The column scaling `v_j` that makes slot `k`'s column meet its marginal, given
+    /// `C_j = sum_p K_pj u_p > 0` (the module doc derives it); `v` is the current one, kept
+    /// where the marginal says nothing (an empty baseline and no kernel).
+    fn column_scaling(&self, k: usize, c: f64, v: f64) -> f64 {
+        let cap = self.cell_volume;
+        match &self.air {
+            Air::Capacity => (cap / c).min(1.0),
+            Air::Baseline { eta, baseline } => match (baseline[k], *eta) {
+                (b, _) if c == 0.0 && b == 0.0 => v,
+                (b, 1.0) => cap / (c + b),
+                (b, eta) => baseline_newton(cap, c, b, eta),
+            },
+        }
+    }
+
+    /// Slot `k`'s relative column error when its kernels fill `fill = v_j C_j` of its cell and
+    /// its column scaling is `v`.
+    pub fn column_error(&self, k: usize, fill: f64, v: f64) -> f64 {
+        let ratio = fill / self.cell_volume;
+        match &self.air {
+            Air::Capacity if v < 1.0 => (ratio - 1.0).abs(),
+            Air::Capacity => (ratio - 1.0).max(0.0),
+            Air::Baseline { eta, baseline } => {
+                let air = baseline[k] * if *eta == 1.0 { v } else { v.powf(1.0 / eta) };
+                (ratio + air / self.cell_volume - 1.0).abs()
+            }
+        }
     }
 
     /// Takes the scalings [`Self::column_update`] put in `next`, if `normal`.
@@ -538,20 +594,59 @@ fn row_of(rows: &[Rows], p: usize) -> (&[u32], &[f64]) {
     (&r.slot[range.clone()], &r.kernel[range])
 }
 
-/// The cells of `num_cells` that the rows name, in grid order; the rows' slots, listed as
-/// cell indices, are rewritten to index into them.
-fn reached_cells(num_cells: usize, rows: &mut [Rows]) -> Vec<u32> {
-    let index: Vec<AtomicU32> = (0..num_cells).map(|_| AtomicU32::new(u32::MAX)).collect();
+/// The cells within the kernel's reach of some point's cell: the cube of side
+/// `2 ceil(r / h) + 1` around each (what [`Axes::ball`] looks at), each line's as one span.
+fn near_cells<const D: usize>(
+    tg: &TransportGrid<D>,
+    points: &[Vector<D>],
+    s: &SinkhornSettings,
+) -> Active<D> {
+    let cells = points.par_iter().map(|x| cell_of(tg, x));
+    let reach = (s.radius() / tg.h).ceil() as usize;
+    Active::around_spans(&tg.grid, line_spans(&tg.grid.dims, cells), reach)
+}
+
+/// Lists every point's row into `rows`: the free cells in its kernel's ball, by their numbers
+/// among the `near` cells, with their `K_pj`.
+fn list_rows<const D: usize>(
+    tg: &TransportGrid<D>,
+    near: &CellNumbers,
+    points: &[Vector<D>],
+    s: &SinkhornSettings,
+    rows: &mut Vec<Rows>,
+) {
+    rows.resize_with(points.len().div_ceil(LIST_POINTS), Rows::default);
+    (rows.par_iter_mut().zip(points.par_chunks(LIST_POINTS))).for_each(|(r, chunk)| {
+        r.row.clear();
+        r.row.push(0);
+        r.slot.clear();
+        r.kernel.clear();
+        let mut axes = Axes::default();
+        for x in chunk {
+            axes.ball(tg, near, x, s, |n, k| {
+                r.slot.push(n as u32);
+                r.kernel.push(k);
+            });
+            r.row.push(r.slot.len());
+        }
+    });
+}
+
+/// The cells the rows reach, in grid order; the rows' slots, listed by the cells' numbers
+/// among the `near` ones, are rewritten to index into them.
+fn reached_cells(near: &CellNumbers, rows: &mut [Rows]) -> Vec<u32> {
+    let index: Vec<AtomicU32> = (0..near.len()).map(|_| AtomicU32::new(u32::MAX)).collect();
     (rows.par_iter().flat_map_iter(|r| &r.slot))
-        .for_each(|&j| index[j as usize].store(0, Ordering::Relaxed));
+        .for_each(|&n| index[n as usize].store(0, Ordering::Relaxed));
     let mut index: Vec<u32> = index.into_iter().map(AtomicU32::into_inner).collect();
-    let active: Vec<u32> = (0..num_cells as u32)
-        .filter(|&j| index[j as usize] == 0)
-        .collect();
-    for (k, &j) in active.iter().enumerate() {
-        index[j as usize] = k as u32;
+    let mut active = vec![];
+    for (n, j) in near.cells().enumerate() {
+        if index[n] == 0 {
+            index[n] = active.len() as u32;
+            active.push(j as u32);
+        }
     }
-    (rows.par_iter_mut().flat_map_iter(|r| &mut r.slot)).for_each(|j| *j = index[*j as usize]);
+    (rows.par_iter_mut().flat_map_iter(|r| &mut r.slot)).for_each(|n| *n = index[*n as usize]);
     active
 }
 
@@ -577,12 +672,14 @@ struct Axes {
 }
 
 impl Axes {
-    /// Calls `f(j, K_pj)` for the cells with capacity within the kernel's ball around `x`, in
-    /// grid order: `K_pj` is the product of the per-axis factors (the outer axes' first), and
+    /// Calls `f(n, K_pj)` for the free cells within the kernel's ball around `x`, in grid
+    /// order, `n` the cell's number among the `near` ones ([`near_cells`], which hold the
+    /// ball's box): `K_pj` is the product of the per-axis factors (the outer axes' first), and
     /// the ball test is on the sum of the per-axis squares.
     fn ball<const D: usize>(
         &mut self,
         tg: &TransportGrid<D>,
+        near: &CellNumbers,
         x: &Vector<D>,
         s: &SinkhornSettings,
         mut f: impl FnMut(usize, f64),
@@ -613,12 +710,12 @@ impl Axes {
                 kernel *= self.factor[k][at[k]];
             }
             if d2 <= r2 {
-                let base = tg
-                    .grid
-                    .cell_index(std::array::from_fn(|k| self.lo[k] + at[k]));
+                let first = std::array::from_fn(|k| self.lo[k] + at[k]);
+                let base = tg.grid.cell_index(first);
+                let number = near.at(first).expect("the near cells hold the ball's box");
                 for (i, (dx2, fx)) in self.d2[0].iter().zip(&self.factor[0]).enumerate() {
-                    if d2 + dx2 <= r2 && tg.capacity[base + i] > 0.0 {
-                        f(base + i, kernel * fx);
+                    if d2 + dx2 <= r2 && tg.free[base + i] {
+                        f(number + i, kernel * fx);
                     }
                 }
             }
@@ -647,6 +744,16 @@ mod tests {
         max_iterations: 10_000,
     };
 
+    /// A test's air: the baseline of each cell from a list.
+    type ListedAir = Air<Box<dyn Fn(usize) -> f64 + Sync>>;
+
+    fn listed(eta: f64, baseline: Vec<f64>) -> ListedAir {
+        Air::Baseline {
+            eta,
+            baseline: Box::new(move |j| baseline[j]),
+        }
+    }
+
     /// `n` random points in a box of `cells` transport cells of side 0.5, the middle cell
     /// blocked, their volumes together `fill` times the free volume; air free.
     fn instance<const D: usize>(
@@ -655,19 +762,12 @@ mod tests {
         fill: f64,
         seed: u64,
     ) -> (TransportGrid<D>, Vec<Vector<D>>, f64) {
-        let h: f64 = 0.5;
         let grid = Grid::new(cells);
-        let mut capacity = vec![h.powi(D as i32); grid.num_cells()];
-        capacity[grid.num_cells() / 2] = 0.0;
-        let tg = TransportGrid {
-            grid,
-            h,
-            capacity,
-            air: Air::Capacity,
-        };
+        let mut tg = TransportGrid::new(grid, 0.5);
+        tg.set_free(tg.grid.num_cells() / 2, false);
         let points = random_points(&tg, n, 1.0, seed);
-        let free: f64 = tg.capacity.iter().sum();
-        (tg, points, fill * free / n as f64)
+        let v = fill * tg.free_volume() / n as f64;
+        (tg, points, v)
     }
 
     /// `n` random points in the free cells of `tg` below `height` times its height (axis 1).
@@ -685,7 +785,7 @@ mod tests {
                     let side = dims[k] as f64 * tg.h * if k == 1 { height } else { 1.0 };
                     rng.random::<f64>() * side
                 });
-                if tg.capacity[tg.grid.cell_index(cell_of(tg, &x))] > 0.0 {
+                if tg.is_free(tg.grid.cell_index(cell_of(tg, &x))) {
                     break x;
                 }
             })
@@ -704,17 +804,11 @@ mod tests {
         n: usize,
         eta: f64,
         seed: u64,
-    ) -> (TransportGrid<D>, Vec<Vector<D>>, f64) {
-        let h: f64 = 0.5;
+    ) -> (TransportGrid<D>, ListedAir, Vec<Vector<D>>, f64) {
         let grid = Grid::new(cells);
-        let cell = h.powi(D as i32);
+        let cell = 0.5f64.powi(D as i32);
         let at = |j: usize| grid.cell_coords(j);
-        let capacity: Vec<f64> = (0..grid.num_cells())
-            .map(|j| match at(j)[0] == 2 && 4 * at(j)[1] < 3 * cells[1] {
-                true => 0.0,
-                false => cell,
-            })
-            .collect();
+        let wall = |j: usize| at(j)[0] == 2 && 4 * at(j)[1] < 3 * cells[1];
         let below = |j: usize| 2 * at(j)[1] < cells[1];
         let baseline = (0..grid.num_cells())
             .map(|j| match 8 * at(j)[1] {
@@ -724,24 +818,20 @@ mod tests {
             })
             .collect();
         let liquid: f64 = (0..grid.num_cells())
-            .filter(|&j| below(j))
-            .map(|j| capacity[j])
+            .filter(|&j| below(j) && !wall(j))
+            .map(|_| cell)
             .sum();
-        let air = Air::Baseline { eta, baseline };
-        let tg = TransportGrid {
-            grid,
-            h,
-            capacity,
-            air,
-        };
+        let mut tg = TransportGrid::new(grid.clone(), 0.5);
+        (0..grid.num_cells()).for_each(|j| tg.set_free(j, !wall(j)));
         let points = random_points(&tg, n, 0.5, seed);
-        (tg, points, liquid / n as f64)
+        (tg, listed(eta, baseline), points, liquid / n as f64)
     }
 
     /// Both marginals, recounted entry by entry through the rows and through the columns, and
     /// each column's, with the air its model gives, met to `delta`.
     fn check_marginals<const D: usize>(
         tg: &TransportGrid<D>,
+        air: &AirCost,
         t: &Transport<D>,
         n: usize,
         delta: f64,
@@ -768,15 +858,15 @@ mod tests {
         for (k, &j) in t.active_cells().iter().enumerate() {
             let (j, v) = (j as usize, t.column_scalings()[k]);
             assert!((cols[k] - by_rows[k]).abs() <= 1e-12 * (1.0 + cols[k]));
-            assert!(tg.capacity[j] > 0.0, "a blocked cell holds volume");
-            let ratio = cols[k] / tg.capacity[j];
-            match &tg.air {
+            assert!(tg.is_free(j), "a blocked cell holds volume");
+            let ratio = cols[k] / tg.cell_volume();
+            match air {
                 Air::Capacity => {
                     assert!(ratio <= 1.0 + delta, "cell {j} over-full: {ratio}");
                     assert!(v >= 1.0 || ratio >= 1.0 - delta, "full cell {j} at {ratio}");
                 }
                 Air::Baseline { eta, baseline } => {
-                    let air = baseline[j] * v.powf(1.0 / eta) / tg.capacity[j];
+                    let air = baseline(j) * v.powf(1.0 / eta) / tg.cell_volume();
                     let e = ratio + air - 1.0;
                     assert!(e.abs() <= delta, "cell {j}: {ratio} kernels + {air} air");
                 }
@@ -790,18 +880,18 @@ mod tests {
             // Half full (a free surface) and nearly full (most cells full).
             for fill in [0.5, 0.9] {
                 let (tg, pts, v) = instance([16, 12], 150, fill, seed);
-                let t = Transport::solve(&tg, &pts, v, &S, None).unwrap();
-                check_marginals(&tg, &t, pts.len(), S.delta);
+                let t = Transport::solve(&tg, &Air::Capacity, &pts, v, &S, None).unwrap();
+                check_marginals(&tg, &Air::Capacity, &t, pts.len(), S.delta);
                 let (tg, pts, v) = instance([8, 6, 7], 300, fill, seed);
-                let t = Transport::solve(&tg, &pts, v, &S, None).unwrap();
-                check_marginals(&tg, &t, pts.len(), S.delta);
+                let t = Transport::solve(&tg, &Air::Capacity, &pts, v, &S, None).unwrap();
+                check_marginals(&tg, &Air::Capacity, &t, pts.len(), S.delta);
             }
         }
         // A tighter delta is met as well.
         let tight = SinkhornSettings { delta: 1e-6, ..S };
         let (tg, pts, v) = instance([16, 12], 150, 0.9, 7);
-        let t = Transport::solve(&tg, &pts, v, &tight, None).unwrap();
-        check_marginals(&tg, &t, pts.len(), 1e-6);
+        let t = Transport::solve(&tg, &Air::Capacity, &pts, v, &tight, None).unwrap();
+        check_marginals(&tg, &Air::Capacity, &t, pts.len(), 1e-6);
     }
 
     #[test]
@@ -810,12 +900,12 @@ mod tests {
         // (Newton), to Levi's delta and to a tight one.
         for (seed, eta, delta) in [(0, 1.0, 0.1), (1, 3.0, 0.1), (2, 1.0, 1e-6), (3, 0.5, 1e-6)] {
             let s = SinkhornSettings { delta, ..S };
-            let (tg, pts, v) = half_full([16, 12], 200, eta, seed);
-            let t = Transport::solve(&tg, &pts, v, &s, None).unwrap();
-            check_marginals(&tg, &t, pts.len(), delta);
-            let (tg, pts, v) = half_full([8, 8, 6], 400, eta, seed);
-            let t = Transport::solve(&tg, &pts, v, &s, None).unwrap();
-            check_marginals(&tg, &t, pts.len(), delta);
+            let (tg, air, pts, v) = half_full([16, 12], 200, eta, seed);
+            let t = Transport::solve(&tg, &air.cost(), &pts, v, &s, None).unwrap();
+            check_marginals(&tg, &air.cost(), &t, pts.len(), delta);
+            let (tg, air, pts, v) = half_full([8, 8, 6], 400, eta, seed);
+            let t = Transport::solve(&tg, &air.cost(), &pts, v, &s, None).unwrap();
+            check_marginals(&tg, &air.cost(), &t, pts.len(), delta);
         }
     }
 
@@ -849,7 +939,7 @@ mod tests {
                 .num_threads(threads)
                 .build()
                 .unwrap();
-            pool.install(|| Transport::solve(&tg, &pts, v, &s, None).unwrap())
+            pool.install(|| Transport::solve(&tg, &Air::Capacity, &pts, v, &s, None).unwrap())
         };
         let (a, b) = (solve(1), solve(2));
         assert_eq!((&a.v, a.iterations), (&b.v, b.iterations));
@@ -859,25 +949,27 @@ mod tests {
     #[test]
     fn a_warm_start_from_the_same_points_converges_at_once_and_takes_new_points() {
         let s = SinkhornSettings { delta: 1e-6, ..S };
-        let (tg, pts, v) = half_full([16, 12], 200, 1.0, 5);
-        let cold = Transport::solve(&tg, &pts, v, &s, None).unwrap();
+        let (tg, air, pts, v) = half_full([16, 12], 200, 1.0, 5);
+        let air = air.cost();
+        let cold = Transport::solve(&tg, &air, &pts, v, &s, None).unwrap();
         assert!(cold.iterations > 1, "{}", cold.iterations);
         let (iterations, scalings) = (cold.iterations, cold.v.clone());
-        let warm = Transport::solve(&tg, &pts, v, &s, Some(cold)).unwrap();
-        check_marginals(&tg, &warm, pts.len(), 1e-6);
+        let warm = Transport::solve(&tg, &air, &pts, v, &s, Some(cold)).unwrap();
+        check_marginals(&tg, &air, &warm, pts.len(), 1e-6);
         assert_eq!(warm.iterations, 1, "cold: {iterations}");
         let moved = (warm.v.iter().zip(&scalings)).map(|(a, b)| (a / b - 1.0).abs());
         assert!(moved.fold(0.0, f64::max) < 1e-5);
         // Two more points after the same ones, the volume shared out anew.
         let more: Vec<_> = pts.iter().chain(&pts[..2]).copied().collect();
         let v = v * pts.len() as f64 / more.len() as f64;
-        let t = Transport::solve(&tg, &more, v, &s, Some(warm)).unwrap();
-        check_marginals(&tg, &t, more.len(), 1e-6);
+        let t = Transport::solve(&tg, &air, &more, v, &s, Some(warm)).unwrap();
+        check_marginals(&tg, &air, &t, more.len(), 1e-6);
     }
 
     /// Point `x`'s row alone on `tg`: its volume, barycentre and largest entry.
     fn lone_row<const D: usize>(
         tg: &TransportGrid<D>,
+        air: &AirCost,
         x: Vector<D>,
         v: f64,
     ) -> (f64, Vector<D>, f64) {
@@ -886,8 +978,8 @@ mod tests {
             max_iterations: 50,
             ..S
         };
-        let t = Transport::solve(tg, &[x], v, &s, None).unwrap();
-        check_marginals(tg, &t, 1, 1e-10);
+        let t = Transport::solve(tg, air, &[x], v, &s, None).unwrap();
+        check_marginals(tg, air, &t, 1, 1e-10);
         let (mut mass, mut centre, mut peak) = (0.0, Vector::<D>::zeros(), 0.0f64);
         t.for_each_in_row(0, |_, xj, v| {
             mass += v;
@@ -902,14 +994,9 @@ mod tests {
         // Far from the walls and from any full cell: the row is the normalised kernel, whose
         // barycentre is the point, and one row update is the whole solve.
         let grid = Grid::new([20, 20]);
-        let tg = TransportGrid {
-            capacity: vec![0.25; grid.num_cells()],
-            grid,
-            h: 0.5,
-            air: Air::Capacity,
-        };
+        let tg = TransportGrid::new(grid, 0.5);
         let x = Vector::<2>::new(5.25, 4.75);
-        let (mass, centre, peak) = lone_row(&tg, x, 0.2);
+        let (mass, centre, peak) = lone_row(&tg, &Air::Capacity, x, 0.2);
         assert!((mass - 0.2).abs() < 1e-15);
         assert!((centre - x).norm() < 1e-12);
         // The peak cell holds 1 / sum_j exp(-|x - x_j|^2 / eps) of the volume.
@@ -929,16 +1016,9 @@ mod tests {
             let grid = Grid::new([16; D]);
             let cell = 0.5f64.powi(D as i32);
             let n = grid.num_cells();
-            let tg = TransportGrid {
-                capacity: vec![cell; n],
-                grid,
-                h: 0.5,
-                air: Air::Baseline {
-                    eta: 1.0,
-                    baseline: vec![cell / 2.0; n],
-                },
-            };
-            let (mass, centre, _) = lone_row(&tg, x, 0.3 * cell);
+            let tg = TransportGrid::new(grid, 0.5);
+            let air = listed(1.0, vec![cell / 2.0; n]);
+            let (mass, centre, _) = lone_row(&tg, &air.cost(), x, 0.3 * cell);
             assert!((mass / (0.3 * cell) - 1.0).abs() < 1e-12, "{D}D: {mass}");
             assert!((centre - x).norm() < 1e-12, "{D}D: {centre:?}");
         }
@@ -953,10 +1033,11 @@ mod tests {
             ..S
         };
         let (tg, pts, v) = instance([6, 6], 20, 1.0, 1);
-        let e = Transport::solve(&tg, &pts, v * 1.01, &s, None).unwrap_err();
+        let e = Transport::solve(&tg, &Air::Capacity, &pts, v * 1.01, &s, None).unwrap_err();
         assert!(matches!(e, SinkhornError::Overfull { .. }), "{e}");
         let tiny = SinkhornSettings { epsilon: 1e-4, ..s };
-        let e = Transport::solve(&tg, &[Vector::<2>::new(0.3, 0.3)], 0.1, &tiny, None).unwrap_err();
+        let x = [Vector::<2>::new(0.3, 0.3)];
+        let e = Transport::solve(&tg, &Air::Capacity, &x, 0.1, &tiny, None).unwrap_err();
         assert_eq!(e, SinkhornError::KernelVanishes { point: 0 });
     }
 }

@@ -10,28 +10,18 @@
 
 use crate::metrics::cell_volume;
 use crate::sim::markings::Markings;
-use crate::solvers::sinkhorn::TransportGrid;
-use rayon::prelude::*;
 
-/// `b_j` of every transport cell of `tg` (zero in cells without capacity), from the markings
-/// of the simulation grid at `mu` particles per cell; `cell_of[j]` is the simulation cell of
-/// transport cell `j`.
-pub fn air_baseline<const D: usize>(
-    tg: &TransportGrid<D>,
-    cell_of: &[u32],
-    markings: &Markings,
-    mu: u32,
-) -> Vec<f64> {
-    (tg.capacity.par_iter().zip(cell_of))
-        .map(|(&capacity, &c)| capacity * (1.0 - cell_volume(markings, mu, c as usize)))
-        .collect()
+/// `b_j` of a free transport cell of volume `v_j` in simulation cell `c`, from the markings of
+/// the simulation grid at `mu` particles per cell.
+pub fn air_baseline(v_j: f64, markings: &Markings, mu: u32, c: usize) -> f64 {
+    v_j * (1.0 - cell_volume(markings, mu, c))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::grid::{Grid, Vector};
-    use crate::solvers::sinkhorn::Air;
+    use crate::solvers::sinkhorn::TransportGrid;
 
     #[test]
     fn the_baseline_is_zero_deep_inside_the_liquid_and_the_cell_volume_far_outside_2d_and_3d() {
@@ -53,16 +43,11 @@ mod tests {
             let markings = Markings::compute(&grid, &points, &vec![false; grid.num_cells()]);
             let fine = Grid::new([24; D]);
             let cell = 0.5f64.powi(D as i32);
-            let tg = TransportGrid {
-                capacity: vec![cell; fine.num_cells()],
-                grid: fine,
-                h: 0.5,
-                air: Air::Capacity,
-            };
+            let tg = TransportGrid::new(fine, 0.5);
             let mu = 2u32.pow(D as u32);
-            let b = air_baseline(&tg, &tg.cells_on(&grid), &markings, mu);
-            for (j, &b) in b.iter().enumerate() {
+            for j in 0..tg.grid.num_cells() {
                 let x = tg.center(j);
+                let b = air_baseline(cell, &markings, mu, grid.cell_index_of(&x));
                 let expected = match x.iter().fold(0.0f64, |m, &v| m.max(v)) {
                     m if m < 4.0 => 0.0,
                     m if m > 7.0 => cell,
