@@ -123,7 +123,7 @@ impl MethodType for Powerpic {
 
     /// Measured peak memory over a run ([`Footprint`]; docs/benchmarks/memory.md).
     fn footprint(_settings: &PowerPicSettings, dim: usize) -> Footprint {
-        Footprint::of(dim, [(282.0, 850.0), (700.0, 2750.0)])
+        Footprint::of(dim, [(160.0, 850.0), (450.0, 2450.0)])
     }
 
     fn step_cost(_settings: &PowerPicSettings, dim: usize) -> StepCost {
