@@ -9,7 +9,7 @@ use super::{
 use crate::grid::Grid;
 use crate::methods::{MethodFlags, MethodSettings, SettingContext, SettingError};
 use crate::particles;
-use std::collections::BTreeSet;
+use std::collections::{BTreeSet, HashMap};
 
 /// What is wrong with a scene, broadly: tests match on it, people read the reason.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -689,32 +689,34 @@ fn obstacle_mode(
 }
 
 /// Every obstacle starts clear of the static solids and of the other obstacles, cell by cell
-/// at the scene's resolution.
+/// at the scene's resolution. The work of the obstacles' cells: a cell's solid is asked of the
+/// regions, and the obstacles' cells are kept as they are checked.
 fn obstacles_start_clear<const D: usize>(ch: &Checker, scene: &Scene) -> Checked<()> {
     let config = scene.config::<D>();
     let grid = Grid::new(config.dims);
-    // What holds each cell: a static solid or an obstacle, named as in the scene file.
-    let mut holder: Vec<Option<String>> = vec![None; grid.num_cells()];
-    for (i, r) in config.solids.iter().enumerate() {
-        r.cells(&grid)
-            .for_each(|c| holder[c] = Some(format!("solid[{i}]")));
-    }
+    // What holds a cell, named as in the scene file: the last static solid whose region holds
+    // its centre, or an obstacle checked before.
+    let mut obstacle: HashMap<usize, String> = HashMap::new();
+    let holder = |c: usize, obstacle: &HashMap<usize, String>| {
+        let x = grid.center(grid.cell_coords(c));
+        match config.solids.iter().rposition(|r| r.contains(&x)) {
+            Some(i) => Some(format!("solid[{i}]")),
+            None => obstacle.get(&c).cloned(),
+        }
+    };
     for (i, o) in config.obstacles.iter().enumerate() {
         let cells = o.cells_at(&grid, &o.offset);
-        if let Some(&c) = cells.iter().find(|&&c| holder[c].is_some()) {
+        if let Some((c, held_by)) = cells.iter().find_map(|&c| Some((c, holder(c, &obstacle)?))) {
             let why = format!(
-                "'{}' starts in a cell of {} (cell {:?}); obstacles must start clear of \
+                "'{}' starts in a cell of {held_by} (cell {:?}); obstacles must start clear of \
                  solids and of each other",
                 o.name,
-                holder[c].as_deref().unwrap(),
                 grid.cell_coords(c)
             );
             return ch.err(&format!("obstacle[{i}]"), ErrorKind::Geometry, why);
         }
         let name = format!("obstacle[{i}] '{}'", o.name);
-        cells
-            .into_iter()
-            .for_each(|c| holder[c] = Some(name.clone()));
+        obstacle.extend(cells.into_iter().map(|c| (c, name.clone())));
     }
     Ok(())
 }

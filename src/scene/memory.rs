@@ -6,11 +6,13 @@
 //! The estimate is `BASE + per_cell * cells + per_fluid_cell * fluid cells + per_particle *
 //! particles held (+ a large problem's surcharge, + the spreading of a band beyond its seeded
 //! count, + the recording's)`, where the fluid cells are the seeded liquid's and the
-//! particles held are those seeded plus what emitters may add. A band method holds only the
-//! band's, which moves with the water: the estimate takes the larger of the band of the seeded
-//! liquid's first markings and the band of that liquid settled at rest over the tank's floor
-//! (a column that spreads into a sheet is all band). It holds every particle seeded while it
-//! starts, which is a second peak the estimate takes the larger of. The footprints are fits
+//! particles held are those seeded plus what emitters may add. A grid too large for the limit
+//! on its cells alone (`per_cell * cells`) is refused before the estimate builds anything over
+//! it. A band method holds only the band's, which moves with the water: the estimate takes the
+//! larger of the band of the seeded liquid's first markings and the band of that liquid
+//! settled at rest over the tank's floor (a column that spreads into a sheet is all band). It
+//! holds every particle seeded while it starts, which is a second peak the estimate takes the
+//! larger of. The footprints are fits
 //! to the peak resident memory of whole runs (docs/benchmarks/memory.md, gives the
 //! measurements, the ratio of estimate to peak per method and the command that repeats them).
 
@@ -95,6 +97,19 @@ impl Scene {
         }
     }
 
+    /// What the run's cells alone take, its footprint's bytes per cell: a floor under
+    /// [`Self::memory_estimate`] found without building anything over the grid.
+    fn cell_floor_bytes(&self) -> (usize, f64) {
+        let cells = match self.dim() {
+            2 => self.config::<2>().dims.iter().product(),
+            _ => self.config::<3>().dims.iter().product(),
+        };
+        (
+            cells,
+            self.method.footprint(self.dim()).per_cell * cells as f64,
+        )
+    }
+
     fn memory_estimate_dim<const D: usize>(&self, recorded: bool) -> MemoryEstimate {
         let config = self.config::<D>();
         let grid = Grid::new(config.dims);
@@ -150,6 +165,7 @@ pub fn ensure_fit(scenes: &[&Scene], recorded: bool) -> Result<Vec<MemoryEstimat
     let Some((first, _)) = scenes.split_first() else {
         return Ok(vec![]);
     };
+    ensure_cells_fit(scenes, recorded)?;
     let estimates: Vec<MemoryEstimate> =
         scenes.iter().map(|s| s.memory_estimate(recorded)).collect();
     let sum = |f: fn(&MemoryEstimate) -> f64| estimates.iter().map(f).sum::<f64>();
@@ -161,30 +177,71 @@ pub fn ensure_fit(scenes: &[&Scene], recorded: bool) -> Result<Vec<MemoryEstimat
         true => "simulation.ppc",
         false => "domain.cells",
     };
-    let gib = |b: f64| b / (MIB * 1024.0);
-    let runs = match scenes.len() {
-        1 => "the run needs".to_string(),
-        n => format!("{n} runs side by side need"),
-    };
     let reason = format!(
-        "{runs} about {:.1} GiB ({} cells, about {:.3e} particles{}), more than the {:.1} GiB \
+        "{} about {:.1} GiB ({} cells, about {:.3e} particles{}), more than the {:.1} GiB \
          left under {}",
+        runs_need(scenes.len()),
         gib(bytes),
         estimates[0].cells,
         estimates[0].particles,
-        match scenes.len() {
-            1 => "",
-            _ => " each",
-        },
+        each(scenes.len()),
         gib(limit.bytes),
         limit.source
     );
-    Err(SceneError {
-        file: first.source.clone(),
+    Err(refusal(first, key, reason))
+}
+
+/// Fails, as [`ensure_fit`] does, when the runs' cells alone would not fit: the estimate
+/// itself builds arrays over each grid (the solids, the seeded liquid, a band's first
+/// markings), which a grid far too large for the limit would fail to allocate.
+fn ensure_cells_fit(scenes: &[&Scene], recorded: bool) -> Result<(), SceneError> {
+    let floors: Vec<(usize, f64)> = scenes.iter().map(|s| s.cell_floor_bytes()).collect();
+    let bytes = process_bytes(recorded) + floors.iter().map(|f| f.1).sum::<f64>();
+    let Some(limit) = super::limits::smallest().filter(|l| bytes > l.bytes) else {
+        return Ok(());
+    };
+    let reason = format!(
+        "{} at least {:.1} GiB for the cells alone ({} cells{}), more than the {:.1} GiB left \
+         under {}",
+        runs_need(scenes.len()),
+        gib(bytes),
+        floors[0].0,
+        each(scenes.len()),
+        gib(limit.bytes),
+        limit.source
+    );
+    Err(refusal(scenes[0], "domain.cells", reason))
+}
+
+fn gib(bytes: f64) -> f64 {
+    bytes / (MIB * 1024.0)
+}
+
+/// "the run needs" or "`n` runs side by side need".
+fn runs_need(n: usize) -> String {
+    match n {
+        1 => "the run needs".to_string(),
+        n => format!("{n} runs side by side need"),
+    }
+}
+
+/// " each" after one run's figures when `n` runs share the reason.
+fn each(n: usize) -> &'static str {
+    if n == 1 {
+        ""
+    } else {
+        " each"
+    }
+}
+
+/// The memory refusal of `scene`'s file at `key`.
+fn refusal(scene: &Scene, key: &str, reason: String) -> SceneError {
+    SceneError {
+        file: scene.source.clone(),
         key: key.into(),
         kind: ErrorKind::Memory,
         reason,
-    })
+    }
 }
 
 /// Peak resident memory of this process so far (Linux `VmHWM`), in MiB.

@@ -214,6 +214,13 @@ fn bad_solids_and_obstacles_are_rejected() {
         "obstacle[1]",
         ErrorKind::Geometry,
     );
+    // The reason names what holds the cell.
+    let reason = |text: &str| {
+        let e = Scene::parse("scene.toml", text, &Overrides::default()).unwrap_err();
+        e.reason
+    };
+    assert!(reason(&in_solid).contains("a cell of solid[0]"));
+    assert!(reason(&overlap).contains("a cell of obstacle[0] 'a'"));
 }
 
 #[test]
@@ -381,6 +388,33 @@ fn the_memory_estimate_counts_the_particles_a_band_holds() {
     let e = dam.memory_estimate(false);
     assert!(e.held < e.particles, "{e:?}");
     assert_eq!(e.held_most, e.particles, "{e:?}");
+}
+
+/// A grid far too large for the limit is refused on its cells alone, before the scene's checks
+/// and the estimate build anything over it (the check of the obstacles' start held 24 bytes a
+/// cell, the estimate the solids and the first markings: a failed allocation aborted the run).
+#[test]
+fn a_grid_far_too_large_for_the_limit_is_refused_before_anything_is_built_over_it() {
+    let dir = scratch_dir("rlimit-cells");
+    for run in [
+        "dam-3d --res 580",
+        "falling-obstacle-3d --res 500 --method nbflip",
+    ] {
+        let script = format!(
+            "ulimit -v 2500000; exec {} run {run} --steps 1 -q",
+            env!("CARGO_BIN_EXE_cellflip")
+        );
+        let out = std::process::Command::new("bash")
+            .args(["-c", &script])
+            .current_dir(&*dir)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{run}: {stderr}");
+        assert!(stderr.contains("'domain.cells'"), "{run}: {stderr}");
+        assert!(stderr.contains("for the cells alone"), "{run}: {stderr}");
+        assert!(stderr.contains("ulimit -v"), "{run}: {stderr}");
+    }
 }
 
 /// A run that exceeds the process's own memory limits (`ulimit -v`, `ulimit -d`, as a batch
