@@ -100,10 +100,7 @@ impl Scene {
     /// What the run's cells alone take, its footprint's bytes per cell: a floor under
     /// [`Self::memory_estimate`] found without building anything over the grid.
     fn cell_floor_bytes(&self) -> (usize, f64) {
-        let cells = match self.dim() {
-            2 => self.config::<2>().dims.iter().product(),
-            _ => self.config::<3>().dims.iter().product(),
-        };
+        let cells: usize = self.dims.iter().product();
         (
             cells,
             self.method.footprint(self.dim()).per_cell * cells as f64,

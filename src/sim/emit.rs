@@ -13,9 +13,8 @@ use rand::Rng;
 pub fn emit<const D: usize>(s: &mut State<D>, count: impl Fn(&State<D>, usize) -> u32) -> usize {
     let counts: Vec<Option<Vec<u32>>> = (s.config.emitters.iter())
         .map(|e| {
-            let cells = || e.region.cells(&s.grid);
             e.emits_at(s.time_secs)
-                .then(|| cells().map(|c| count(s, c)).collect())
+                .then(|| e.region.cells(&s.grid).map(|c| count(s, c)).collect())
         })
         .collect();
     let c = &s.config;

@@ -390,6 +390,24 @@ fn the_memory_estimate_counts_the_particles_a_band_holds() {
     assert_eq!(e.held_most, e.particles, "{e:?}");
 }
 
+/// `cellflip run ARGS --steps 1 -q` in `dir` under `ulimit LIMIT`: its exit code and standard
+/// error.
+fn run_under_ulimit(dir: &std::path::Path, limit: &str, args: &str) -> (Option<i32>, String) {
+    let script = format!(
+        "ulimit {limit}; exec {} run {args} --steps 1 -q",
+        env!("CARGO_BIN_EXE_cellflip")
+    );
+    let out = std::process::Command::new("bash")
+        .args(["-c", &script])
+        .current_dir(dir)
+        .output()
+        .unwrap();
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stderr).into(),
+    )
+}
+
 /// A grid far too large for the limit is refused on its cells alone, before the scene's checks
 /// and the estimate build anything over it (the check of the obstacles' start held 24 bytes a
 /// cell, the estimate the solids and the first markings: a failed allocation aborted the run).
@@ -400,17 +418,8 @@ fn a_grid_far_too_large_for_the_limit_is_refused_before_anything_is_built_over_i
         "dam-3d --res 580",
         "falling-obstacle-3d --res 500 --method nbflip",
     ] {
-        let script = format!(
-            "ulimit -v 2500000; exec {} run {run} --steps 1 -q",
-            env!("CARGO_BIN_EXE_cellflip")
-        );
-        let out = std::process::Command::new("bash")
-            .args(["-c", &script])
-            .current_dir(&*dir)
-            .output()
-            .unwrap();
-        let stderr = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(1), "{run}: {stderr}");
+        let (code, stderr) = run_under_ulimit(&dir, "-v 2500000", run);
+        assert_eq!(code, Some(1), "{run}: {stderr}");
         assert!(stderr.contains("'domain.cells'"), "{run}: {stderr}");
         assert!(stderr.contains("for the cells alone"), "{run}: {stderr}");
         assert!(stderr.contains("ulimit -v"), "{run}: {stderr}");
@@ -424,17 +433,8 @@ fn a_grid_far_too_large_for_the_limit_is_refused_before_anything_is_built_over_i
 fn a_run_larger_than_the_process_limits_is_refused_naming_the_limit() {
     let dir = scratch_dir("rlimit");
     for (limit, named) in [("-v 2000000", "ulimit -v"), ("-d 1000000", "ulimit -d")] {
-        let script = format!(
-            "ulimit {limit}; exec {} run dam-3d --res 250 --steps 1 -q",
-            env!("CARGO_BIN_EXE_cellflip")
-        );
-        let out = std::process::Command::new("bash")
-            .args(["-c", &script])
-            .current_dir(&*dir)
-            .output()
-            .unwrap();
-        let stderr = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(1), "{stderr}");
+        let (code, stderr) = run_under_ulimit(&dir, limit, "dam-3d --res 250");
+        assert_eq!(code, Some(1), "{stderr}");
         assert!(stderr.contains("the run needs about"), "{stderr}");
         assert!(stderr.contains("left under the process's"), "{stderr}");
         assert!(stderr.contains(named), "{stderr}");
