@@ -168,6 +168,7 @@ impl<const D: usize> Simulation<D> {
             &s.grid,
             &plan,
             &s.particles.pos,
+            |c| m.holds_liquid(&s.grid, c),
             &s.markings,
             &s.config.gravity,
             dt,

@@ -13,6 +13,7 @@
 //! | [`FluidMethod::grid_to_particles`] | line 4 | FLIP/PIC blend by default |
 //! | [`FluidMethod::before_advection`], [`FluidMethod::next_grid_velocity`] | line 5 | ccp keeps `x_bar`; the band advects the grid velocity |
 //! | [`FluidMethod::correct_positions`] | line 6 | ccp: eq. problem3 and the band corrections |
+//! | [`FluidMethod::holds_liquid`] | line 6, the obstacles' move (sec. soilds) | nbflip: a `naive` obstacle waits for the level set's inside too |
 //! | [`FluidMethod::before_markings`], [`FluidMethod::after_markings`] | line 7, alg. band line 9 | the band methods: the deep; nbflip's level set and resampling |
 //! | [`FluidMethod::check_invariants`] | after the step | what the method guarantees |
 //! | [`FluidMethod::finish_step`] | after the step | what the method did, as a [`MethodReport`] |

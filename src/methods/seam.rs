@@ -8,7 +8,7 @@
 use super::cost::{Footprint, StepCost};
 use super::options::Flag;
 use crate::draw::{LayerView, Log, Panel};
-use crate::grid::{MacField, NearCells, Vector};
+use crate::grid::{Grid, MacField, NearCells, Vector};
 use crate::metrics::InvariantViolation;
 use crate::sim::markings::Markings;
 use crate::sim::solids::ObstacleMode;
@@ -146,6 +146,13 @@ pub trait FluidMethod<const D: usize>: MethodRecording<D> + Send {
     /// ever seeded or emitted (checked every step).
     fn particles_not_held(&self) -> isize {
         0
+    }
+
+    /// Whether cell `c`, which is not solid, holds liquid that no particle stands for, after
+    /// the advection: `naive` obstacles wait for it as for a particle (sec. soilds). FLIP's
+    /// liquid is its particles.
+    fn holds_liquid(&self, _grid: &Grid<D>, _c: usize) -> bool {
+        false
     }
 
     /// Alg. flip line 1: particle velocities to the grid's faces, and which faces got one.

@@ -13,7 +13,8 @@
 //!   stays this step.
 //! - `ignore` (the baselines' option 1): it moves regardless; particles it covers are lost
 //!   volume until it passes.
-//! - `naive` (option 2): it waits until the cells it would enter hold no particle.
+//! - `naive` (option 2): it waits until the cells it would enter hold no liquid: no particle,
+//!   and for narrow-band FLIP, whose deep liquid holds none, no cell of its level set's inside.
 
 use crate::grid::active::{hull, line_hulls};
 use crate::grid::{Grid, Vector};
@@ -39,7 +40,7 @@ pub enum ObstacleMode {
     Couple,
     /// Move regardless; the particles covered count as lost volume.
     Ignore,
-    /// Wait until the cells it would enter hold no particle.
+    /// Wait until the cells it would enter hold no liquid.
     Naive,
 }
 
@@ -401,16 +402,19 @@ impl<const D: usize> Solids<D> {
         plan
     }
 
-    /// Moves each obstacle to its target unless particles (at `pos`) hold cells it wants
-    /// (`couple`: after the correction; `naive`: after advection); with `ignore` it always
-    /// moves. Then each obstacle's velocity is updated (gravity `g`, in the water or not by
-    /// the `markings` of the step's start) and the solids rasterised again. Returns, per
+    /// Moves each obstacle to its target unless liquid holds cells it wants: particles (at
+    /// `pos`) or, for a method whose liquid is not all particles, cells for which `liquid`
+    /// holds (`couple`: after the correction; `naive`: after advection); with `ignore` it
+    /// always moves. Then each obstacle's velocity is updated (gravity `g`, in the water or not
+    /// by the `markings` of the step's start) and the solids rasterised again. Returns, per
     /// obstacle, whether it had to stay.
+    #[allow(clippy::too_many_arguments)]
     pub fn advance(
         &mut self,
         grid: &Grid<D>,
         plan: &ObstaclePlan<D>,
         pos: &[Vector<D>],
+        liquid: impl Fn(usize) -> bool,
         markings: &Markings,
         g: &Vector<D>,
         dt: f64,
@@ -422,10 +426,11 @@ impl<const D: usize> Solids<D> {
         for x in pos {
             occupied[grid.cell_index_of(x)] = true;
         }
+        let held = |k: usize| occupied[k] || liquid(k);
         let blocked: Vec<bool> = plan
             .wanted
             .iter()
-            .map(|cells| self.mode != ObstacleMode::Ignore && cells.iter().any(|&k| occupied[k]))
+            .map(|cells| self.mode != ObstacleMode::Ignore && cells.iter().any(|&k| held(k)))
             .collect();
         // In the water: fluid in or next to a cell the obstacle occupies or wants.
         let touches_fluid = |cells: &[usize]| {

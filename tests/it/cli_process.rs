@@ -84,7 +84,7 @@ fn record(dir: &Path, scene: &str, steps: &str, extra: &[&str]) -> BTreeSet<Stri
 fn recordings_log_exactly_the_documented_entities() {
     // Between them these runs log everything: flip in 2D, ccp with the solver cross-check and
     // an exported problem, the band in 2D (all variants' objectives) and 3D (with its slice),
-    // obstacles, idp in 2D and 3D (its slice), nbflip and powerpic in 3D.
+    // obstacles (under ccp and nbflip), idp in 2D and 3D (its slice), nbflip and powerpic in 3D.
     let dir = scratch_dir("record");
     let mut logged = BTreeSet::new();
     logged.extend(record(&dir, "hydrostatic-2d", "3", &[]));
@@ -109,6 +109,7 @@ fn recordings_log_exactly_the_documented_entities() {
     logged.extend(band_2d);
     logged.extend(record(&dir, "drop-3d", "30", &["--res", "12"]));
     logged.extend(record(&dir, "compress-2d", "20", &[]));
+    logged.extend(record(&dir, "compress-2d", "5", &["--method", "nbflip"]));
     logged.extend(record(&dir, "dam-2d", "5", &["--method", "idp"]));
     let every_step = ["--record-every", "1", "--res", "12"];
     logged.extend(record(

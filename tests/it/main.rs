@@ -11,6 +11,7 @@ mod cli_process;
 mod compare;
 mod correction;
 mod docs;
+mod envelope;
 mod export;
 mod fuzz;
 mod golden;

@@ -10,6 +10,7 @@ use crate::metrics::InvariantViolation;
 use crate::particles::Particles;
 use crate::sim::band::{combine_velocities, count_with_full_deep, Band};
 use crate::sim::markings::{DepthLevel, Markings};
+use crate::sim::solids::Solids;
 use crate::sim::transfer::{self, Known};
 use crate::sim::{ParticlesMut, State, StepError};
 use crate::snapshot::{Reader, SnapshotError, Writer};
@@ -22,6 +23,11 @@ use std::sync::Arc;
 const INSIDE_LAYERS_BEYOND_BAND: u32 = 2;
 /// Layers it is re-marched into the air (`extrapolateLsSimple(distance = 3)`, ibid.).
 const OUTSIDE_LAYERS: u32 = 3;
+/// The re-march into the air.
+const OUTWARDS: March = March {
+    side: Side::Outside,
+    layers: OUTSIDE_LAYERS,
+};
 /// Particles resampling looks up at a time.
 const RESAMPLING_CHUNK: usize = 1 << 16;
 /// A cell holds at most this many times `mu` particles away from the surface
@@ -50,6 +56,9 @@ pub struct NbflipSim<const D: usize> {
     not_held: isize,
     /// The first particle seeded by the last resampling (those before it passed its test).
     first_seed: usize,
+    /// The moving obstacles' cells at the last rebuild, ascending
+    /// ([`NbflipSim::newly_covered_liquid`]).
+    obstacle_cells: Vec<usize>,
     step: NbflipReport,
 }
 
@@ -66,6 +75,7 @@ impl<const D: usize> NbflipSim<D> {
             layer: vec![],
             not_held: 0,
             first_seed: 0,
+            obstacle_cells: vec![],
             step: NbflipReport::default(),
         }
     }
@@ -83,10 +93,7 @@ impl<const D: usize> NbflipSim<D> {
                 side: Side::Inside,
                 layers: inside,
             },
-            March {
-                side: Side::Outside,
-                layers: OUTSIDE_LAYERS,
-            },
+            OUTWARDS,
         ]
     }
 
@@ -123,11 +130,40 @@ impl<const D: usize> NbflipSim<D> {
         self.around(s, cells.chain(obstacle_cells.map(|c| g.cell_coords(c))))
     }
 
+    /// Whether cell `c` holds liquid now, after the advection: the advected level set's inside
+    /// where it was advected, the last one's elsewhere (far from the surface, where a step
+    /// does not change it). Asked of cells that are not solid.
+    fn liquid_after_advection(&self, g: &Grid<D>, c: usize) -> bool {
+        match &self.advected {
+            Some(advected) if self.advected_over.contains(g, c) => advected.phi[c] < 0.0,
+            _ => self.phi.phi[c] < 0.0,
+        }
+    }
+
+    /// How many cells of liquid the obstacles newly covered since the last rebuild (with
+    /// `ignore`: liquid lost; with `naive` none, since an obstacle waits for liquid); keeps
+    /// their cells for the next rebuild.
+    fn newly_covered_liquid(&mut self, s: &ParticlesMut<'_, D>) -> usize {
+        let before = std::mem::replace(&mut self.obstacle_cells, obstacle_cells(s.solids));
+        if self.phi.phi.is_empty() {
+            return 0; // the first rebuild: the obstacles have not moved
+        }
+        let newly = self.obstacle_cells.iter().copied();
+        let newly = newly.filter(|c| before.binary_search(c).is_err());
+        newly
+            .filter(|&c| self.liquid_after_advection(s.grid, c))
+            .count()
+    }
+
     /// Step 4: the level set from the advected one (if any) and the particles, on the cells
-    /// advected and those around the particles (new ones from an emitter); the cells to
-    /// advect next.
+    /// advected and those around the particles (new ones from an emitter), with the moving
+    /// obstacles carved out of it ([`LevelSet::carve`]); the cells to advect next. The
+    /// re-marches leave the static solids out, and their values are then extended from the
+    /// cells around them ([`LevelSet::extend_into_solids`]).
     fn rebuild_level_set(&mut self, s: &ParticlesMut<'_, D>) {
+        self.step.carved += self.newly_covered_liquid(s);
         let (g, solid, pos) = (s.grid, &s.solids.solid, &s.particles.pos);
+        let fixed = &s.solids.fixed;
         let marches = self.marches();
         if self.advected.is_none() {
             // The first rebuild: the particles' level set, on every cell.
@@ -150,9 +186,11 @@ impl<const D: usize> NbflipSim<D> {
             }
             None => Region::all(g),
         };
+        phi.carve(g, &self.obstacle_cells, solid);
         for march in marches {
-            phi.remarch(g, march, solid, &self.rebuilt.cells, &mut self.layer);
+            phi.remarch(g, march, fixed, &self.rebuilt.cells, &mut self.layer);
         }
+        phi.extend_into_solids(g, fixed, &self.rebuilt.cells, OUTWARDS.cap());
         self.next = match around_particles {
             Some(around) => {
                 let crossing = phi.crossing(g, solid, &self.rebuilt.cells);
@@ -217,6 +255,14 @@ pub fn combine<const D: usize>(
     });
 }
 
+/// The moving obstacles' cells, ascending, each once.
+fn obstacle_cells<const D: usize>(solids: &Solids<D>) -> Vec<usize> {
+    let mut cells: Vec<usize> = solids.obstacle_cells().collect();
+    cells.sort_unstable();
+    cells.dedup();
+    cells
+}
+
 /// The level set above which a particle is "at the surface": one cell diagonal plus 1 %
 /// (MantaFlow's `adjustNumber`, `SURFACE_LS`). Cells above it are not seeded, and their
 /// particles are never thinned.
@@ -240,6 +286,12 @@ impl<const D: usize> FluidMethod<D> for NbflipSim<D> {
 
     fn particles_not_held(&self) -> isize {
         self.not_held
+    }
+
+    /// The level set's inside after the advection: `naive` obstacles wait for it as for a
+    /// particle, since most of the liquid holds none.
+    fn holds_liquid(&self, grid: &Grid<D>, c: usize) -> bool {
+        self.liquid_after_advection(grid, c)
     }
 
     /// The level set, the cells the next advection works on, the count resampling deleted,
@@ -268,6 +320,8 @@ impl<const D: usize> FluidMethod<D> for NbflipSim<D> {
             reason: "not one flag per tile of the scene's grid".into(),
         })?;
         self.not_held = r.scalar::<i64>("nbflip.not_held")? as isize;
+        // The obstacles are where the checkpoint's step left them, as at its last rebuild.
+        self.obstacle_cells = obstacle_cells(&s.solids);
         Ok(())
     }
 
@@ -311,22 +365,23 @@ impl<const D: usize> FluidMethod<D> for NbflipSim<D> {
         Some(NearCells::new(s.grid, phi.map(|&v| v < 0.0).collect()))
     }
 
-    /// What resampling guarantees: every particle it kept lies inside the liquid and at most
-    /// `R` below its surface, and every particle it seeded lies in a band cell below the
-    /// surface layer; every such cell holds at least `mu` particles. The level set at the
-    /// particles kept is interpolated in parallel; the first particle outside the band, in
-    /// order, is the one reported.
+    /// What resampling guarantees: every particle it kept lies outside the solids, inside the
+    /// liquid and at most `R` below its surface, and every particle it seeded lies in a band
+    /// cell below the surface layer; every such cell holds at least `mu` particles. The level
+    /// set at the particles kept is interpolated in parallel; the first particle outside the
+    /// band, in order, is the one reported.
     fn check_invariants(&self, s: &State<D>) -> Result<(), InvariantViolation> {
-        let (g, pos) = (&s.grid, &s.particles.pos);
+        let (g, pos, solid) = (&s.grid, &s.particles.pos, &s.solids.solid);
         let kept = pos[..self.first_seed].par_iter();
         let outside = kept
             .with_min_len(crate::PAR_GRAIN_PARTICLES)
             .map(|x| (x, self.phi.interpolate(g, x)))
-            .find_first(|(_, phi)| !(-self.r()..=0.0).contains(phi));
+            .find_first(|(x, phi)| solid[g.cell_index_of(x)] || !(-self.r()..=0.0).contains(phi));
         if let Some((x, phi)) = outside {
             return Err(InvariantViolation(format!(
-                "a particle at {:?} has phi = {phi:.3} after resampling, outside the band [-{}, 0]",
+                "a particle at {:?} has phi = {phi:.3} after resampling{}, outside the band [-{}, 0]",
                 x.as_slice(),
+                if solid[g.cell_index_of(x)] { " in a solid cell" } else { "" },
                 self.r()
             )));
         }
@@ -398,10 +453,10 @@ impl<const D: usize> Resampling<'_, D> {
         !self.solid[c] && v <= surface_layer(D) && v >= -self.r
     }
 
-    /// Deletes particles outside the liquid (`phi > 0`), deeper than `R`, or beyond `2 mu` in a
-    /// cell away from the surface; then tops up every seedable cell to `mu` with particles
-    /// uniformly at random in it, moving with the grid velocity `u`. The seeds go after the
-    /// particles kept.
+    /// Deletes particles in a solid (an `ignore` obstacle covered them: their liquid is lost),
+    /// outside the liquid (`phi > 0`), deeper than `R`, or beyond `2 mu` in a cell away from
+    /// the surface; then tops up every seedable cell to `mu` with particles uniformly at
+    /// random in it, moving with the grid velocity `u`. The seeds go after the particles kept.
     pub fn run(&self, p: &mut Particles<D>, u: &MacField<D>, rng: &mut impl Rng) -> NbflipReport {
         let (g, mu) = (self.grid, self.mu);
         let mut rep = NbflipReport::default();
@@ -416,7 +471,9 @@ impl<const D: usize> Resampling<'_, D> {
                 .map(|x| (self.phi.interpolate(g, x), g.cell_index_of(x)))
                 .collect_into_vec(&mut found);
             for &(v, c) in &found {
-                let deleted = if v > 0.0 {
+                let deleted = if self.solid[c] {
+                    &mut rep.covered
+                } else if v > 0.0 {
                     &mut rep.outside
                 } else if v < -self.r {
                     &mut rep.below
@@ -450,6 +507,8 @@ impl<const D: usize> Resampling<'_, D> {
 #[derive(Clone, Debug, Default)]
 pub struct NbflipReport {
     pub seeded: usize,
+    /// Particles deleted inside a solid (an `ignore` obstacle moved over them).
+    pub covered: usize,
     /// Particles deleted outside the liquid (`phi > 0`).
     pub outside: usize,
     /// Particles deleted below the band (`phi < -R`).
@@ -458,6 +517,8 @@ pub struct NbflipReport {
     pub crowded: usize,
     /// Particles held after the step.
     pub particles: usize,
+    /// Cells of liquid the obstacles newly covered in the step (`ignore`: liquid lost).
+    pub carved: usize,
     /// Cells the level set was last rebuilt on (all cells with the dense level set).
     pub cells_worked: usize,
     /// `R` and the level set after the step.
@@ -467,12 +528,13 @@ pub struct NbflipReport {
 
 impl NbflipReport {
     pub fn deleted(&self) -> usize {
-        self.outside + self.below + self.crowded
+        self.covered + self.outside + self.below + self.crowded
     }
 
     /// Adds another resampling of the same step (after emission and at the end).
     pub(super) fn add(&mut self, other: &NbflipReport) {
         self.seeded += other.seeded;
+        self.covered += other.covered;
         self.outside += other.outside;
         self.below += other.below;
         self.crowded += other.crowded;

@@ -20,6 +20,11 @@ pub(super) const PANELS: &[Panel] = &[
         series: &["metrics/nbflip/seeded", "metrics/nbflip/deleted"],
         needs: Needs::Always,
     },
+    Panel {
+        title: "narrow band: liquid obstacles covered (cells)",
+        series: &["metrics/nbflip/carved"],
+        needs: Needs::Obstacles,
+    },
 ];
 
 pub(super) const LAYER_VIEWS: &[LayerView] = &[
@@ -50,6 +55,9 @@ impl<const D: usize> MethodReport<D> for NbflipReport {
         log.scalar("metrics/nbflip/particles", self.particles as f64);
         log.scalar("metrics/nbflip/seeded", self.seeded as f64);
         log.scalar("metrics/nbflip/deleted", self.deleted() as f64);
+        if !s.solids.obstacles.is_empty() {
+            log.scalar("metrics/nbflip/carved", self.carved as f64);
+        }
         if full {
             let layer = Layer {
                 order: 1.0,
@@ -68,6 +76,7 @@ impl<const D: usize> MethodReport<D> for NbflipReport {
         vec![
             ("nbflip_seeded", self.seeded as f64),
             ("nbflip_deleted", self.deleted() as f64),
+            ("nbflip_carved", self.carved as f64),
         ]
     }
 
@@ -109,7 +118,7 @@ impl<const D: usize> MethodSummary<D> for Totals {
         let sum = |f: fn(&NbflipReport) -> usize| self.steps.iter().map(f).sum::<usize>();
         let seeded: Vec<usize> = self.steps.iter().map(|r| r.seeded).collect();
         let worked: Vec<usize> = self.steps.iter().map(|r| r.cells_worked).collect();
-        vec![format!(
+        let mut lines = vec![format!(
             "narrow band (R = {}): {lo} .. {hi} particles after a step; level set worked on {} cells (median a step); resampling seeded {} (median {} a step) and deleted {} outside the liquid, {} below the band, {} in crowded cells",
             self.band_r,
             median(&worked).unwrap_or(0),
@@ -118,6 +127,13 @@ impl<const D: usize> MethodSummary<D> for Totals {
             sum(|r| r.outside),
             sum(|r| r.below),
             sum(|r| r.crowded),
-        )]
+        )];
+        let (carved, covered) = (sum(|r| r.carved), sum(|r| r.covered));
+        if carved + covered > 0 {
+            lines.push(format!(
+                "obstacles covered {carved} cells of liquid (lost) and {covered} particles (deleted)"
+            ));
+        }
+        lines
     }
 }

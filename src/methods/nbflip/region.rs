@@ -48,6 +48,11 @@ impl Region {
         })
     }
 
+    /// Whether cell `c` is in the region.
+    pub fn contains<const D: usize>(&self, grid: &Grid<D>, c: usize) -> bool {
+        self.tiles[tile_of(grid, &tiles(grid), c)]
+    }
+
     /// Per tile, whether its cells are in (what a checkpoint keeps of a region).
     pub fn tiles(&self) -> &[bool] {
         &self.tiles
