@@ -107,6 +107,15 @@ impl<const D: usize> Simulation<D> {
         self.method.save_state(w);
     }
 
+    /// How the liquid moves, the method's deep included ([`metrics::liquid_motion`]): the same
+    /// measure for every method.
+    pub fn liquid_motion(&self) -> metrics::LiquidMotion {
+        let s = &self.state;
+        let deep = |c| self.method.is_deep(s, c);
+        let (g, vel, h) = (&s.grid, &s.particles.vel, s.config.cell_size_m);
+        metrics::liquid_motion(g, vel, s.config.mu(), &s.active, &s.velocity, deep, h)
+    }
+
     /// Forgets the method's totals so far (after a warm-up).
     pub fn reset_summary(&mut self) {
         self.summary = self.settings.kind.summary::<D>(&self.settings);

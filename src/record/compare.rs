@@ -15,7 +15,6 @@ use super::{Drawing, Output, RunLog, Sink, Stream};
 use crate::draw::legend;
 use crate::draw::Log;
 use crate::grid::Vector;
-use crate::metrics::kinetic_energy;
 use crate::scene::Scene;
 use crate::simulation::{Simulation, StepReport};
 
@@ -96,8 +95,7 @@ impl Comparison {
         run.log_step(sim, rep, frame);
         let s = &sim.state;
         let mut c = run.canvas(sim);
-        let ke = kinetic_energy(&s.particles.vel, s.config.cell_size_m);
-        c.scalar("metrics/kinetic_energy", ke);
+        c.scalar("metrics/kinetic_energy", sim.liquid_motion().kinetic_energy);
         if frame {
             let text = format!(
                 "{title}: V = {:.1}% of V*, t = {:.3} s",

@@ -219,16 +219,16 @@ fn a_runs_figures_match_an_independent_run_of_the_same_scene() {
             steps += 1;
         });
         let s = &runner.sim.state;
-        let h = s.config.cell_size_m;
-        let ke = 0.5
-            * s.particles
-                .vel
-                .iter()
-                .map(|v| v.norm_squared())
-                .sum::<f64>()
-            * h
-            * h
-            / s.particles.len() as f64;
+        let (g, h, mu) = (&s.grid, s.config.cell_size_m, s.config.mu() as f64);
+        // The liquid's kinetic energy per unit mass (docs/report.md): a particle is 1/mu of a
+        // cell, a deep cell a whole one moving with the grid velocity at its centre.
+        let deep: Vec<f64> = (0..g.num_cells())
+            .filter(|&c| s.markings.is_fluid(c) && runner.sim.method.is_deep(s, c))
+            .map(|c| (s.velocity.interpolate(g, &g.center(g.cell_coords(c)))).norm_squared())
+            .collect();
+        let particles: f64 = s.particles.vel.iter().map(|v| v.norm_squared()).sum();
+        let mass = s.particles.len() as f64 / mu + deep.len() as f64;
+        let ke = 0.5 * (particles / mu + deep.iter().sum::<f64>()) / mass * h * h;
         let num = |c: &str| {
             row[c]
                 .parse::<f64>()

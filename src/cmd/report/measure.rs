@@ -41,7 +41,7 @@ pub const COLUMNS: &[(&str, &str)] = &[
     ("volume_end", "V/V* at the end, %"),
     ("front_error", "martin-moyce-2d: mean relative error of the surge front against experiment, %"),
     ("column_error", "martin-moyce-2d: mean relative error of the column height, %"),
-    ("rest_speed", "hydrostatic-2d: largest particle speed at the end, m/s"),
+    ("rest_speed", "hydrostatic-2d: the liquid's top speed at the end (particles and deep cells), m/s"),
     ("rest_ke", "hydrostatic-2d: kinetic energy per unit mass at the end, m^2/s^2"),
     ("obstacle_bottom", "first obstacle's lowest point at the end, m"),
     ("obstacle_lowest", "the lowest it can reach, m: the floor, or for a lid as wide as the tank the height the fluid fills at mu per cell"),
@@ -135,7 +135,6 @@ fn measure<const D: usize>(
     };
     // The checkpoint file's copy of the state is not kept for the whole run.
     drop(resumed);
-    let h = runner.sim.state.config.cell_size_m;
     let mu = runner.sim.state.config.mu() as f64;
     let limit = Limit::SimSeconds(scene.duration_secs());
     let t0 = std::time::Instant::now();
@@ -156,7 +155,7 @@ fn measure<const D: usize>(
             limit,
             || stop() || over() || pause_now(),
             |sim, rep| {
-                observe(sim, rep, mu, h, &mut g, m);
+                observe(sim, rep, mu, &mut g, m);
                 stepped.set(true);
                 Ok(())
             },
@@ -254,16 +253,12 @@ fn observe<const D: usize>(
     sim: &Simulation<D>,
     rep: &StepReport<D>,
     mu: f64,
-    h: f64,
     g: &mut Gathered,
     m: &mut Measured,
 ) {
     let s = &sim.state;
     m.volume.push((s.time_secs, rep.volume_percent));
-    m.ke.push((
-        s.time_secs,
-        crate::metrics::kinetic_energy(&s.particles.vel, h),
-    ));
+    m.ke.push((s.time_secs, sim.liquid_motion().kinetic_energy));
     let most = s.markings.count.iter().max().copied().unwrap_or(0) as f64;
     g.compression = g.compression.max(most / mu);
     g.held += rep.blocked.first().copied().unwrap_or(false) as u64;
@@ -326,8 +321,7 @@ fn finish<const D: usize>(runner: &Runner<D>, g: &Gathered, lowest: f64, m: &mut
         m.front = c.front.iter().map(|r| (r.time, r.simulated)).collect();
     }
     if m.spec.label == "hydrostatic-2d" {
-        let speed = s.particles.vel.iter().map(|x| x.norm()).fold(0.0, f64::max) * h;
-        put("rest_speed", speed);
+        put("rest_speed", runner.sim.liquid_motion().top_speed);
         put("rest_ke", m.ke.last().map_or(f64::NAN, |x| x.1));
     }
     if let Some(o) = s.solids.obstacles.first() {
