@@ -240,6 +240,11 @@ def table_and_plot(a, data, png):
                                "spread_manta": float((M.max(0) - M.min(0)).max()),
                                "ranges_apart": float(np.maximum(0, np.maximum(C.min(0) - M.max(0), M.min(0) - C.max(0))).max()),
                                "cellflip_mean": stats(C.mean(0)), "manta_mean": stats(M.mean(0))}
+            pairs = [compare(x, y, "volume_percent", TARGET[method]) for x in cs for y in ms]
+            worst = max(pairs, key=lambda q: q["max_abs"])
+            row["ensemble"].update({"pairs": len(pairs), "pairs_over": sum(q["max_abs"] > TARGET[method] for q in pairs),
+                                    "pairs_max_abs": worst["max_abs"], "pairs_max_at": worst["at"],
+                                    "pairs_first_over": min([q["first_over"] for q in pairs if q["first_over"] is not None], default=None)})
         rows.append(row)
         panels.append((method, c, m, cmp_, ens))
     if not rows:
@@ -260,13 +265,15 @@ def table_and_plot(a, data, png):
                 f(r["cellflip"]), f(r["manta_phi"]), d["max_abs"], d["signed"], d["at"], TARGET["nbflip"], ov(d)))
     ens_rows = [r for r in rows if "ensemble" in r]
     if ens_rows:
-        lines += ["", "| %s, ensembles | seeds (cellflip, MantaFlow) | mean volume %% min / max / mean / end: cellflip | MantaFlow | max \\|difference of the means\\| (signed, at t) | largest spread over seeds: cellflip | MantaFlow | largest gap between the two ranges |" % dimtxt,
-                  "|---|---|---|---|---|---|---|---|"]
+        lines += ["", "| %s, ensembles | seeds (cellflip, MantaFlow) | mean volume %% min / max / mean / end: cellflip | MantaFlow | max \\|difference of the means\\| (signed, at t) | largest spread over seeds: cellflip | MantaFlow | largest gap between the two ranges | seed pairs over the target (largest difference, at t; first time over) |" % dimtxt,
+                  "|---|---|---|---|---|---|---|---|---|"]
         for r in ens_rows:
             e = r["ensemble"]
-            lines.append("| %s | %d, %d | %s | %s | %.1f (%+.1f at %.2f s) | %.1f | %.1f | %.1f |" % (
+            lines.append("| %s | %d, %d | %s | %s | %.1f (%+.1f at %.2f s) | %.1f | %.1f | %.1f | %d of %d (%.1f at %.2f s; %s) |" % (
                 r["method"], e["seeds"][0], e["seeds"][1], f(e["cellflip_mean"]), f(e["manta_mean"]), e["mean_max_abs"],
-                e["mean_signed"], e["at"], e["spread_cellflip"], e["spread_manta"], e["ranges_apart"]))
+                e["mean_signed"], e["at"], e["spread_cellflip"], e["spread_manta"], e["ranges_apart"],
+                e["pairs_over"], e["pairs"], e["pairs_max_abs"], e["pairs_max_at"],
+                "-" if e["pairs_first_over"] is None else "%.2f s" % e["pairs_first_over"]))
     text = "\n".join(lines) + "\n"
     with open(os.path.join(data, "table-%s.md" % case), "w") as fh:
         fh.write(text)
