@@ -105,7 +105,7 @@ def snapshot_cellflip(work):
     h = hashlib.sha256(open(dst, "rb").read()).hexdigest()[:12]
     dirty = subprocess.run(["git", "-C", ROOT, "status", "--porcelain", "--", "src", "Cargo.toml", "Cargo.lock"],
                            capture_output=True, text=True).stdout.split("\n")
-    info = {"binary_built": datetime.datetime.utcfromtimestamp(os.path.getmtime(CELLFLIP)).strftime("%Y-%m-%d %H:%M:%S UTC"),
+    info = {"binary_built": datetime.datetime.fromtimestamp(os.path.getmtime(CELLFLIP), datetime.timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC"),
             "binary_sha256": h, "commit": git_head(), "uncommitted_sources": [l[3:] for l in dirty if l.strip()]}
     return dst, info
 
@@ -305,7 +305,9 @@ def table_and_plot(a, data, png):
         ax.legend(fontsize=7, loc="best")
         ax.set_ylim(lo - 0.1 * (hi - lo) - 1, max(hi + 0.05 * (hi - lo) + 1, 102))
         ax.set_ylabel("volume, % of V* (eq. volume)")
-    fig.suptitle("Volume over time, cellflip and MantaFlow, %s" % dimtxt, fontsize=10)
+    note = "; ".join(x for x in (("MantaFlow " + a.manta_args) if a.manta_args else "",
+                                 ("cellflip " + a.cellflip_sim) if a.cellflip_sim else "") if x)
+    fig.suptitle("Volume over time, cellflip and MantaFlow, %s%s" % (dimtxt, "\n(%s)" % note if note else ""), fontsize=10)
     fig.tight_layout()
     os.makedirs(os.path.dirname(os.path.abspath(png)), exist_ok=True)
     fig.savefig(png, dpi=110)
