@@ -14,13 +14,15 @@ usage (cwd: the project root; cellflip from $CELLFLIP, default ./target/release/
       [--methods flip,idp,nbflip] [--side both|cellflip|manta|none] [--band-r 6] [--seeds K]
       [--data tools/mantaflow/reference-volume] [--png docs/img/reference-volume-dam-3d-64.png]
       [--manta-args "--ghost-fluid 0"] [--cellflip-sim "pressure_tolerance = 3e-5"]
---seeds K runs an ensemble: seeds 1..K (--seed-from S: S..K, keeping the CSVs of the others) (cellflip --seed s; MantaFlow --seed s-1, 0 its own
-sampling), then the plot shades each side's range over the seeds and the table compares their means.
+--seeds K runs an ensemble: seeds 1..K (cellflip --seed s; MantaFlow --seed s-1, 0 its own
+sampling; --seed-from S runs S..K only, keeping the CSVs of the others), then the plot shades each
+side's range over the seeds and the table compares their means and every pair of single runs.
 --side cellflip reruns cellflip's side only and compares it with the MantaFlow CSVs kept in --data
 (no MANTA_BIN needed); --side none only redraws the plot and the table from the CSVs.
 Writes to --data, per method: cellflip-<method>-<case>.csv and manta-<method>-<case>.csv
-(<case> as dam3d-64-3s, then -seed<s> for s > 1; columns time_s, volume_percent[, phi_volume_percent], ...), the
-table table-<case>.md and the runs' commands and wall times in runs-<case>.json; the plot to --png
+(<case> as dam3d-64-3s, then -seed<s> for s > 1; columns time_s, volume_percent[,
+phi_volume_percent], ...), the table table-<case>.md (and .json) and the runs' commands, scenes,
+binaries and wall times in runs-<case>.json; the plot to --png
 (default docs/img/reference-volume-dam-<dim>d-<res>.png). Prints the table last.
 """
 import argparse
