@@ -50,14 +50,15 @@ pub fn liquid_motion<const D: usize>(
     deep: impl Fn(usize) -> bool,
     h: f64,
 ) -> LiquidMotion {
-    let particles: f64 = vel.iter().map(|v| v.norm_squared()).sum();
-    let fastest = vel.iter().map(|v| v.norm_squared()).fold(0.0, f64::max);
-    let deep_cells = active.each_cell().filter(|&c| deep(c));
-    let at_centres = deep_cells.map(|c| u.interpolate(grid, &grid.center(grid.cell_coords(c))));
-    let (cells, n_deep, fastest) = at_centres.fold((0.0, 0usize, fastest), |(s, n, m), v| {
+    // Sums and the largest of |v|^2, in one pass each over the particles and the deep.
+    let gather = |(s, n, m): (f64, usize, f64), v: Vector<D>| {
         let v2 = v.norm_squared();
         (s + v2, n + 1, m.max(v2))
-    });
+    };
+    let (particles, _, fastest) = vel.iter().copied().fold((0.0, 0, 0.0), gather);
+    let deep_cells = active.each_cell().filter(|&c| deep(c));
+    let at_centres = deep_cells.map(|c| u.interpolate(grid, &grid.center(grid.cell_coords(c))));
+    let (cells, n_deep, fastest) = at_centres.fold((0.0, 0usize, fastest), gather);
     let mean = match n_deep {
         0 => particles / vel.len().max(1) as f64,
         _ => {

@@ -375,15 +375,17 @@ impl<const D: usize> FluidMethod<D> for NbflipSim<D> {
         let kept = pos[..self.first_seed].par_iter();
         let outside = kept
             .with_min_len(crate::PAR_GRAIN_PARTICLES)
-            .map(|x| (x, self.phi.interpolate(g, x)))
-            .find_first(|(x, phi)| solid[g.cell_index_of(x)] || !(-self.r()..=0.0).contains(phi));
-        if let Some((x, phi)) = outside {
-            return Err(InvariantViolation(format!(
-                "a particle at {:?} has phi = {phi:.3} after resampling{}, outside the band [-{}, 0]",
-                x.as_slice(),
-                if solid[g.cell_index_of(x)] { " in a solid cell" } else { "" },
-                self.r()
-            )));
+            .map(|x| (x, solid[g.cell_index_of(x)], self.phi.interpolate(g, x)))
+            .find_first(|&(_, in_solid, phi)| in_solid || !(-self.r()..=0.0).contains(&phi));
+        if let Some((x, in_solid, phi)) = outside {
+            let x = x.as_slice();
+            return Err(InvariantViolation(match in_solid {
+                true => format!("a particle at {x:?} lies in a solid cell after resampling"),
+                false => format!(
+                    "a particle at {x:?} has phi = {phi:.3} after resampling, outside the band [-{}, 0]",
+                    self.r()
+                ),
+            }));
         }
         let resampling = self.resampling(g, &s.solids.solid, s.config.mu());
         let seedable = |c: usize| resampling.seedable(c);
