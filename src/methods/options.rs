@@ -46,11 +46,13 @@ impl FlagValue {
     }
 
     /// A number (any type that parses from its text, e.g. `u32` or `f64`), called `N` in the
-    /// help.
+    /// help. A number that the type holds but a TOML value does not (a `u64` past `i64::MAX`:
+    /// every flag's value passes through TOML, as a scene file's key would) is refused while
+    /// the command line is parsed, naming the flag.
     pub const fn number<T>() -> Self
     where
         T: FromStr + Serialize + Clone + Send + Sync + 'static,
-        T::Err: std::error::Error + Send + Sync + 'static,
+        T::Err: std::fmt::Display,
     {
         Self {
             arg: |a| a.value_parser(parse::<T>).value_name("N"),
@@ -65,8 +67,18 @@ impl FlagValue {
     };
 }
 
-fn parse<T: FromStr>(text: &str) -> Result<T, T::Err> {
-    text.parse()
+fn parse<T: FromStr + Serialize>(text: &str) -> Result<T, String>
+where
+    T::Err: std::fmt::Display,
+{
+    let n = text.parse::<T>().map_err(|e| e.to_string())?;
+    match toml::Value::try_from(&n) {
+        Ok(_) => Ok(n),
+        Err(_) => Err(format!(
+            "{text} is too large: a setting holds integers up to {}",
+            i64::MAX
+        )),
+    }
 }
 
 fn read_as<T: Serialize + Clone + Send + Sync + 'static>(

@@ -490,8 +490,24 @@ fn simulation(ch: &Checker, s: &SimulationFile, flags: &MethodFlags) -> Checked<
         dim,
         per_axis: ppc_per_axis(s.ppc, dim).unwrap_or(1),
     };
-    m.check(ctx).map_err(setting_error)?;
+    m.check(ctx)
+        .map_err(|e| given_as_flag(e, flags))
+        .map_err(setting_error)?;
     Ok(m)
+}
+
+/// A setting's refusal says so when a command-line flag gave the value (the flag of a setting
+/// is its key with dashes: `band_r`, `--band-r`), so that the user finds what they typed.
+fn given_as_flag(mut e: SettingError, flags: &MethodFlags) -> SettingError {
+    let flag = flags
+        .0
+        .iter()
+        .rev()
+        .find(|(name, _)| name.replace('-', "_") == e.key);
+    if let Some((name, value)) = flag {
+        e.reason = format!("{} (given as --{name} {value})", e.reason);
+    }
+    e
 }
 
 /// Refuses a method key (`simulation.band`, ...) that the file's own method does not have,

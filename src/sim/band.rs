@@ -15,9 +15,13 @@ use crate::sim::transfer::Known;
 /// `R` when a scene file does not say (the paper: 3, and 6 for the dam scenes).
 pub const DEFAULT_BAND_R: u32 = 3;
 
-/// Refuses an `R` below 1 (or absurdly deep), with the reason.
+/// The deepest band interface taken: far deeper than any grid of ours is tall, so only a typo
+/// or a value at its type's extreme meets it.
+pub const MAX_BAND_R: u32 = 10_000;
+
+/// Refuses an `R` below 1 or past [`MAX_BAND_R`], with the reason.
 pub fn check_band_r(r: u32) -> Result<(), BadBandDepth> {
-    match (1..=10_000).contains(&r) {
+    match (1..=MAX_BAND_R).contains(&r) {
         true => Ok(()),
         false => Err(BadBandDepth(r)),
     }
@@ -25,7 +29,9 @@ pub fn check_band_r(r: u32) -> Result<(), BadBandDepth> {
 
 /// A band depth `R` no band can have.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
-#[error("must be at least 1 (the band interface lies R cells below the surface), got {0}")]
+#[error(
+    "must be from 1 to {MAX_BAND_R} (the band interface lies R cells below the surface), got {0}"
+)]
 pub struct BadBandDepth(pub u32);
 
 /// A band `R + 1` cells thick: the interface is at depth `-R`, the deep below it.

@@ -282,6 +282,64 @@ fn options_a_method_lacks_are_refused_before_anything_is_written() {
     assert!(String::from_utf8_lossy(&o.stderr).contains("--band"));
 }
 
+/// Every method flag that takes a number, at the extremes of the integer and float types and
+/// past them, on the method that declares it: the run goes (a value the method takes) or is
+/// refused naming the flag, exit 1; never a panic. Values pass through TOML on their way to the
+/// settings, whose integers end at `i64::MAX`: a `u64` flag given `u64::MAX` once panicked.
+#[test]
+fn every_method_flag_s_number_is_taken_or_refused_at_its_type_s_extremes() {
+    use clap::CommandFactory;
+    let cli = cellflip::cmd::cli::Cli::command();
+    let run = cli.find_subcommand("run").expect("cellflip run");
+    let takes_number = |name: &str| {
+        run.get_arguments().any(|a| {
+            a.get_long() == Some(name) && a.get_value_names().is_some_and(|v| v == ["N"])
+        })
+    };
+    let numbers: Vec<_> = cellflip::methods::MethodKind::flags()
+        .into_iter()
+        .filter(|f| takes_number(f.name))
+        .collect();
+    assert!(numbers.len() >= 2, "no numeric method flag found in `run --help`");
+    let (u32_max, u64_max) = (u32::MAX as u128, u64::MAX as u128);
+    let (i64_max, i64_min) = (i64::MAX as i128, i64::MIN as i128);
+    let extremes: Vec<String> = [
+        "0".to_string(),
+        "-1".into(),
+        u32_max.to_string(),
+        (u32_max + 1).to_string(),
+        i64_max.to_string(),
+        (i64_max + 1).to_string(),
+        u64_max.to_string(),
+        (u64_max + 1).to_string(),
+        i64_min.to_string(),
+        (i64_min - 1).to_string(),
+        "1e400".into(),
+        "NaN".into(),
+        "inf".into(),
+        "".into(),
+    ]
+    .into();
+    for flag in &numbers {
+        for (method, _) in &flag.declared_by {
+            for value in &extremes {
+                let long = format!("--{}", flag.name);
+                // `--flag=-1`: a value of its own, not taken for another flag.
+                let given = format!("{long}={value}");
+                let args = ["run", "hydrostatic-2d", "--method", method, "--steps", "1"];
+                let o = cellflip(&[&args[..], &["--no-record", &given]].concat());
+                let err = String::from_utf8_lossy(&o.stderr);
+                let said = format!("{method} {given}: {:?} {err}", o.status.code());
+                assert!(matches!(o.status.code(), Some(0 | 1)), "{said}");
+                assert!(!err.contains("panicked"), "{said}");
+                if !o.status.success() {
+                    assert!(err.contains(&long), "{said}");
+                }
+            }
+        }
+    }
+}
+
 /// The up-front memory estimate is never below what a run takes: each method's peak over 30
 /// steps of dam-3d at 48^3, and ccp's without the band on drop-3d at 64^3, whose 205,280
 /// particles make a problem the flow solver halves (`cellflip bench` prints the process's
