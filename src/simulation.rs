@@ -92,6 +92,18 @@ impl<const D: usize> Simulation<D> {
         let state = State::restore(config, r)?;
         let mut method = settings.kind.build::<D>(settings);
         method.restore_state(&state, r)?;
+        let (total, held) = (state.total_particles, state.particles.len());
+        let not_held = method.particles_not_held();
+        let counted = (not_held.checked_neg()).and_then(|n| total.checked_add_signed(n));
+        if counted != Some(held) {
+            return Err(SnapshotError::Array {
+                name: "total_particles".into(),
+                reason: format!(
+                    "{total} seeded or emitted, but {held} held and {not_held} not held by the \
+                     method"
+                ),
+            });
+        }
         Ok(Self {
             state,
             method,

@@ -474,6 +474,35 @@ impl Reader {
     }
 }
 
+/// Checks what a checkpoint's array holds, not only its shape: the first element for which
+/// `why` gives a reason fails the read, naming the array, the element and the reason. A
+/// checksum proves the bytes are those written, not that they make a state (a file edited with
+/// numpy and its checksum recomputed).
+pub fn check_elements<T: Sync>(
+    name: &str,
+    items: &[T],
+    why: impl Fn(&T) -> Option<String> + Sync,
+) -> Result<(), SnapshotError> {
+    use rayon::prelude::*;
+    let first = (items.par_iter().enumerate())
+        .with_min_len(crate::PAR_GRAIN_PARTICLES)
+        .find_map_first(|(i, x)| why(x).map(|w| (i, w)));
+    match first {
+        None => Ok(()),
+        Some((i, why)) => Err(array_error(name, format!("element {i}: {why}"))),
+    }
+}
+
+/// [`check_elements`]' reason for a number that is not finite.
+pub fn not_finite(x: &f64) -> Option<String> {
+    (!x.is_finite()).then(|| format!("{x} is not a finite number"))
+}
+
+/// [`check_elements`]' reason for a vector with a component that is not finite.
+pub fn vector_not_finite<const D: usize>(x: &Vector<D>) -> Option<String> {
+    (!x.iter().all(|c| c.is_finite())).then(|| format!("{:?} is not finite", x.as_slice()))
+}
+
 fn array_error(name: &str, reason: String) -> SnapshotError {
     SnapshotError::Array {
         name: name.into(),

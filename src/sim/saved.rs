@@ -5,8 +5,10 @@
 
 use super::markings::{CellKind, Markings};
 use super::{SimConfig, SimRng, State};
-use crate::grid::{Grid, MacField};
-use crate::snapshot::{Reader, SnapshotError, Writer};
+use crate::grid::{Grid, MacField, Vector};
+use crate::snapshot::{
+    check_elements, not_finite, vector_not_finite, Reader, SnapshotError, Writer,
+};
 use rand::SeedableRng;
 
 /// The cell kinds by the number a checkpoint stores ([`CellKind`] as `u8`).
@@ -59,21 +61,38 @@ impl<const D: usize> State<D> {
         let k = solids.obstacles.len();
         let offsets = r.vectors::<D>("obstacles.offset", Some(k))?;
         let velocities = r.vectors::<D>("obstacles.velocity", Some(k))?;
+        check_elements("obstacles.velocity", &velocities, vector_not_finite)?;
+        let obstacle = |(o, x): (&super::solids::Obstacle<D>, &Vector<D>)| {
+            let why = vector_not_finite(x);
+            why.or_else(|| {
+                (!o.inside_tank(&grid, x)).then(|| format!("puts '{}' outside the tank", o.name))
+            })
+        };
+        let placed: Vec<_> = solids.obstacles.iter().zip(&offsets).collect();
+        check_elements("obstacles.offset", &placed, |&p| obstacle(p))?;
         solids.place(&grid, &offsets, &velocities);
         let pos = r.vectors::<D>("particles.pos", None)?;
+        check_positions(&grid, &pos, solids.particle_free())?;
         let vel = r.vectors::<D>("particles.vel", Some(pos.len()))?;
+        check_elements("particles.vel", &vel, vector_not_finite)?;
         let mut velocity = MacField::zeros(&grid);
         for (a, c) in velocity.comp.iter_mut().enumerate() {
-            *c = r.slice(&format!("velocity.{a}"), Some(c.len()))?;
+            let name = format!("velocity.{a}");
+            *c = r.slice(&name, Some(c.len()))?;
+            check_elements(&name, c, not_finite)?;
         }
-        let markings = restore_markings(r, &grid)?;
+        let markings = restore_markings(r, &grid, pos.len())?;
         Ok(State {
             active: super::active_cells(&grid, &markings, &solids),
             markings,
-            time_secs: r.scalar("time_secs")?,
+            time_secs: r
+                .scalar("time_secs")
+                .and_then(|t| at_least("time_secs", t, 0.0))?,
             steps: r.scalar("steps")?,
             total_particles: r.scalar::<u64>("total_particles")? as usize,
-            target_volume: r.scalar("target_volume")?,
+            target_volume: r
+                .scalar("target_volume")
+                .and_then(|v| positive("target_volume", v))?,
             rng: restore_rng(r)?,
             particles: crate::particles::Particles { pos, vel },
             velocity,
@@ -84,22 +103,84 @@ impl<const D: usize> State<D> {
     }
 }
 
-fn restore_markings<const D: usize>(r: &Reader, grid: &Grid<D>) -> Result<Markings, SnapshotError> {
+/// Every particle where a step leaves it: finite, inside the domain, and in no cell where
+/// particles may not be (`particle_free`, the solids as the obstacle mode counts them).
+fn check_positions<const D: usize>(
+    grid: &Grid<D>,
+    pos: &[Vector<D>],
+    particle_free: &[bool],
+) -> Result<(), SnapshotError> {
+    check_elements("particles.pos", pos, |x| {
+        let why = vector_not_finite(x);
+        why.or_else(|| match grid.cell_of(x) {
+            None => Some(format!("{:?} is outside the domain", x.as_slice())),
+            Some(c) if particle_free[grid.cell_index(c)] => {
+                Some(format!("{:?} is in solid cell {c:?}", x.as_slice()))
+            }
+            Some(_) => None,
+        })
+    })
+}
+
+/// The markings of the last step: cell kinds this program knows, particle counts in no empty
+/// cell that add up to the `particles` held, and a depth of at most 0 in every fluid cell
+/// (def. depth).
+fn restore_markings<const D: usize>(
+    r: &Reader,
+    grid: &Grid<D>,
+    particles: usize,
+) -> Result<Markings, SnapshotError> {
     let n = grid.num_cells();
-    let kind = (r.slice::<u8>("markings.kind", Some(n))?.into_iter())
-        .map(|b| KINDS.get(b as usize).copied())
-        .collect::<Option<Vec<_>>>()
-        .ok_or_else(|| SnapshotError::Array {
-            name: "markings.kind".into(),
-            reason: "a cell kind is not 0, 1 or 2".into(),
-        })?;
-    Ok(Markings::from_cells(
-        grid,
-        kind,
-        r.slice("markings.count", Some(n))?,
-        r.bools("markings.surface", Some(n))?,
-        r.slice("markings.depth", Some(n))?,
-    ))
+    let kinds = r.slice::<u8>("markings.kind", Some(n))?;
+    let known =
+        |&b: &u8| (b as usize >= KINDS.len()).then(|| format!("cell kind {b} is not 0, 1 or 2"));
+    check_elements("markings.kind", &kinds, known)?;
+    let kind: Vec<CellKind> = kinds.into_iter().map(|b| KINDS[b as usize]).collect();
+    let count = r.slice::<u32>("markings.count", Some(n))?;
+    let cells: Vec<(CellKind, u32)> = kind.iter().copied().zip(count.iter().copied()).collect();
+    // Particles mark a cell fluid, or lie in a solid one (an obstacle that `ignore`s them).
+    let counted = |&(k, m): &(CellKind, u32)| {
+        (m > 0 && k == CellKind::Empty).then(|| format!("{m} particles in an empty cell"))
+    };
+    check_elements("markings.count", &cells, counted)?;
+    let total: u64 = count.iter().map(|&m| m as u64).sum();
+    if total != particles as u64 {
+        return Err(SnapshotError::Array {
+            name: "markings.count".into(),
+            reason: format!("counts {total} particles, the checkpoint holds {particles}"),
+        });
+    }
+    let depth = r.slice::<i32>("markings.depth", Some(n))?;
+    let depths: Vec<(CellKind, i32)> = kind.iter().copied().zip(depth.iter().copied()).collect();
+    let deep = |&(k, d): &(CellKind, i32)| {
+        (k == CellKind::Fluid && d > 0)
+            .then(|| format!("a fluid cell at depth {d}, above its surface (0)"))
+    };
+    check_elements("markings.depth", &depths, deep)?;
+    let surface = r.bools("markings.surface", Some(n))?;
+    Ok(Markings::from_cells(grid, kind, count, surface, depth))
+}
+
+/// A scalar of the checkpoint that must be a finite number of at least `min`.
+fn at_least(name: &str, x: f64, min: f64) -> Result<f64, SnapshotError> {
+    match x.is_finite() && x >= min {
+        true => Ok(x),
+        false => Err(SnapshotError::Array {
+            name: name.into(),
+            reason: format!("is {x}, must be a finite number of at least {min}"),
+        }),
+    }
+}
+
+/// A scalar of the checkpoint that must be a finite positive number.
+fn positive(name: &str, x: f64) -> Result<f64, SnapshotError> {
+    match x.is_finite() && x > 0.0 {
+        true => Ok(x),
+        false => Err(SnapshotError::Array {
+            name: name.into(),
+            reason: format!("is {x}, must be a finite positive number"),
+        }),
+    }
 }
 
 /// The generator at the word of its stream where it was saved.

@@ -107,10 +107,14 @@ impl<const D: usize> Obstacle<D> {
     /// Whether the obstacle at `offset` leaves the tank (by more than [`WALL_SLACK`]) or covers
     /// a cell for which `blocks` holds.
     fn hits(&self, grid: &Grid<D>, offset: &Vector<D>, blocks: &impl Fn(usize) -> bool) -> bool {
-        let r = self.region_at(offset);
-        let (lo, hi) = r.bounds();
-        (0..D).any(|k| lo[k] < -WALL_SLACK || hi[k] > grid.dims[k] as f64 + WALL_SLACK)
-            || r.cells(grid).any(blocks)
+        !self.inside_tank(grid, offset) || self.region_at(offset).cells(grid).any(blocks)
+    }
+
+    /// Whether the obstacle at `offset` stays in the tank (up to [`WALL_SLACK`]), as every
+    /// step leaves it.
+    pub fn inside_tank(&self, grid: &Grid<D>, offset: &Vector<D>) -> bool {
+        let (lo, hi) = self.region_at(offset).bounds();
+        (0..D).all(|k| lo[k] >= -WALL_SLACK && hi[k] <= grid.dims[k] as f64 + WALL_SLACK)
     }
 
     /// Where one step at its velocity takes it: `offset + v dt`, one axis after the other, each

@@ -7,6 +7,7 @@ mod common;
 mod active;
 mod band;
 mod checkpoint;
+mod checkpoint_content;
 mod cli_process;
 mod compare;
 mod correction;

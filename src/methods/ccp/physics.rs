@@ -13,7 +13,7 @@ use crate::sim::band::Band;
 use crate::sim::markings::{DepthLevel, Markings};
 use crate::sim::transfer::{self, Known};
 use crate::sim::{ParticlesMut, State, StepError};
-use crate::snapshot::{Reader, SnapshotError, Writer};
+use crate::snapshot::{check_elements, not_finite, Reader, SnapshotError, Writer};
 use std::path::{Path, PathBuf};
 
 /// The paper's method in a running simulation.
@@ -95,9 +95,20 @@ impl<const D: usize> FluidMethod<D> for CcpSim<D> {
         w.slice("ccp.cell_prices", self.prices.cell_prices());
     }
 
-    fn restore_state(&mut self, _s: &State<D>, r: &Reader) -> Result<(), SnapshotError> {
-        self.n_deep = r.scalar::<u64>("ccp.n_deep")? as usize;
+    fn restore_state(&mut self, s: &State<D>, r: &Reader) -> Result<(), SnapshotError> {
+        let n_deep = r.scalar::<u64>("ccp.n_deep")?;
+        if n_deep > s.total_particles as u64 {
+            return Err(SnapshotError::Array {
+                name: "ccp.n_deep".into(),
+                reason: format!(
+                    "{n_deep} particles in the deep, more than the {} seeded or emitted",
+                    s.total_particles
+                ),
+            });
+        }
+        self.n_deep = n_deep as usize;
         let prices = r.slice("ccp.cell_prices", None)?;
+        check_elements("ccp.cell_prices", &prices, not_finite)?;
         self.prices = correct::PriceMemory::from_cell_prices(prices);
         Ok(())
     }

@@ -13,7 +13,7 @@ use crate::sim::markings::{DepthLevel, Markings};
 use crate::sim::solids::Solids;
 use crate::sim::transfer::{self, Known};
 use crate::sim::{ParticlesMut, State, StepError};
-use crate::snapshot::{Reader, SnapshotError, Writer};
+use crate::snapshot::{check_elements, not_finite, Reader, SnapshotError, Writer};
 use rand::Rng;
 use rayon::prelude::*;
 use std::sync::Arc;
@@ -307,9 +307,9 @@ impl<const D: usize> FluidMethod<D> for NbflipSim<D> {
 
     fn restore_state(&mut self, s: &State<D>, r: &Reader) -> Result<(), SnapshotError> {
         let n = Some(s.grid.num_cells());
-        self.phi = Arc::new(LevelSet {
-            phi: r.slice("nbflip.phi", n)?,
-        });
+        let phi = r.slice("nbflip.phi", n)?;
+        check_elements("nbflip.phi", &phi, not_finite)?;
+        self.phi = Arc::new(LevelSet { phi });
         self.advected = match r.scalar::<u8>("nbflip.advected")? {
             0 => None,
             _ => Some((*self.phi).clone()),

@@ -9,7 +9,7 @@ use crate::metrics::InvariantViolation;
 use crate::sim::advect::displace;
 use crate::sim::transfer::{self, Known};
 use crate::sim::{ParticlesMut, State, StepError};
-use crate::snapshot::{Reader, SnapshotError, Writer};
+use crate::snapshot::{check_elements, Reader, SnapshotError, Writer};
 use crate::solvers::sinkhorn::{Air, SinkhornError, Transport, TransportGrid};
 use rayon::prelude::*;
 
@@ -154,9 +154,19 @@ impl<const D: usize> FluidMethod<D> for PowerPicSim<D> {
     fn restore_state(&mut self, s: &State<D>, r: &Reader) -> Result<(), SnapshotError> {
         self.set_up_grids(s);
         if r.has("powerpic.active") {
-            let active = r.slice("powerpic.active", None)?;
+            let active = r.slice::<u32>("powerpic.active", None)?;
+            let cells = self.tg.grid.num_cells();
+            let pairs: Vec<[u32; 2]> = active.windows(2).map(|w| [w[0], w[1]]).collect();
+            let ascending = |&[a, b]: &[u32; 2]| (a >= b).then(|| format!("{a} before {b}"));
+            check_elements("powerpic.active", &pairs, ascending)?;
+            let outside = |&j: &u32| {
+                (j as usize >= cells).then(|| format!("cell {j} of a transport grid of {cells}"))
+            };
+            check_elements("powerpic.active", &active, outside)?;
             let v = r.slice("powerpic.v", Some(active.len()))?;
+            check_elements("powerpic.v", &v, scaling)?;
             let u = r.slice("powerpic.u", None)?;
+            check_elements("powerpic.u", &u, scaling)?;
             self.plan = Some(Transport::from_warm_parts(active, u, v));
         }
         Ok(())
@@ -322,6 +332,12 @@ pub struct PowerPicReport {
 }
 
 impl<const D: usize> MethodRecording<D> for PowerPicSim<D> {}
+
+/// [`check_elements`]' reason for a Sinkhorn scaling that is not a finite positive number
+/// (`u_p`, `v_j`: exponentials of the dual potentials).
+fn scaling(x: &f64) -> Option<String> {
+    (!(x.is_finite() && *x > 0.0)).then(|| format!("scaling {x} is not a finite positive number"))
+}
 
 #[cfg(test)]
 mod tests {
