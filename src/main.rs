@@ -11,6 +11,7 @@ use std::io::Write;
 /// (its recording and summary finished first).
 fn main() {
     one_malloc_arena();
+    file_size_limit_as_write_error();
     // A usage error (an unknown flag or value) exits 1 as every other error; --help and
     // --version print and exit 0.
     let cli = Cli::try_parse().unwrap_or_else(|e| {
@@ -51,6 +52,18 @@ fn one_malloc_arena() {
     // SAFETY: `mallopt` only sets an allocator parameter; no other thread exists yet.
     unsafe {
         libc::mallopt(libc::M_ARENA_MAX, 1);
+    }
+}
+
+/// Makes a file size limit (`ulimit -f`, as batch systems set) a write error, as a full disk
+/// is: by default the kernel kills a process that writes past it with SIGXFSZ, before any
+/// message or checkpoint; ignored, the write fails with EFBIG ("File too large"), which every
+/// writer reports with the file's name, finishing what it can.
+fn file_size_limit_as_write_error() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: sets the disposition of one signal to "ignore"; no handler runs.
+    unsafe {
+        libc::signal(libc::SIGXFSZ, libc::SIG_IGN);
     }
 }
 
