@@ -18,6 +18,7 @@ pub mod draw;
 pub mod frames;
 pub mod grid;
 pub mod interrupt;
+pub mod machine;
 pub mod methods;
 pub mod metrics;
 pub mod out;

@@ -17,12 +17,12 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         bail!("--steps: must be at least 1");
     }
     crate::outln!(
-        "scene {}, {} measured steps per resolution after {} warm-up steps, {} threads, {}",
+        "scene {}, {} measured steps per resolution after {} warm-up steps, {}, on {}",
         args.scene,
         args.steps,
         args.warmup,
-        rayon::current_num_threads(),
-        crate::sim::transfer::grid_to_particles_mode()
+        crate::sim::transfer::grid_to_particles_mode(),
+        crate::machine::describe(rayon::current_num_threads()),
     );
     let bands: Vec<Option<BandMode>> = match args.band.is_empty() {
         true => vec![None],

@@ -292,15 +292,17 @@ fn every_method_flag_s_number_is_taken_or_refused_at_its_type_s_extremes() {
     let cli = cellflip::cmd::cli::Cli::command();
     let run = cli.find_subcommand("run").expect("cellflip run");
     let takes_number = |name: &str| {
-        run.get_arguments().any(|a| {
-            a.get_long() == Some(name) && a.get_value_names().is_some_and(|v| v == ["N"])
-        })
+        run.get_arguments()
+            .any(|a| a.get_long() == Some(name) && a.get_value_names().is_some_and(|v| v == ["N"]))
     };
     let numbers: Vec<_> = cellflip::methods::MethodKind::flags()
         .into_iter()
         .filter(|f| takes_number(f.name))
         .collect();
-    assert!(numbers.len() >= 2, "no numeric method flag found in `run --help`");
+    assert!(
+        numbers.len() >= 2,
+        "no numeric method flag found in `run --help`"
+    );
     let (u32_max, u64_max) = (u32::MAX as u128, u64::MAX as u128);
     let (i64_max, i64_min) = (i64::MAX as i128, i64::MIN as i128);
     let extremes: Vec<String> = [

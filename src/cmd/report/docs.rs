@@ -87,13 +87,11 @@ impl DocsTarget {
 /// When, where and how the figures were made: the first line of both generated texts.
 pub fn provenance(command: &str) -> String {
     format!(
-        "Generated {} at commit `{}` (cellflip {}) on {} ({} cores, {} threads) by `cellflip {command}`.",
+        "Generated {} at commit `{}` (cellflip {}) on {} by `cellflip {command}`.",
         utc_date(),
         commit(),
         env!("CARGO_PKG_VERSION"),
-        cpu_model(),
-        std::thread::available_parallelism().map_or(0, |n| n.get()),
-        rayon::current_num_threads(),
+        crate::machine::describe(rayon::current_num_threads()),
     )
 }
 
@@ -156,19 +154,6 @@ fn commit() -> String {
         },
         None => "unknown (not a git checkout)".into(),
     }
-}
-
-/// The CPU's model name, as `/proc/cpuinfo` gives it.
-fn cpu_model() -> String {
-    std::fs::read_to_string("/proc/cpuinfo")
-        .ok()
-        .and_then(|t| {
-            t.lines()
-                .find(|l| l.starts_with("model name"))
-                .and_then(|l| l.split_once(':'))
-                .map(|(_, v)| v.trim().to_string())
-        })
-        .unwrap_or_else(|| "an unknown CPU".into())
 }
 
 /// Today's date in UTC, `YYYY-MM-DD`.

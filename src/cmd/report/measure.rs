@@ -114,7 +114,7 @@ fn measure<const D: usize>(
     files: Option<&RunFiles>,
     resumed: Option<Opened>,
 ) {
-    reset_peak_memory();
+    crate::machine::reset_peak_memory();
     let mut g = Gathered {
         probe: (scene.name() == "martin-moyce-2d").then(MartinMoyceProbe::default),
         ..Default::default()
@@ -384,12 +384,6 @@ fn costs<const D: usize>(runner: &Runner<D>, v: &mut BTreeMap<String, f64>) {
 /// The column of a stage's share: `share_<stage name>`.
 pub fn share_column(st: Stage) -> String {
     format!("share_{}", st.name())
-}
-
-/// Resets this process's peak resident memory to its current size (Linux), so that the next
-/// run's peak is its own.
-fn reset_peak_memory() {
-    let _ = std::fs::write("/proc/self/clear_refs", "5");
 }
 
 /// Every method figure column, in registration order.
