@@ -47,9 +47,16 @@ fn slurm(conf: &str, program: &str, args: &[&str]) -> String {
     String::from_utf8_lossy(&out.stdout).trim().to_string()
 }
 
-/// The sweep script on `matrix` into `dir/out`, with `env` added to its environment: the merge
-/// job's id.
-fn sweep(conf: &str, dir: &Path, matrix: &[&str], env: &[(&str, &str)]) -> String {
+/// What the sweep script submitted: its arrays' ids and the merge job's.
+struct Submitted {
+    arrays: Vec<String>,
+    merge: String,
+}
+
+/// The sweep script on `matrix` into `dir/out`, with `env` added to its environment. The ids
+/// are read from what the script says, not worked out from each other: tests run at once, and
+/// two sweeps' `sbatch` calls can take turns.
+fn sweep(conf: &str, dir: &Path, matrix: &[&str], env: &[(&str, &str)]) -> Submitted {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tools/slurm/sweep.sh");
     let out = Command::new(script)
         .args(["--out", "out"])
@@ -63,7 +70,14 @@ fn sweep(conf: &str, dir: &Path, matrix: &[&str], env: &[(&str, &str)]) -> Strin
         .unwrap();
     ok(&out);
     let said = String::from_utf8_lossy(&out.stdout);
-    said.lines().last().expect("the merge job's id").to_string()
+    let merge = said.lines().last().expect("the merge job's id").to_string();
+    // `array 116: 1 jobs, --mem=512M --time=1 min`, one line per array, on stderr.
+    let arrays = String::from_utf8_lossy(&out.stderr)
+        .lines()
+        .filter_map(|l| l.strip_prefix("array ")?.split_once(':'))
+        .map(|(id, _)| id.to_string())
+        .collect();
+    Submitted { arrays, merge }
 }
 
 /// A job's state (`scontrol show job`), e.g. PENDING, RUNNING, COMPLETED.
@@ -124,7 +138,7 @@ fn one_process(dir: &Path, matrix: &[&str]) -> std::path::PathBuf {
 fn a_sweep_on_slurm_merges_into_the_one_process_report() {
     let Some(conf) = cluster() else { return };
     let dir = scratch_dir("slurm_sweep");
-    let merge = sweep(&conf, &dir, &MATRIX[1..], &[]);
+    let merge = sweep(&conf, &dir, &MATRIX[1..], &[]).merge;
     let whole = one_process(&dir, &MATRIX);
     wait_for(&conf, &merge, &["COMPLETED"], 300, &String::new);
     let (a, b) = (untimed_rows(&whole), untimed_rows(&dir.join("out")));
@@ -286,7 +300,8 @@ impl OneJob {
     /// The sweep script on `matrix` (one job), with `env` for the script; once its task runs
     /// cellflip (its log says SLURM_RESTART_COUNT=0).
     fn submit(conf: &str, dir: &Path, matrix: &[&str], env: &[(&str, &str)]) -> OneJob {
-        let merge = sweep(conf, dir, matrix, env);
+        let Submitted { arrays, merge } = sweep(conf, dir, matrix, env);
+        assert_eq!(arrays.len(), 1, "{arrays:?}");
         let plan = std::fs::read_to_string(dir.join("out/slurm/plan.txt")).unwrap();
         let id = plan
             .lines()
@@ -296,7 +311,7 @@ impl OneJob {
             .next()
             .unwrap()
             .to_string();
-        let task = format!("{}_1", merge.parse::<u64>().unwrap() - 1);
+        let task = format!("{}_1", arrays[0]);
         let job = OneJob {
             conf: conf.to_string(),
             dir: dir.to_path_buf(),
