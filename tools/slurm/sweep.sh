@@ -137,7 +137,7 @@ for key in "${!lists[@]}"; do
     minutes=${minutes%min}
     # shellcheck disable=SC2086
     jid=$(sbatch --parsable --job-name="cellflip-$key" --array="1-$n" --mem="$mem" \
-        --time="$minutes" --cpus-per-task="$cpus" "${signal[@]}" --requeue \
+        --time="$minutes" --cpus-per-task="$cpus" ${signal[@]+"${signal[@]}"} --requeue \
         --output="$out/slurm/logs/%A_%a.out" --open-mode=append ${SBATCH_EXTRA:-} "$task" "$ids")
     echo "array $jid: $n jobs, --mem=$mem --time=${minutes} min" >&2
     arrays+=("$jid")
