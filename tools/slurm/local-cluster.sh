@@ -64,7 +64,11 @@ ReturnToService=2
 AccountingStorageType=accounting_storage/none
 JobCompType=jobcomp/none
 MpiDefault=none
-KillWait=30
+# Between the SIGTERM of a time limit, a cancel or a requeue and the SIGKILL (30 s by default).
+# A task stopped by its limit must write its checkpoint and requeue itself within it: half the
+# default here shows that this takes seconds (6 s at most seen, on 2 cores four times
+# oversubscribed), not the whole half minute.
+KillWait=15
 MinJobAge=600
 $node State=UNKNOWN
 PartitionName=local Nodes=ALL Default=YES MaxTime=INFINITE State=UP

@@ -13,17 +13,28 @@
 # Each task runs with --signal=B:USR1@$CELLFLIP_SIGNAL_SECS --requeue: near its time limit it
 # stops its run with a checkpoint (SIGTERM to cellflip) and requeues itself, and the requeued
 # task goes on from that checkpoint; its log line says SLURM_RESTART_COUNT. A task requeued by
-# Slurm (preemption, `scontrol requeue`) gets SIGTERM and does the same.
+# Slurm (preemption, `scontrol requeue`) gets SIGTERM and does the same. A task that reaches
+# its time limit all the same (no warning, or one too late) gets SIGTERM too, writes its
+# checkpoint within KillWait and requeues itself: Slurm ends a timed-out task for good.
 #
 # Environment: CELLFLIP (the binary, default `cellflip` on the PATH), CELLFLIP_CPUS (CPUs per
-# task, default 2: the cost model's threads), CELLFLIP_SIGNAL_SECS (default 120),
-# CELLFLIP_TIME_MARGIN (time limit over the estimate, default 3), SBATCH_EXTRA (more sbatch
-# options, e.g. a partition or an account).
+# task, default 2: the cost model's threads), CELLFLIP_SIGNAL_SECS (default 120; 0: no warning
+# signal, the limit's SIGTERM only), CELLFLIP_TIME_MARGIN (time limit over the estimate,
+# default 3), CELLFLIP_TIME_MINUTES (every task's time limit in minutes instead of the
+# estimate's, e.g. 1, with CELLFLIP_SIGNAL_SECS=0, to see a real limit expire), SBATCH_EXTRA
+# (more sbatch options, e.g. a partition or an account). Slurm may send the warning up to a
+# minute early, so a limit not above the signal's lead time and a minute is refused: the
+# warning could come at once, each time the task ran, and the task would never get far.
 set -euo pipefail
 cellflip=${CELLFLIP:-cellflip}
 cpus=${CELLFLIP_CPUS:-2}
 signal_secs=${CELLFLIP_SIGNAL_SECS:-120}
 margin=${CELLFLIP_TIME_MARGIN:-3}
+time_minutes=${CELLFLIP_TIME_MINUTES:-}
+if [ -n "$time_minutes" ] && ! [[ $time_minutes =~ ^[1-9][0-9]*$ ]]; then
+    echo "$0: CELLFLIP_TIME_MINUTES must be a whole number of minutes, not '$time_minutes'" >&2
+    exit 2
+fi
 
 out=
 only=
@@ -56,16 +67,28 @@ echo "cellflip job $id: task ${SLURM_ARRAY_JOB_ID}_${SLURM_ARRAY_TASK_ID}, SLURM
 export RAYON_NUM_THREADS=${SLURM_CPUS_PER_TASK:-2}
 "$cellflip" report "${matrix[@]}" --out "$out" --job "$id" &
 pid=$!
+me=${SLURM_ARRAY_JOB_ID}_${SLURM_ARRAY_TASK_ID}
 near_limit() {
     echo "cellflip job $id: near the time limit: checkpoint, then requeue"
     kill -TERM "$pid"
     wait "$pid"
-    scontrol requeue "${SLURM_ARRAY_JOB_ID}_${SLURM_ARRAY_TASK_ID}"
+    scontrol requeue "$me"
     exit 0
 }
-# Cancelled or requeued by Slurm: cellflip has its own SIGTERM (a second one would end it before
-# its checkpoint), so only wait for it.
-stopped() { wait "$pid"; exit 143; }
+# Stopped by Slurm: cellflip has its own SIGTERM (a second one would end it before its
+# checkpoint), so wait for it. Cancelled, requeued or preempted, that is all. Stopped by the
+# time limit itself (no warning asked for, or it came too late), the task would end TIMEOUT,
+# which --requeue does not requeue, and the merge would list its job as missing: requeue it,
+# before KillWait runs out (Slurm takes a requeue while the task is completing).
+stopped() {
+    wait "$pid"
+    if scontrol show job "$me" | grep -qw 'Reason=TimeLimit'; then
+        echo "cellflip job $id: stopped by the time limit: checkpoint written, requeue"
+        scontrol requeue "$me"
+        exit 0
+    fi
+    exit 143
+}
 trap near_limit USR1
 trap stopped TERM
 wait "$pid"
@@ -83,12 +106,26 @@ while read -r id rest; do
     cpu_s=${f[$((n - 1))]}
     mem=$(awk -v m="$mib" 'BEGIN { r = int(m * 1.25 / 256 + 1) * 256; print (r < 512 ? 512 : r) }')
     # cpu_s is wall seconds on 2 threads times 2: wall seconds on p CPUs are about cpu_s / p.
-    minutes=$(awk -v c="$cpu_s" -v k="$margin" -v p="$cpus" 'BEGIN {
-        t = c / p * k / 60 + 5; m = 8; while (m < t) m *= 2; print m }')
+    minutes=${time_minutes:-$(awk -v c="$cpu_s" -v k="$margin" -v p="$cpus" 'BEGIN {
+        t = c / p * k / 60 + 5; m = 8; while (m < t) m *= 2; print m }')}
     key="${mem}M-${minutes}min"
     lists[$key]+="$id"$'\n'
 done < <(grep -v '^#' "$out/slurm/plan.txt" | grep -E -- "${only:-.}" || true)
 [ -n "${lists[*]+x}" ] || { echo "$0: no job of the plan matches --only '$only'" >&2; exit 2; }
+signal=()
+if [ "$signal_secs" != 0 ]; then
+    signal=(--signal="B:USR1@$signal_secs")
+    for key in "${!lists[@]}"; do
+        minutes=${key#*-}
+        minutes=${minutes%min}
+        if [ $((minutes * 60)) -le $((signal_secs + 60)) ]; then
+            echo "$0: a time limit of $minutes min leaves no time before the warning" \
+                "(CELLFLIP_SIGNAL_SECS=$signal_secs, which Slurm may send up to 60 s early);" \
+                "set CELLFLIP_SIGNAL_SECS=0 or a longer limit" >&2
+            exit 2
+        fi
+    done
+fi
 
 arrays=()
 for key in "${!lists[@]}"; do
@@ -100,7 +137,7 @@ for key in "${!lists[@]}"; do
     minutes=${minutes%min}
     # shellcheck disable=SC2086
     jid=$(sbatch --parsable --job-name="cellflip-$key" --array="1-$n" --mem="$mem" \
-        --time="$minutes" --cpus-per-task="$cpus" --signal="B:USR1@$signal_secs" --requeue \
+        --time="$minutes" --cpus-per-task="$cpus" ${signal[@]+"${signal[@]}"} --requeue \
         --output="$out/slurm/logs/%A_%a.out" --open-mode=append ${SBATCH_EXTRA:-} "$task" "$ids")
     echo "array $jid: $n jobs, --mem=$mem --time=${minutes} min" >&2
     arrays+=("$jid")
