@@ -220,9 +220,9 @@ pub struct ReportArgs {
     /// Which scenes and sizes: `default` (the paper's scenes at small sizes and the hard
     /// cases, about 15 minutes on 2 cores) or `paper` (every scene of the paper's sec. 8 at
     /// the size the paper names, whole runs: hours to days, a sweep for a cluster;
-    /// docs/cluster.md). --scenes replaces either
-    #[arg(long, value_enum, default_value_t = Matrix::Default)]
-    pub matrix: Matrix,
+    /// docs/cluster.md). --scenes replaces either [default: default]
+    #[arg(long, value_enum)]
+    pub matrix: Option<Matrix>,
     /// Scenes (built-in names or .toml paths), comma-separated [default: the --matrix's]
     #[arg(long, value_delimiter = ',', conflicts_with = "matrix")]
     pub scenes: Vec<String>,

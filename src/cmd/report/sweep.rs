@@ -4,6 +4,7 @@
 //! the one-process report runs every job and then merges, so both paths share this code.
 
 use super::measured::Measured;
+use super::options::MatrixOptions;
 use super::saved::{self, RunFiles};
 use super::{scene_of, RunSpec};
 use crate::scene::Scene;
@@ -182,11 +183,15 @@ pub fn not_run(missing: &[Missing<'_>]) -> Result<String> {
 pub type Missing<'a> = (&'a RunSpec, String);
 
 /// The results of the matrix's jobs kept in `dir`, in the plan's order, and the jobs that
-/// have none. Fails when there is none at all.
-pub fn gather<'a>(dir: &Path, specs: &'a [RunSpec]) -> Result<(Vec<Measured>, Vec<Missing<'a>>)> {
+/// have none. Fails when there is none at all (`matrix` is the one of `specs`).
+pub fn gather<'a>(
+    dir: &Path,
+    specs: &'a [RunSpec],
+    matrix: &MatrixOptions,
+) -> Result<(Vec<Measured>, Vec<Missing<'a>>)> {
     let (mut results, mut missing) = (vec![], vec![]);
     for spec in specs {
-        let files = RunFiles::of(dir, spec);
+        let files = RunFiles::of(dir, spec, matrix);
         match saved::load_result(&files.result, spec) {
             Ok(Some(m)) => results.push(m),
             Ok(None) => missing.push((spec, "not run".to_string())),
