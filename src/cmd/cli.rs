@@ -270,7 +270,8 @@ pub struct ReportArgs {
     #[arg(long, value_name = "ID", value_delimiter = ',', conflicts_with_all = ["merge", "docs"])]
     pub job: Vec<String>,
     /// Build the report (report.md, report.csv, plots, report.rrd, written into DIR; with --docs
-    /// the manual's pages) from the jobs' results kept in DIR, with the same matrix options;
+    /// the manual's pages) from the jobs' results kept in DIR: of the matrix they were run for
+    /// (each result keeps its matrix options), or of the one the matrix options given name;
     /// nothing is run, and jobs without a result are listed as missing
     #[arg(long, value_name = "DIR", conflicts_with = "out")]
     pub merge: Option<PathBuf>,

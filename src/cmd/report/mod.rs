@@ -274,13 +274,13 @@ pub fn scene_of(spec: &RunSpec) -> Result<Scene> {
 /// `cellflip report`: the plan (`--plan`), some jobs (`--job`), the merge of their results
 /// (`--merge`), or all three in one process.
 pub fn report(args: &ReportArgs) -> Result<()> {
+    if let Some(dir) = &args.merge {
+        return merge(&sweep::merged(args, dir)?, dir);
+    }
     let specs = matrix(args)?;
     if args.plan {
         sweep::print_plan(&sweep::plan(&specs)?);
         return Ok(());
-    }
-    if let Some(dir) = &args.merge {
-        return merge(args, &specs, dir);
     }
     // Only the jobs this process runs must fit here: a sweep's others may be a cluster's.
     let jobs = match args.job.is_empty() {
@@ -314,11 +314,12 @@ pub fn report(args: &ReportArgs) -> Result<()> {
     Ok(())
 }
 
-/// `--merge DIR`: the report (with `--docs`, the manual's pages) from the results kept in
-/// `dir`, nothing run.
-fn merge(args: &ReportArgs, specs: &[RunSpec], dir: &Path) -> Result<()> {
+/// `--merge DIR`: the report (with `--docs`, the manual's pages) of the matrix `args` ask for
+/// ([`sweep::merged`]) from the results kept in `dir`, nothing run.
+fn merge(args: &ReportArgs, dir: &Path) -> Result<()> {
     let header = docs::provenance(&command());
-    write(args, specs, dir, &header, docs_target(args)?.as_ref())
+    let specs = matrix(args)?;
+    write(args, &specs, dir, &header, docs_target(args)?.as_ref())
 }
 
 /// With `--docs`, the manual's pages in the folder the command runs from (checked first).

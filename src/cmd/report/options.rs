@@ -1,9 +1,11 @@
 //! A report's matrix as the command-line options that make it (`--scenes dam-2d --res 32`):
-//! kept with each run's result ([`super::saved`]), so that a result says which matrix it was
-//! run for.
+//! kept with each run's result ([`super::saved`]), so that `report --merge DIR` merges what
+//! DIR holds without the options repeated, and names the command that merges another matrix's
+//! results.
 
 use crate::cmd::cli::{Matrix, ReportArgs};
-use clap::ValueEnum;
+use anyhow::{anyhow, Result};
+use clap::{Args, FromArgMatches, ValueEnum};
 
 /// A matrix's options in one order, each left out where it is the default (the default matrix
 /// has none), so that two command lines of one matrix give the same options.
@@ -39,6 +41,34 @@ impl MatrixOptions {
             _ => {}
         }
         Self(o)
+    }
+
+    /// Whether `args` name any option of the matrix (`--matrix default` too); without one,
+    /// `--merge` merges the matrix its folder's results were planned from.
+    pub fn given(args: &ReportArgs) -> bool {
+        let said = args.matrix.is_some() || args.stability || args.no_stability;
+        said || !Self::of(args).0.is_empty()
+    }
+
+    /// `args` with this matrix in place of theirs, read by the command line's own parser (so
+    /// that `--docs` refuses a matrix it does not write).
+    pub fn apply(&self, args: &ReportArgs) -> Result<ReportArgs> {
+        let docs = args.docs.then_some("--docs");
+        let words = self.0.iter().map(String::as_str).chain(docs);
+        let parser = ReportArgs::augment_args(clap::Command::new("report"));
+        let parsed = (parser.try_get_matches_from(std::iter::once("report").chain(words)))
+            .and_then(|m| ReportArgs::from_arg_matches(&m))
+            .map_err(|e| {
+                let said = e.render().to_string();
+                let line = said.lines().next().unwrap_or_default();
+                anyhow!("{}", line.trim_start_matches("error: "))
+            })?;
+        Ok(ReportArgs {
+            out: args.out.clone(),
+            merge: args.merge.clone(),
+            quiet: args.quiet,
+            ..parsed
+        })
     }
 
     /// As a result file keeps them: one option or value a line.
@@ -87,8 +117,8 @@ mod tests {
         }
     }
 
-    /// Command lines of one matrix give one set of options (defaults left out), kept as they
-    /// are.
+    /// Command lines of one matrix give one set of options (defaults left out), which read
+    /// back give that matrix again.
     #[test]
     fn a_matrix_s_options_leave_out_its_defaults_and_read_back() {
         for (line, options) in [
@@ -105,6 +135,17 @@ mod tests {
             let o = MatrixOptions::of(&args(line));
             assert_eq!(o.to_string(), options, "{line}");
             assert_eq!(MatrixOptions::from_meta(&o.to_meta()), o);
+            let again = o.apply(&args("--merge x")).unwrap();
+            assert_eq!(MatrixOptions::of(&again), o, "{line}");
+            assert_eq!(again.merge.as_deref(), Some(std::path::Path::new("x")));
         }
+        assert!(!MatrixOptions::given(&args("-q --merge x")));
+        assert!(MatrixOptions::given(&args("--matrix default")));
+        let scenes = MatrixOptions::of(&args("--scenes dam-2d"));
+        let e = scenes.apply(&args("--docs --merge x")).unwrap_err();
+        assert!(
+            e.to_string().contains("cannot be used with '--docs'"),
+            "{e}"
+        );
     }
 }

@@ -128,6 +128,14 @@ pub fn load_result(path: &Path, spec: &RunSpec) -> Result<Option<Measured>> {
         .with_context(|| format!("'{}'", path.display()))
 }
 
+/// The matrix a result kept by this build was planned from; `None` for a file that is not
+/// one (damaged, or kept by another build, which is never merged).
+pub fn matrix_of(path: &Path) -> Option<MatrixOptions> {
+    let r = Reader::from_bytes(std::fs::read(path).ok()?).ok()?;
+    let ours = r.meta("program").ok()? == crate::checkpoint::build();
+    ours.then(|| r.meta("matrix").ok().map(MatrixOptions::from_meta))?
+}
+
 fn pairs(w: &mut Writer<'_>, name: &str, series: &[(f64, f64)]) {
     let flat = series.iter().flat_map(|&(a, b)| [a, b]).collect();
     w.owned(name, &[series.len(), 2], flat);
