@@ -220,9 +220,9 @@ pub struct ReportArgs {
     /// Which scenes and sizes: `default` (the paper's scenes at small sizes and the hard
     /// cases, about 15 minutes on 2 cores) or `paper` (every scene of the paper's sec. 8 at
     /// the size the paper names, whole runs: hours to days, a sweep for a cluster;
-    /// docs/cluster.md). --scenes replaces either
-    #[arg(long, value_enum, default_value_t = Matrix::Default)]
-    pub matrix: Matrix,
+    /// docs/cluster.md). --scenes replaces either [default: default]
+    #[arg(long, value_enum)]
+    pub matrix: Option<Matrix>,
     /// Scenes (built-in names or .toml paths), comma-separated [default: the --matrix's]
     #[arg(long, value_delimiter = ',', conflicts_with = "matrix")]
     pub scenes: Vec<String>,
@@ -270,7 +270,8 @@ pub struct ReportArgs {
     #[arg(long, value_name = "ID", value_delimiter = ',', conflicts_with_all = ["merge", "docs"])]
     pub job: Vec<String>,
     /// Build the report (report.md, report.csv, plots, report.rrd, written into DIR; with --docs
-    /// the manual's pages) from the jobs' results kept in DIR, with the same matrix options;
+    /// the manual's pages) from the jobs' results kept in DIR: of the matrix they were run for
+    /// (each result keeps its matrix options), or of the one the matrix options given name;
     /// nothing is run, and jobs without a result are listed as missing
     #[arg(long, value_name = "DIR", conflicts_with = "out")]
     pub merge: Option<PathBuf>,

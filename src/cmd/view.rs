@@ -6,19 +6,30 @@ use crate::{interrupt, record};
 use anyhow::{bail, Context, Result};
 use std::path::{Path, PathBuf};
 
-/// `cellflip view`.
+/// `cellflip view`: every file is read through first, so that one that is not a recording is
+/// refused before a viewer opens on nothing, and one cut short is shown with a warning.
 pub fn view(args: &ViewArgs) -> Result<()> {
-    for p in &args.recordings {
-        std::fs::File::open(p)
-            .with_context(|| format!("cannot open recording '{}'", p.display()))?;
-    }
+    let files = read_all(&args.recordings)?;
     let Some(serve) = args.serve.web() else {
         return native(&args.recordings);
     };
     interrupt::install()?;
-    let served = record::serve_files(&serve, &args.recordings)?;
+    let served = record::serve_files(&serve, &files)?;
     served.hold_until_signal();
     Ok(())
+}
+
+/// What each file holds ([`record::Contents`]); warns of each file cut short.
+fn read_all(paths: &[PathBuf]) -> Result<Vec<record::Contents>> {
+    let mut all = vec![];
+    for p in paths {
+        let c = record::Contents::read(p)?;
+        if let Some(warning) = c.warning() {
+            eprintln!("{warning}");
+        }
+        all.push(c);
+    }
+    Ok(all)
 }
 
 /// The native viewer (`rerun` on the `PATH`) on the recordings, until it is closed.

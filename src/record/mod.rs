@@ -10,6 +10,7 @@
 mod blueprint;
 mod canvas;
 mod compare;
+mod contents;
 mod file;
 pub mod layout;
 mod output;
@@ -19,6 +20,7 @@ mod stream;
 
 pub use canvas::{Canvas, Plane};
 pub use compare::{ComparedRun, Comparison};
+pub use contents::Contents;
 pub use file::RrdFile;
 pub use output::{Output, Resumed, Sink};
 pub use run_log::RunLog;
@@ -94,6 +96,12 @@ pub enum RecordError {
         path: PathBuf,
         #[source]
         error: BoxError,
+    },
+    #[error("cannot open recording '{}'", .path.display())]
+    Open {
+        path: PathBuf,
+        #[source]
+        error: std::io::Error,
     },
     #[error("cannot read recording '{}'", .path.display())]
     Read {

@@ -5,7 +5,7 @@
 //! browser that opens the page late still gets the whole run; past the limit it drops the
 //! oldest non-static data. Serving goes on after the run until Ctrl-C ([`Served::hold_until_signal`]).
 
-use super::RecordError;
+use super::{Contents, RecordError};
 use rerun::sink::LogSink;
 use std::net::{IpAddr, TcpListener};
 use std::time::Duration;
@@ -154,18 +154,20 @@ impl Served {
     }
 }
 
-/// Serves saved recordings as `serve` says: each file's messages, in order, go to the servers
-/// before the page is announced as ready. Fails, naming the file, on one that cannot be read.
-pub fn serve_files(serve: &WebServe, files: &[std::path::PathBuf]) -> Result<Served, RecordError> {
+/// Serves saved recordings as `serve` says: each file's messages that [`Contents::read`]
+/// found whole, in order, go to the servers before the page is announced as ready (of a file
+/// cut short, those before the cut). Fails, naming the file, on one that can no longer be read.
+pub fn serve_files(serve: &WebServe, files: &[Contents]) -> Result<Served, RecordError> {
     use rerun::external::re_log_encoding::DecoderApp;
     let sink = serve.start()?;
-    for path in files {
+    for c in files {
         let cannot = |error: crate::out::BoxError| RecordError::Read {
-            path: path.clone(),
+            path: c.path.clone(),
             error,
         };
-        let file = std::fs::File::open(path).map_err(|e| cannot(e.into()))?;
-        for msg in DecoderApp::decode_lazy(std::io::BufReader::new(file)) {
+        let file = std::fs::File::open(&c.path).map_err(|e| cannot(e.into()))?;
+        let messages = DecoderApp::decode_lazy(std::io::BufReader::new(file));
+        for msg in messages.take(c.messages) {
             sink.send(msg.map_err(|e| cannot(e.into()))?);
         }
     }

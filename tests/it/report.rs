@@ -439,6 +439,7 @@ fn a_report_stopped_and_started_again_goes_on_where_it_stopped() {
 /// and resumed from its newest checkpoint, the same again.
 #[test]
 fn checkpoints_during_a_report_run_change_none_of_its_figures() {
+    use cellflip::cmd::report::options::MatrixOptions;
     use cellflip::cmd::report::{matrix, measure, measure::Measured, saved::RunFiles};
     use clap::Parser;
     let cli = cellflip::cmd::cli::Cli::parse_from([
@@ -459,7 +460,7 @@ fn checkpoints_during_a_report_run_change_none_of_its_figures() {
     let dir = common::scratch_dir("report-pauses");
     let every_step = |sub: &str| RunFiles {
         every: std::time::Duration::ZERO,
-        ..RunFiles::of(&dir.join(sub), spec)
+        ..RunFiles::of(&dir.join(sub), spec, &MatrixOptions::of(&args))
     };
     let timed = |c: &str| {
         c.starts_with("ms_") || c.starts_with("share_") || c == "peak_mib" || c.contains("_ms")

@@ -139,8 +139,88 @@ fn missing_damaged_and_unknown_jobs_are_named() {
         .current_dir(&*dir)
         .output()
         .unwrap();
-    assert_eq!(other.status.code(), Some(1));
-    assert!(String::from_utf8_lossy(&other.stderr).contains("of another matrix"));
+    refused(
+        &other,
+        "the results there are of another matrix, merged with:\n  cellflip report --merge part \
+         --scenes dam-2d,hydrostatic-2d --methods flip,ccp --res 24,32 --duration 0.1    (1 result)",
+    );
+}
+
+/// `cellflip report ARGS` in `dir`.
+fn report(dir: &Path, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_cellflip"))
+        .arg("report")
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .unwrap()
+}
+
+/// Each result keeps the matrix it was run for: `--merge DIR` without matrix options merges
+/// the one DIR holds, refuses a mix naming the command for each, and with options of a matrix
+/// DIR holds no result of names the command that merges what it holds.
+#[test]
+fn a_merge_without_matrix_options_merges_the_matrix_its_results_were_run_for() {
+    let dir = scratch_dir("sweep_matrix_kept");
+    let job = |matrix: &[&str]| {
+        let plan = report(&dir, &[matrix, &["--plan"]].concat());
+        ok(&plan);
+        let said = String::from_utf8_lossy(&plan.stdout);
+        let id = said.lines().find(|l| !l.starts_with('#')).unwrap();
+        let id = id.split(' ').next().unwrap().to_string();
+        ok(&report(
+            &dir,
+            &[matrix, &["-q", "--out", "kept", "--job", &id]].concat(),
+        ));
+    };
+    let dam = [
+        "--scenes",
+        "dam-2d",
+        "--methods",
+        "flip",
+        "--res",
+        "24",
+        "--duration",
+        "0.05",
+    ];
+    job(&dam);
+    let merged = report(&dir, &["--merge", "kept"]);
+    ok(&merged);
+    let said = String::from_utf8_lossy(&merged.stdout);
+    assert!(said.contains("1 of 1 runs (0 failed, 0 missing)"), "{said}");
+    assert_eq!(untimed_rows(&dir.join("kept")).len(), 1);
+    let dam_command =
+        "cellflip report --merge kept --scenes dam-2d --methods flip --res 24 --duration 0.05";
+    refused(
+        &report(
+            &dir,
+            &["--scenes", "dam-2d", "--res", "32", "--merge", "kept"],
+        ),
+        &format!(
+            "--merge kept: no result of this matrix's 5 jobs (--scenes dam-2d --res 32) in \
+             'kept/runs'; the results there are of another matrix, merged with:\n  \
+             {dam_command}    (1 result)"
+        ),
+    );
+    let pool = [
+        "--scenes",
+        "hydrostatic-2d",
+        "--methods",
+        "ccp",
+        "--res",
+        "24",
+    ];
+    job(&[&pool[..], &["--duration", "0.05"]].concat());
+    let pool_command = "cellflip report --merge kept --scenes hydrostatic-2d --methods ccp \
+                        --res 24 --duration 0.05";
+    refused(
+        &report(&dir, &["--merge", "kept"]),
+        &format!(
+            "--merge kept: its results are of 2 matrices; name one with its options:\n  \
+             {dam_command}    (1 result)\n  {pool_command}    (1 result)"
+        ),
+    );
+    ok(&report(&dir, &[&dam[..], &["--merge", "kept"]].concat()));
 }
 
 /// A command that exited 1 saying `why` on standard error.

@@ -10,7 +10,7 @@ use rerun::external::re_log_encoding::{CachingApplicationIdInjector, ToApplicati
 use rerun::log::LogMsg;
 use std::io::{Read, Write};
 use std::path::Path;
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 /// A loopback port nothing listens on (bound, then released).
@@ -225,6 +225,108 @@ fn taken_ports_missing_files_and_a_missing_viewer_are_refused_before_anything_ru
         "--serve-web with --spawn is a usage error"
     );
     ok(&cellflip_in(&dir, &["view", "--help"]));
+}
+
+/// `cellflip view FILES` with `PATH` holding no viewer: what it says of the files before it
+/// looks for one (then it fails, saying there is none).
+fn view_without_viewer(dir: &Path, files: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_cellflip"))
+        .arg("view")
+        .args(files)
+        .current_dir(dir)
+        .env("PATH", "/nonexistent")
+        .output()
+        .unwrap()
+}
+
+/// `view` reads every file through before it serves or opens a viewer: a file that is not a
+/// recording is refused (exit 1, naming it, no URL announced), in a browser or natively, and
+/// what `run`, `compare` and `report` write passes without a word.
+#[test]
+fn view_refuses_a_file_that_is_not_a_recording_before_serving() {
+    let dir = scratch_dir("serve_web_not_a_recording");
+    std::fs::write(dir.join("text.rrd"), "plain text, named like a recording\n").unwrap();
+    let free = free_port().to_string();
+    let served = cellflip_in(&dir, &["view", "text.rrd", "--serve-web", &free]);
+    let native = view_without_viewer(&dir, &["text.rrd"]);
+    for out in [served, native] {
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{stderr}");
+        assert!(
+            stderr.contains("error: cannot read recording 'text.rrd': it is not a Rerun recording"),
+            "{stderr}"
+        );
+        assert!(
+            !stderr.contains("serving") && !stderr.contains("no native viewer"),
+            "{stderr}"
+        );
+    }
+    saved_run(&dir);
+    let compare = ["compare", "dam-2d", "--methods", "flip,ccp", "--res", "24"];
+    let short = ["--duration", "0.05", "--save", "compare.rrd"];
+    ok(&cellflip_in(&dir, &[&compare[..], &short].concat()));
+    let report = [
+        "report",
+        "--scenes",
+        "dam-2d",
+        "--methods",
+        "flip",
+        "--res",
+        "24",
+    ];
+    let short = [
+        "--duration",
+        "0.05",
+        "--no-stability",
+        "-q",
+        "--out",
+        "report",
+    ];
+    ok(&cellflip_in(&dir, &[&report[..], &short].concat()));
+    let out = view_without_viewer(&dir, &["file.rrd", "compare.rrd", "report/report.rrd"]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.starts_with("error: no native viewer"), "{stderr}");
+}
+
+/// A recording cut at half its bytes is served as far as it can be read, with a warning that
+/// says up to which step it holds and why the rest cannot be read.
+#[test]
+fn view_serves_a_recording_cut_short_with_a_warning() {
+    let dir = scratch_dir("serve_web_cut_short");
+    let whole = std::fs::read(saved_run(&dir)).unwrap();
+    std::fs::write(dir.join("half.rrd"), &whole[..whole.len() / 2]).unwrap();
+    let (web, grpc) = (free_port(), free_port());
+    let (web_s, grpc_s) = (web.to_string(), grpc.to_string());
+    let args = [
+        "view",
+        "half.rrd",
+        "--serve-web",
+        &web_s,
+        "--grpc-port",
+        &grpc_s,
+    ];
+    let mut child = start(&dir, &args);
+    wait_until_serving(&mut child, &dir);
+    let served = read_served(grpc);
+    interrupt(child);
+    let held = cellflip::record::Contents::read(&dir.join("half.rrd")).unwrap();
+    assert!(held.messages > 0 && held.messages < messages_in(&whole));
+    assert_eq!(served.len(), held.messages);
+    let said = std::fs::read_to_string(dir.join("stderr.txt")).unwrap();
+    let warning = "warning: 'half.rrd' is cut short: it holds steps 0..=";
+    assert!(said.contains(warning), "{said}");
+    assert!(
+        said.contains(" (the rest could not be read: it stops "),
+        "{said}"
+    );
+    let native = view_without_viewer(&dir, &["half.rrd"]);
+    assert!(String::from_utf8_lossy(&native.stderr).starts_with(warning));
+}
+
+/// The messages a whole recording holds.
+fn messages_in(rrd: &[u8]) -> usize {
+    use rerun::external::re_log_encoding::DecoderApp;
+    DecoderApp::decode_lazy(rrd).map(Result::unwrap).count()
 }
 
 /// A run resumed from a checkpoint goes on in its file and is served whole: browsers get the

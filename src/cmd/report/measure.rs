@@ -189,7 +189,7 @@ fn measure<const D: usize>(
     }
     finish(&runner, &g, lowest, m);
     if let (false, Some(f), Some(s)) = (stopped, files, saves) {
-        match save_result(&f.result, m) {
+        match save_result(f, m) {
             Ok(()) => s.remove(),
             Err(e) => eprintln!("warning: {e:#}: the run will be run again"),
         }

@@ -11,6 +11,7 @@
 pub mod docs;
 pub mod measure;
 mod measured;
+pub mod options;
 mod output;
 pub mod plots;
 pub mod saved;
@@ -180,9 +181,8 @@ fn emitter_at_speed_limit() -> Result<Entry> {
 
 /// The runs `args` ask for.
 pub fn matrix(args: &ReportArgs) -> Result<Vec<RunSpec>> {
-    let default = args.scenes.is_empty() && args.matrix == Matrix::Default;
-    let stability = args.stability || (default && !args.no_stability);
-    let mut entries = match (args.scenes.is_empty(), args.matrix) {
+    let (_, stability) = stability(args);
+    let mut entries = match (args.scenes.is_empty(), args.matrix.unwrap_or_default()) {
         (true, Matrix::Default) => default_entries(),
         (true, Matrix::Paper) => paper_entries(),
         (false, _) => args
@@ -236,6 +236,13 @@ pub fn matrix(args: &ReportArgs) -> Result<Vec<RunSpec>> {
     Ok(out)
 }
 
+/// Whether `args` ask for the default matrix (which runs the stability table's hard cases
+/// unless told not to), and whether its runs include those hard cases.
+fn stability(args: &ReportArgs) -> (bool, bool) {
+    let default = args.scenes.is_empty() && args.matrix.unwrap_or_default() == Matrix::Default;
+    (default, args.stability || (default && !args.no_stability))
+}
+
 /// Loads a run's scene with its overrides and checks that it fits in the memory this process
 /// may take.
 pub fn load(spec: &RunSpec) -> Result<Scene> {
@@ -267,13 +274,13 @@ pub fn scene_of(spec: &RunSpec) -> Result<Scene> {
 /// `cellflip report`: the plan (`--plan`), some jobs (`--job`), the merge of their results
 /// (`--merge`), or all three in one process.
 pub fn report(args: &ReportArgs) -> Result<()> {
+    if let Some(dir) = &args.merge {
+        return merge(&sweep::merged(args, dir)?, dir);
+    }
     let specs = matrix(args)?;
     if args.plan {
         sweep::print_plan(&sweep::plan(&specs)?);
         return Ok(());
-    }
-    if let Some(dir) = &args.merge {
-        return merge(args, &specs, dir);
     }
     // Only the jobs this process runs must fit here: a sweep's others may be a cluster's.
     let jobs = match args.job.is_empty() {
@@ -289,7 +296,8 @@ pub fn report(args: &ReportArgs) -> Result<()> {
         .with_context(|| format!("cannot create the output folder '{}'", args.out.display()))?;
     crate::interrupt::install()?;
     let stop = || crate::interrupt::signal().is_some();
-    run_all(&jobs, args.quiet, &stop, &args.out);
+    let planned = options::MatrixOptions::of(args);
+    run_all(&jobs, &planned, args.quiet, &stop, &args.out);
     let interrupted = stop();
     if args.job.is_empty() {
         // An interrupted matrix would leave the manual with half its runs: keep the pages.
@@ -306,17 +314,18 @@ pub fn report(args: &ReportArgs) -> Result<()> {
     Ok(())
 }
 
-/// `--merge DIR`: the report (with `--docs`, the manual's pages) from the results kept in
-/// `dir`, nothing run.
-fn merge(args: &ReportArgs, specs: &[RunSpec], dir: &Path) -> Result<()> {
+/// `--merge DIR`: the report (with `--docs`, the manual's pages) of the matrix `args` ask for
+/// ([`sweep::merged`]) from the results kept in `dir`, nothing run.
+fn merge(args: &ReportArgs, dir: &Path) -> Result<()> {
     let header = docs::provenance(&command());
-    write(args, specs, dir, &header, docs_target(args)?.as_ref())
+    let specs = matrix(args)?;
+    write(args, &specs, dir, &header, docs_target(args)?.as_ref())
 }
 
 /// With `--docs`, the manual's pages in the folder the command runs from (checked first).
 fn docs_target(args: &ReportArgs) -> Result<Option<docs::DocsTarget>> {
     match args.docs {
-        true => docs::DocsTarget::at(Path::new("."), args.matrix).map(Some),
+        true => docs::DocsTarget::at(Path::new("."), args.matrix.unwrap_or_default()).map(Some),
         false => Ok(None),
     }
 }
@@ -330,7 +339,7 @@ fn write(
     header: &str,
     docs: Option<&docs::DocsTarget>,
 ) -> Result<()> {
-    let (results, missing) = sweep::gather(dir, specs)?;
+    let (results, missing) = sweep::gather(dir, specs, &options::MatrixOptions::of(args))?;
     for (spec, why) in &missing {
         eprintln!(
             "missing: {} {} {}: {why}",
@@ -391,9 +400,16 @@ fn check_loads(specs: &[&RunSpec]) -> Result<()> {
     }
 }
 
-/// Runs `jobs` in order with a progress bar, until done or stopped, each kept under `out`: a
-/// job whose result is there is skipped, one stopped midway goes on from its checkpoint.
-pub fn run_all(jobs: &[&RunSpec], quiet: bool, stop: &dyn Fn() -> bool, out: &Path) {
+/// Runs `jobs` in order with a progress bar, until done or stopped, each kept under `out`
+/// with the `matrix` it was planned from: a job whose result is there is skipped, one stopped
+/// midway goes on from its checkpoint.
+pub fn run_all(
+    jobs: &[&RunSpec],
+    matrix: &options::MatrixOptions,
+    quiet: bool,
+    stop: &dyn Fn() -> bool,
+    out: &Path,
+) {
     let bar = ProgressBar::with_draw_target(Some(jobs.len() as u64), ProgressDrawTarget::stderr());
     if quiet {
         bar.set_draw_target(ProgressDrawTarget::hidden());
@@ -413,7 +429,7 @@ pub fn run_all(jobs: &[&RunSpec], quiet: bool, stop: &dyn Fn() -> bool, out: &Pa
             spec.method.name(),
             spec.res.map_or(String::new(), |r| r.to_string())
         ));
-        let files = saved::RunFiles::of(out, spec);
+        let files = saved::RunFiles::of(out, spec, matrix);
         match saved::load_result(&files.result, spec) {
             Ok(Some(_)) => {
                 bar.inc(1);
@@ -436,7 +452,7 @@ pub fn run_all(jobs: &[&RunSpec], quiet: bool, stop: &dyn Fn() -> bool, out: &Pa
         // A run that could not start is a result too (a row that says why); one a signal
         // stopped is not, and goes on from its checkpoint next time.
         if m.status != "interrupted" && !files.result.exists() {
-            if let Err(e) = saved::save_result(&files.result, &m) {
+            if let Err(e) = saved::save_result(&files, &m) {
                 bar.suspend(|| eprintln!("warning: {e:#}"));
             }
         }

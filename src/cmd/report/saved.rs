@@ -7,6 +7,7 @@
 //! timings.
 
 use super::measured::{Gathered, Measured};
+use super::options::MatrixOptions;
 use super::RunSpec;
 use crate::checkpoint::{Checkpoints, Opened, Origin};
 use crate::metrics::{Stage, StageTimes};
@@ -28,24 +29,29 @@ pub struct RunFiles {
     pub checkpoints: PathBuf,
     /// Wall time between checkpoints ([`CHECKPOINT_WALL`]).
     pub every: Duration,
+    /// The matrix the run was planned from, kept with its result: `--merge` of the folder
+    /// without matrix options merges the matrix its results name.
+    pub matrix: MatrixOptions,
 }
 
 impl RunFiles {
-    /// The files of `spec` under the report's `out` folder.
-    pub fn of(out: &Path, spec: &RunSpec) -> Self {
+    /// The files of `spec`, of the `matrix`, under the report's `out` folder.
+    pub fn of(out: &Path, spec: &RunSpec, matrix: &MatrixOptions) -> Self {
         let dir = out.join("runs");
         let id = id(spec);
         Self {
             result: dir.join(format!("{id}.result")),
             checkpoints: dir.join(format!("{id}.checkpoints")),
             every: CHECKPOINT_WALL,
+            matrix: matrix.clone(),
         }
     }
 }
 
 /// A name of the run as the matrix gives it: its label, method, resolution and seed, readable,
 /// and a digest of all it is run with (scene text, duration, budget), so that another matrix
-/// in the same `--out` never takes its result.
+/// in the same `--out` never takes its result unless it runs the very same run. (The matrix is
+/// not in it: a run of two matrices is one job, whose result either takes.)
 pub fn id(spec: &RunSpec) -> String {
     let label = crate::record::path_part(&spec.label);
     let or_default = |x: Option<String>| x.unwrap_or_else(|| "default".into());
@@ -58,10 +64,12 @@ pub fn id(spec: &RunSpec) -> String {
     format!("{label}-{method}-r{res}-s{seed}-{digest:08x}")
 }
 
-/// Keeps a run that ended (not one a signal stopped).
-pub fn save_result(path: &Path, m: &Measured) -> Result<()> {
+/// Keeps a run that ended (not one a signal stopped) in its result file, with its matrix.
+pub fn save_result(files: &RunFiles, m: &Measured) -> Result<()> {
+    let path = &files.result;
     let mut w = Writer::default();
     w.meta("program", crate::checkpoint::build());
+    w.meta("matrix", files.matrix.to_meta());
     w.meta("status", &*m.status);
     w.meta("res", m.res.to_string());
     w.meta("seed", m.seed.to_string());
@@ -118,6 +126,14 @@ pub fn load_result(path: &Path, spec: &RunSpec) -> Result<Option<Measured>> {
     read()
         .map(Some)
         .with_context(|| format!("'{}'", path.display()))
+}
+
+/// The matrix a result kept by this build was planned from; `None` for a file that is not
+/// one (damaged, or kept by another build, which is never merged).
+pub fn matrix_of(path: &Path) -> Option<MatrixOptions> {
+    let r = Reader::from_bytes(std::fs::read(path).ok()?).ok()?;
+    let ours = r.meta("program").ok()? == crate::checkpoint::build();
+    ours.then(|| r.meta("matrix").ok().map(MatrixOptions::from_meta))?
 }
 
 fn pairs(w: &mut Writer<'_>, name: &str, series: &[(f64, f64)]) {

@@ -1,14 +1,19 @@
 //! The report as a sweep of independent jobs (docs/cluster.md): the plan of the matrix's jobs
 //! with their memory and cost, the selection of jobs to run, and the merge of their results.
 //! A job is one run of the matrix, kept under `--out` as `runs/<id>.result` ([`super::saved`]);
-//! the one-process report runs every job and then merges, so both paths share this code.
+//! the one-process report runs every job and then merges, so both paths share this code. Each
+//! result keeps the matrix it was planned from ([`super::options`]): a merge without matrix
+//! options merges that matrix.
 
 use super::measured::Measured;
+use super::options::{shell_word, MatrixOptions};
 use super::saved::{self, RunFiles};
 use super::{scene_of, RunSpec};
+use crate::cmd::cli::ReportArgs;
 use crate::scene::Scene;
-use anyhow::{bail, Result};
-use std::path::Path;
+use anyhow::{bail, Context, Result};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
 
 /// Threads a job runs with on the machine the cost model was fitted on (2 cores): its
 /// CPU-seconds are its wall seconds times these.
@@ -182,30 +187,101 @@ pub fn not_run(missing: &[Missing<'_>]) -> Result<String> {
 pub type Missing<'a> = (&'a RunSpec, String);
 
 /// The results of the matrix's jobs kept in `dir`, in the plan's order, and the jobs that
-/// have none. Fails when there is none at all.
-pub fn gather<'a>(dir: &Path, specs: &'a [RunSpec]) -> Result<(Vec<Measured>, Vec<Missing<'a>>)> {
+/// have none. Fails when there is none at all, naming the command that merges each matrix of
+/// the results there (`matrix` is the one asked for, that of `specs`).
+pub fn gather<'a>(
+    dir: &Path,
+    specs: &'a [RunSpec],
+    matrix: &MatrixOptions,
+) -> Result<(Vec<Measured>, Vec<Missing<'a>>)> {
     let (mut results, mut missing) = (vec![], vec![]);
     for spec in specs {
-        let files = RunFiles::of(dir, spec);
+        let files = RunFiles::of(dir, spec, matrix);
         match saved::load_result(&files.result, spec) {
             Ok(Some(m)) => results.push(m),
             Ok(None) => missing.push((spec, "not run".to_string())),
             Err(e) => missing.push((spec, format!("{e:#}"))),
         }
     }
-    if results.is_empty() {
-        let kept = std::fs::read_dir(dir.join("runs")).map_or(0, |d| {
-            d.flatten()
-                .filter(|e| e.path().extension().is_some_and(|x| x == "result"))
-                .count()
-        });
+    if !results.is_empty() {
+        return Ok((results, missing));
+    }
+    let kept = kept_matrices(dir);
+    let none = format!(
+        "--merge {}: no result of this matrix's {} jobs ({matrix}) in '{}'",
+        dir.display(),
+        specs.len(),
+        dir.join("runs").display()
+    );
+    if !kept.is_empty() {
+        let others = match kept.len() {
+            1 => "another matrix".to_string(),
+            n => format!("{n} other matrices"),
+        };
         bail!(
-            "--merge {}: no result of this matrix's {} jobs in '{}' ({kept} results there, of \
-             another matrix or another build of cellflip)",
-            dir.display(),
-            specs.len(),
-            dir.join("runs").display()
+            "{none}; the results there are of {others}, merged with:\n{}",
+            commands(dir, &kept)
         );
     }
-    Ok((results, missing))
+    let there = counted(result_files(dir).len());
+    bail!("{none} ({there} there, of another build of cellflip or damaged)")
+}
+
+/// The report `--merge DIR` writes, as options: those given or, without any, those of the
+/// matrix DIR's results were planned from. Refuses a folder of several matrices' results then,
+/// naming the command that merges each.
+pub fn merged(args: &ReportArgs, dir: &Path) -> Result<ReportArgs> {
+    let kept = kept_matrices(dir);
+    let mut matrices = kept.keys();
+    match (MatrixOptions::given(args), matrices.next(), matrices.next()) {
+        (true, _, _) | (false, None, _) => Ok(args.clone()),
+        (false, Some(one), None) => one.apply(args).with_context(|| {
+            format!(
+                "--merge {}: its results are of the matrix {one}",
+                dir.display()
+            )
+        }),
+        (false, Some(_), Some(_)) => bail!(
+            "--merge {}: its results are of {} matrices; name one with its options:\n{}",
+            dir.display(),
+            kept.len(),
+            commands(dir, &kept)
+        ),
+    }
+}
+
+/// The matrices this build's results in `dir` were planned from, with how many results each.
+fn kept_matrices(dir: &Path) -> BTreeMap<MatrixOptions, usize> {
+    let mut kept = BTreeMap::new();
+    for path in result_files(dir) {
+        if let Some(m) = saved::matrix_of(&path) {
+            *kept.entry(m).or_default() += 1;
+        }
+    }
+    kept
+}
+
+/// The result files under `dir/runs`.
+fn result_files(dir: &Path) -> Vec<PathBuf> {
+    let Ok(entries) = std::fs::read_dir(dir.join("runs")) else {
+        return vec![];
+    };
+    let paths = entries.flatten().map(|e| e.path());
+    paths
+        .filter(|p| p.extension().is_some_and(|x| x == "result"))
+        .collect()
+}
+
+/// The command that merges each of the `kept` matrices in `dir`, a line each with its count.
+fn commands(dir: &Path, kept: &BTreeMap<MatrixOptions, usize>) -> String {
+    let dir = shell_word(&dir.display().to_string());
+    let line = |(m, n): (&MatrixOptions, &usize)| {
+        format!("  cellflip report --merge {dir} {m}    ({})", counted(*n))
+    };
+    kept.iter().map(line).collect::<Vec<_>>().join("\n")
+}
+
+/// `1 result`, `2 results`.
+fn counted(n: usize) -> String {
+    format!("{n} result{}", if n == 1 { "" } else { "s" })
 }
