@@ -94,8 +94,7 @@ impl<const D: usize> Simulation<D> {
         method.restore_state(&state, r)?;
         let (total, held) = (state.total_particles, state.particles.len());
         let not_held = method.particles_not_held();
-        let counted = (not_held.checked_neg()).and_then(|n| total.checked_add_signed(n));
-        if counted != Some(held) {
+        if particles_held(total, not_held) != Some(held) {
             return Err(SnapshotError::Array {
                 name: "total_particles".into(),
                 reason: format!(
@@ -215,19 +214,25 @@ impl<const D: usize> Simulation<D> {
     pub fn check_invariants(&self) -> Result<(), InvariantViolation> {
         let s = &self.state;
         let not_held = self.method.particles_not_held();
-        let expected = s
-            .total_particles
-            .checked_add_signed(-not_held)
-            .ok_or_else(|| {
-                InvariantViolation(format!(
-                    "{not_held} particles not held exceed the {} ever seeded or emitted",
-                    s.total_particles
-                ))
-            })?;
+        let expected = particles_held(s.total_particles, not_held).ok_or_else(|| {
+            InvariantViolation(format!(
+                "{not_held} particles not held exceed the {} ever seeded or emitted",
+                s.total_particles
+            ))
+        })?;
         let p = &s.particles;
         metrics::check_particles(&s.grid, &p.pos, &p.vel, s.solids.particle_free(), expected)?;
         self.method.check_invariants(s)
     }
+}
+
+/// The particles a simulation holds when `total` were seeded or emitted and its method holds
+/// `not_held` of them otherwise (a deep, a level set; negative when it seeded more); `None`
+/// when no count can be.
+fn particles_held(total: usize, not_held: isize) -> Option<usize> {
+    not_held
+        .checked_neg()
+        .and_then(|n| total.checked_add_signed(n))
 }
 
 /// New markings from the current positions and their active cells; the method may keep cells

@@ -483,13 +483,32 @@ pub fn check_elements<T: Sync>(
     items: &[T],
     why: impl Fn(&T) -> Option<String> + Sync,
 ) -> Result<(), SnapshotError> {
+    check_indices(name, items.len(), |i| why(&items[i]))
+}
+
+/// As [`check_elements`] over elements `0..n` given by index, for a check that reads several
+/// arrays at the same element (a cell's kind beside its count).
+pub fn check_indices(
+    name: &str,
+    n: usize,
+    why: impl Fn(usize) -> Option<String> + Sync,
+) -> Result<(), SnapshotError> {
     use rayon::prelude::*;
-    let first = (items.par_iter().enumerate())
+    let first = (0..n)
+        .into_par_iter()
         .with_min_len(crate::PAR_GRAIN_PARTICLES)
-        .find_map_first(|(i, x)| why(x).map(|w| (i, w)));
+        .find_map_first(|i| why(i).map(|w| (i, w)));
     match first {
         None => Ok(()),
         Some((i, why)) => Err(array_error(name, format!("element {i}: {why}"))),
+    }
+}
+
+/// A scalar of a checkpoint, `x`, taken when `ok`; else the read fails saying what it `must` be.
+pub fn check_scalar(name: &str, x: f64, ok: bool, must: &str) -> Result<f64, SnapshotError> {
+    match ok {
+        true => Ok(x),
+        false => Err(array_error(name, format!("is {x}, must be {must}"))),
     }
 }
 

@@ -7,7 +7,8 @@ use super::markings::{CellKind, Markings};
 use super::{SimConfig, SimRng, State};
 use crate::grid::{Grid, MacField, Vector};
 use crate::snapshot::{
-    check_elements, not_finite, vector_not_finite, Reader, SnapshotError, Writer,
+    check_elements, check_indices, check_scalar, not_finite, vector_not_finite, Reader,
+    SnapshotError, Writer,
 };
 use rand::SeedableRng;
 
@@ -62,14 +63,11 @@ impl<const D: usize> State<D> {
         let offsets = r.vectors::<D>("obstacles.offset", Some(k))?;
         let velocities = r.vectors::<D>("obstacles.velocity", Some(k))?;
         check_elements("obstacles.velocity", &velocities, vector_not_finite)?;
-        let obstacle = |(o, x): (&super::solids::Obstacle<D>, &Vector<D>)| {
-            let why = vector_not_finite(x);
-            why.or_else(|| {
-                (!o.inside_tank(&grid, x)).then(|| format!("puts '{}' outside the tank", o.name))
-            })
-        };
-        let placed: Vec<_> = solids.obstacles.iter().zip(&offsets).collect();
-        check_elements("obstacles.offset", &placed, |&p| obstacle(p))?;
+        check_indices("obstacles.offset", k, |i| {
+            let (o, x) = (&solids.obstacles[i], &offsets[i]);
+            let outside = || format!("puts '{}' outside the tank", o.name);
+            vector_not_finite(x).or_else(|| (!o.inside_tank(&grid, x)).then(outside))
+        })?;
         solids.place(&grid, &offsets, &velocities);
         let pos = r.vectors::<D>("particles.pos", None)?;
         check_positions(&grid, &pos, solids.particle_free())?;
@@ -85,14 +83,24 @@ impl<const D: usize> State<D> {
         Ok(State {
             active: super::active_cells(&grid, &markings, &solids),
             markings,
-            time_secs: r
-                .scalar("time_secs")
-                .and_then(|t| at_least("time_secs", t, 0.0))?,
+            time_secs: r.scalar("time_secs").and_then(|t| {
+                check_scalar(
+                    "time_secs",
+                    t,
+                    t.is_finite() && t >= 0.0,
+                    "finite, at least 0",
+                )
+            })?,
             steps: r.scalar("steps")?,
             total_particles: r.scalar::<u64>("total_particles")? as usize,
-            target_volume: r
-                .scalar("target_volume")
-                .and_then(|v| positive("target_volume", v))?,
+            target_volume: r.scalar("target_volume").and_then(|v| {
+                check_scalar(
+                    "target_volume",
+                    v,
+                    v.is_finite() && v > 0.0,
+                    "finite and positive",
+                )
+            })?,
             rng: restore_rng(r)?,
             particles: crate::particles::Particles { pos, vel },
             velocity,
@@ -137,12 +145,11 @@ fn restore_markings<const D: usize>(
     check_elements("markings.kind", &kinds, known)?;
     let kind: Vec<CellKind> = kinds.into_iter().map(|b| KINDS[b as usize]).collect();
     let count = r.slice::<u32>("markings.count", Some(n))?;
-    let cells: Vec<(CellKind, u32)> = kind.iter().copied().zip(count.iter().copied()).collect();
     // Particles mark a cell fluid, or lie in a solid one (an obstacle that `ignore`s them).
-    let counted = |&(k, m): &(CellKind, u32)| {
-        (m > 0 && k == CellKind::Empty).then(|| format!("{m} particles in an empty cell"))
-    };
-    check_elements("markings.count", &cells, counted)?;
+    check_indices("markings.count", n, |c| {
+        let m = count[c];
+        (m > 0 && kind[c] == CellKind::Empty).then(|| format!("{m} particles in an empty cell"))
+    })?;
     let total: u64 = count.iter().map(|&m| m as u64).sum();
     if total != particles as u64 {
         return Err(SnapshotError::Array {
@@ -151,36 +158,13 @@ fn restore_markings<const D: usize>(
         });
     }
     let depth = r.slice::<i32>("markings.depth", Some(n))?;
-    let depths: Vec<(CellKind, i32)> = kind.iter().copied().zip(depth.iter().copied()).collect();
-    let deep = |&(k, d): &(CellKind, i32)| {
-        (k == CellKind::Fluid && d > 0)
+    check_indices("markings.depth", n, |c| {
+        let d = depth[c];
+        (kind[c] == CellKind::Fluid && d > 0)
             .then(|| format!("a fluid cell at depth {d}, above its surface (0)"))
-    };
-    check_elements("markings.depth", &depths, deep)?;
+    })?;
     let surface = r.bools("markings.surface", Some(n))?;
     Ok(Markings::from_cells(grid, kind, count, surface, depth))
-}
-
-/// A scalar of the checkpoint that must be a finite number of at least `min`.
-fn at_least(name: &str, x: f64, min: f64) -> Result<f64, SnapshotError> {
-    match x.is_finite() && x >= min {
-        true => Ok(x),
-        false => Err(SnapshotError::Array {
-            name: name.into(),
-            reason: format!("is {x}, must be a finite number of at least {min}"),
-        }),
-    }
-}
-
-/// A scalar of the checkpoint that must be a finite positive number.
-fn positive(name: &str, x: f64) -> Result<f64, SnapshotError> {
-    match x.is_finite() && x > 0.0 {
-        true => Ok(x),
-        false => Err(SnapshotError::Array {
-            name: name.into(),
-            reason: format!("is {x}, must be a finite positive number"),
-        }),
-    }
 }
 
 /// The generator at the word of its stream where it was saved.

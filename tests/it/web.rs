@@ -159,23 +159,23 @@ fn a_served_run_answers_with_the_viewer_and_streams_what_its_file_holds() {
     assert_same_recording(&dir.join("served.rrd"), &saved_run(&dir));
 }
 
+/// `cellflip view FILE --serve-web` started in `dir` on free ports, once it serves: the process
+/// and its gRPC port.
+fn view_served(dir: &Path, file: &str) -> (Child, u16) {
+    let (web, grpc) = (free_port().to_string(), free_port());
+    let grpc_s = grpc.to_string();
+    let args = ["view", file, "--serve-web", &web, "--grpc-port", &grpc_s];
+    let mut child = start(dir, &args);
+    wait_until_serving(&mut child, dir);
+    (child, grpc)
+}
+
 /// `cellflip view --serve-web` serves a saved recording: a gRPC reader gets what it holds.
 #[test]
 fn view_serves_a_saved_recording_to_browsers() {
     let dir = scratch_dir("serve_web_view");
     let file = saved_run(&dir);
-    let (web, grpc) = (free_port(), free_port());
-    let (web_s, grpc_s) = (web.to_string(), grpc.to_string());
-    let args = [
-        "view",
-        file.to_str().unwrap(),
-        "--serve-web",
-        &web_s,
-        "--grpc-port",
-        &grpc_s,
-    ];
-    let mut child = start(&dir, &args);
-    wait_until_serving(&mut child, &dir);
+    let (child, grpc) = view_served(&dir, file.to_str().unwrap());
     let streamed = dir.join("streamed.rrd");
     save(&read_served(grpc), &streamed);
     interrupt(child);
@@ -295,18 +295,7 @@ fn view_serves_a_recording_cut_short_with_a_warning() {
     let dir = scratch_dir("serve_web_cut_short");
     let whole = std::fs::read(saved_run(&dir)).unwrap();
     std::fs::write(dir.join("half.rrd"), &whole[..whole.len() / 2]).unwrap();
-    let (web, grpc) = (free_port(), free_port());
-    let (web_s, grpc_s) = (web.to_string(), grpc.to_string());
-    let args = [
-        "view",
-        "half.rrd",
-        "--serve-web",
-        &web_s,
-        "--grpc-port",
-        &grpc_s,
-    ];
-    let mut child = start(&dir, &args);
-    wait_until_serving(&mut child, &dir);
+    let (child, grpc) = view_served(&dir, "half.rrd");
     let served = read_served(grpc);
     interrupt(child);
     let held = cellflip::record::Contents::read(&dir.join("half.rrd")).unwrap();

@@ -9,7 +9,7 @@ use crate::metrics::InvariantViolation;
 use crate::sim::advect::displace;
 use crate::sim::transfer::{self, Known};
 use crate::sim::{ParticlesMut, State, StepError};
-use crate::snapshot::{check_elements, Reader, SnapshotError, Writer};
+use crate::snapshot::{check_elements, check_indices, Reader, SnapshotError, Writer};
 use crate::solvers::sinkhorn::{Air, SinkhornError, Transport, TransportGrid};
 use rayon::prelude::*;
 
@@ -156,13 +156,14 @@ impl<const D: usize> FluidMethod<D> for PowerPicSim<D> {
         if r.has("powerpic.active") {
             let active = r.slice::<u32>("powerpic.active", None)?;
             let cells = self.tg.grid.num_cells();
-            let pairs: Vec<[u32; 2]> = active.windows(2).map(|w| [w[0], w[1]]).collect();
-            let ascending = |&[a, b]: &[u32; 2]| (a >= b).then(|| format!("{a} before {b}"));
-            check_elements("powerpic.active", &pairs, ascending)?;
-            let outside = |&j: &u32| {
-                (j as usize >= cells).then(|| format!("cell {j} of a transport grid of {cells}"))
-            };
-            check_elements("powerpic.active", &active, outside)?;
+            check_indices("powerpic.active", active.len(), |i| {
+                let (j, next) = (active[i], active.get(i + 1));
+                let outside = || format!("cell {j} of a transport grid of {cells}");
+                let unsorted = |n| format!("{j} before {n}");
+                ((j as usize) >= cells)
+                    .then(outside)
+                    .or_else(|| next.filter(|&&n| n <= j).map(unsorted))
+            })?;
             let v = r.slice("powerpic.v", Some(active.len()))?;
             check_elements("powerpic.v", &v, scaling)?;
             let u = r.slice("powerpic.u", None)?;
