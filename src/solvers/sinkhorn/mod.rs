@@ -42,10 +42,10 @@
 //! **How it is computed.** The kernel is cut where `|x_p - x_j|^2 / eps` exceeds
 //! [`KERNEL_CUTOFF`], so every point sees only the cells of a ball of radius
 //! `sqrt(KERNEL_CUTOFF eps)`. On the regular grid `K_pj` is a product of per-axis factors
-//! `e^(-(x_p,k - x_j,k)^2 / eps)`: each point computes `d (2 r + 1)` exponentials (not one per
-//! cell) and lists its ball's cells with their kernel values once per solve; every iteration
-//! then streams these lists, a sparse matrix-vector product each way (Qu et al.'s "localized
-//! Gaussian convolutions"). The scalings are kept as `u`, `v` rather than their logs: with the
+//! `e^(-(x_p,k - x_j,k)^2 / eps)`: each point computes `d (2 r + 1)` exponentials once per
+//! solve and keeps them, and every iteration rebuilds its row from them, a sparse
+//! matrix-vector product each way ([`kernel`]; Qu et al.'s "localized Gaussian
+//! convolutions"). The scalings are kept as `u`, `v` rather than their logs: with the
 //! cut, every kept `K_pj` is at least `1e-12`, far inside the range of `f64`, and a scaling
 //! that leaves it is reported ([`SinkhornError::Diverged`]). Columns are summed by scattering
 //! chunks of spatially sorted points (their size set by the point count) into their own
@@ -55,35 +55,27 @@
 //!
 //! **What a solve costs of the grid.** Only the cells near the points: the cells within the
 //! kernel's reach of a point's cell (the cube of side `2 ceil(r / h) + 1` around it, each line
-//! of cells along axis 0 as one span, [`Active`]) are numbered densely, the rows list those
-//! numbers, and the reached cells are found among them. A cell's air baseline is asked for
+//! of cells along axis 0 as one span) are numbered densely, and the reached cells among them
+//! are the plan's slots. A cell's air baseline is asked for
 //! only where some point reaches ([`AirCost`]). What a solve reads of the whole grid is a
 //! span per line of cells and a flag per cell (free or blocked), which its owner keeps up.
 
-use crate::grid::active::{line_spans, Active, CellNumbers};
+mod kernel;
+
 use crate::grid::{Grid, Vector};
+use kernel::Kernel;
 use rayon::prelude::*;
-use std::ops::{AddAssign, Mul, Range};
-use std::sync::atomic::{AtomicU32, Ordering};
+use std::ops::{AddAssign, Mul};
 
 /// The kernel is cut where `|x_p - x_j|^2 / eps` exceeds this: `exp(-27.63) = 1e-12`, far
 /// below the tolerances `delta` the iteration is run to.
 pub const KERNEL_CUTOFF: f64 = 27.631_021_115_928_547;
 
-/// Points per chunk of the column sums: a `1 / MIN_CHUNKS` share of the points, within
-/// these bounds. It depends on the point count only, so that the summation order does not
-/// depend on the thread count; it is large enough in 3D that the chunks' windows of cells
-/// overlap little, and small enough that a 2D tank of a few thousand points is cut into
-/// chunks for every thread.
-const CHUNK_POINTS: Range<usize> = 256..4096;
-const MIN_CHUNKS: usize = 16;
-
 /// Slots per task of the column updates.
 const SLOTS_PER_TASK: usize = 2048;
 
-/// Points per chunk of the row listing (any size gives the same rows; small enough that a
-/// 2D tank of a few thousand points is listed on every thread).
-const LIST_POINTS: usize = 256;
+/// Points per task of the row scalings.
+const ROW_GRAIN: usize = 256;
 
 /// Newton's method for the baseline column update stops when a step moves `g_j` by less than
 /// this (a relative change of `1e-13` in `v_j`, far below any `delta`) ...
@@ -230,22 +222,6 @@ pub enum SinkhornError {
     Diverged { iteration: u32 },
 }
 
-/// The rows of [`LIST_POINTS`] consecutive points: the `i`-th one's slots are
-/// `slot[row[i]..row[i + 1]]`, its `K_pj` `kernel[..]` the same range.
-#[derive(Clone, Debug, Default)]
-struct Rows {
-    row: Vec<usize>,
-    slot: Vec<u32>,
-    kernel: Vec<f64>,
-}
-
-/// A chunk of the column sums: points `order[points]`, whose cells are the slots `window`.
-#[derive(Clone, Debug)]
-struct Chunk {
-    points: Range<usize>,
-    window: Range<usize>,
-}
-
 /// The solved plan `T_pj = u_p K_pj v_j`: the scalings, what the iteration did, and every
 /// point's row (its ball's cells and their kernel values) to read it by.
 ///
@@ -268,14 +244,12 @@ pub struct Transport<const D: usize> {
     /// `u_p`, one per point, and `v_j`, one per slot.
     u: Vec<f64>,
     v: Vec<f64>,
-    /// Point `p`'s row is in `rows[p / LIST_POINTS]` ([`row_of`]).
-    rows: Vec<Rows>,
-    /// Each slot's cell and centre.
+    /// The kernel `K_pj`, which numbers the slots.
+    kernel: Kernel<D>,
+    /// Each slot's cell (as in the kernel; alone in a plan from [`Self::from_warm_parts`])
+    /// and centre.
     active: Vec<u32>,
     centre: Vec<Vector<D>>,
-    /// The points sorted by cell, cut into the chunks of the column sums.
-    order: Vec<u32>,
-    chunks: Vec<Chunk>,
 }
 
 impl<const D: usize> Transport<D> {
@@ -297,11 +271,9 @@ impl<const D: usize> Transport<D> {
             air: Air::Capacity,
             u,
             v,
-            rows: vec![],
+            kernel: Kernel::empty(),
             active,
             centre: vec![],
-            order: vec![],
-            chunks: vec![],
         }
     }
 
@@ -324,15 +296,16 @@ impl<const D: usize> Transport<D> {
                 capacity,
             });
         }
-        let storage = warm.as_mut().map(|w| std::mem::take(&mut w.rows));
-        let mut t = Self::rows(tg, air, points, volume, s, storage.unwrap_or_default())?;
+        let storage = warm.as_mut().map(|w| std::mem::replace(&mut w.kernel, Kernel::empty()));
+        let kernel = Kernel::new(tg, points, s, storage.unwrap_or_else(Kernel::empty))?;
+        let mut t = Self::new(tg, air, kernel, volume);
         if let Some(w) = warm {
             t.start_from(w)?;
         }
         let mut next = vec![];
         loop {
             t.update_rows()?;
-            let c = t.kernel_columns(0.0, |p| t.u[p]);
+            let c = t.kernel.columns(0.0, |p| t.u[p]);
             let normal;
             (t.error, normal) = t.column_update(&c, &mut next);
             t.converged = t.error <= s.delta;
@@ -368,31 +341,15 @@ impl<const D: usize> Transport<D> {
             .into_par_iter()
             .map(|p| w.u.get(p).copied().unwrap_or_else(|| self.row_scaling(p)))
             .collect();
-        let c = self.kernel_columns(0.0, |p| self.u[p]);
+        let c = self.kernel.columns(0.0, |p| self.u[p]);
         let mut next = vec![];
         let (_, normal) = self.column_update(&c, &mut next);
         self.adopt(&mut next, normal)
     }
 
-    /// Every point's row: the free cells in the ball of its kernel, with their `K_pj`, listed
-    /// into `rows` (a previous plan's, whose capacity is reused); then the slots, their
-    /// baselines, and the chunks of the column sums.
-    fn rows(
-        tg: &TransportGrid<D>,
-        air: &AirCost,
-        points: &[Vector<D>],
-        volume: f64,
-        s: &SinkhornSettings,
-        mut rows: Vec<Rows>,
-    ) -> Result<Self, SinkhornError> {
-        let near = near_cells(tg, points, s).numbers(&tg.grid);
-        list_rows(tg, &near, points, s, &mut rows);
-        let empty = |p: usize| row_of(&rows, p).0.is_empty();
-        if let Some(p) = (0..points.len()).into_par_iter().find_first(|&p| empty(p)) {
-            return Err(SinkhornError::KernelVanishes { point: p });
-        }
-        let active = reached_cells(&near, &mut rows);
-        let centre = active.iter().map(|&j| tg.center(j as usize)).collect();
+    /// A plan on `kernel`, every scaling 1: its slots' centres and baselines.
+    fn new(tg: &TransportGrid<D>, air: &AirCost, kernel: Kernel<D>, volume: f64) -> Self {
+        let active = kernel.active().to_vec();
         let air = match air {
             Air::Capacity => Air::Capacity,
             Air::Baseline { eta, baseline } => Air::Baseline {
@@ -400,61 +357,36 @@ impl<const D: usize> Transport<D> {
                 baseline: active.par_iter().map(|&j| baseline(j as usize)).collect(),
             },
         };
-        let order = sorted_by_cell(tg, points);
-        let size = (points.len() / MIN_CHUNKS).clamp(CHUNK_POINTS.start, CHUNK_POINTS.end);
-        let chunks = (order.par_chunks(size).enumerate())
-            .map(|(n, ps)| {
-                let slots = ps.iter().flat_map(|&p| row_of(&rows, p as usize).0);
-                let slots = slots.map(|&k| k as usize);
-                let (lo, hi) = slots.fold((usize::MAX, 0), |(lo, hi), k| (lo.min(k), hi.max(k)));
-                Chunk {
-                    points: n * size..n * size + ps.len(),
-                    window: lo..hi + 1,
-                }
-            })
-            .collect();
-        Ok(Self {
+        Self {
             iterations: 0,
             error: f64::INFINITY,
             converged: false,
             volume,
             cell_volume: tg.cell_volume(),
             air,
-            u: vec![0.0; points.len()],
+            u: vec![0.0; kernel.points()],
             v: vec![1.0; active.len()],
-            rows,
+            centre: active.iter().map(|&j| tg.center(j as usize)).collect(),
             active,
-            centre,
-            order,
-            chunks,
-        })
-    }
-
-    #[inline]
-    fn row(&self, p: usize) -> (&[u32], &[f64]) {
-        row_of(&self.rows, p)
+            kernel,
+        }
     }
 
     /// Point `p`'s row scaling `u_p = V_p / sum_j K_pj v_j`: its volume exact.
     fn row_scaling(&self, p: usize) -> f64 {
-        let (slot, kernel) = self.row(p);
-        let sum: f64 = (slot.iter().zip(kernel))
-            .map(|(&k, &kpj)| kpj * self.v[k as usize])
-            .sum();
-        self.volume / sum
+        self.volume / self.kernel.row_sum(p, &self.v)
     }
 
     /// Row update: every point's volume exact.
     fn update_rows(&mut self) -> Result<(), SinkhornError> {
-        let mut u = std::mem::take(&mut self.u);
-        let normal = (u.par_iter_mut().enumerate())
-            .with_min_len(LIST_POINTS)
-            .map(|(p, u)| {
-                *u = self.row_scaling(p);
+        let (sums, volume) = (self.kernel.row_sums(&self.v), self.volume);
+        let normal = (self.u.par_iter_mut().zip(sums))
+            .with_min_len(ROW_GRAIN)
+            .map(|(u, sum)| {
+                *u = volume / sum;
                 u.is_normal()
             })
             .reduce(|| true, |a, b| a && b);
-        self.u = u;
         self.iterations += 1;
         match normal {
             true => Ok(()),
@@ -518,48 +450,13 @@ impl<const D: usize> Transport<D> {
         Ok(())
     }
 
-    /// `sum_p K_pj w(p)` for every slot: each chunk scatters into its window, and the windows
-    /// are added in chunk order.
-    fn kernel_columns<T>(&self, zero: T, w: impl Fn(usize) -> T + Sync) -> Vec<T>
-    where
-        T: Copy + Send + Sync + AddAssign + Mul<f64, Output = T>,
-    {
-        let parts: Vec<Vec<T>> = self
-            .chunks
-            .par_iter()
-            .map(|c| {
-                let mut acc = vec![zero; c.window.len()];
-                for &p in &self.order[c.points.clone()] {
-                    let (p, wp) = (p as usize, w(p as usize));
-                    let (slot, kernel) = self.row(p);
-                    for (&k, &kpj) in slot.iter().zip(kernel) {
-                        acc[k as usize - c.window.start] += wp * kpj;
-                    }
-                }
-                acc
-            })
-            .collect();
-        const BLOCK: usize = 4096;
-        let mut out = vec![zero; self.active.len()];
-        out.par_chunks_mut(BLOCK).enumerate().for_each(|(b, out)| {
-            let block = b * BLOCK..b * BLOCK + out.len();
-            for (c, part) in self.chunks.iter().zip(&parts) {
-                let (lo, hi) = (block.start.max(c.window.start), block.end.min(c.window.end));
-                for k in lo..hi {
-                    out[k - block.start] += part[k - c.window.start];
-                }
-            }
-        });
-        out
-    }
-
     /// `sum_p T_pj w(p)` for every slot (e.g. `w = 1`: the volume the kernels put in each
     /// cell).
     pub fn columns<T>(&self, zero: T, w: impl Fn(usize) -> T + Sync) -> Vec<T>
     where
         T: Copy + Send + Sync + AddAssign + Mul<f64, Output = T>,
     {
-        let mut c = self.kernel_columns(zero, |p| w(p) * self.u[p]);
+        let mut c = self.kernel.columns(zero, |p| w(p) * self.u[p]);
         c.iter_mut().zip(&self.v).for_each(|(c, &v)| *c = *c * v);
         c
     }
@@ -568,11 +465,8 @@ impl<const D: usize> Transport<D> {
     /// centre).
     #[inline]
     pub fn for_each_in_row(&self, p: usize, mut f: impl FnMut(usize, Vector<D>, f64)) {
-        let (slot, kernel) = self.row(p);
-        for (&k, &kpj) in slot.iter().zip(kernel) {
-            let k = k as usize;
-            f(k, self.centre[k], self.u[p] * kpj * self.v[k]);
-        }
+        let u = self.u[p];
+        (self.kernel).for_each_in_row(p, |k, kpj| f(k, self.centre[k], u * kpj * self.v[k]));
     }
 
     /// Each slot's cell: the cells with capacity within the reach of some point.
@@ -586,154 +480,9 @@ impl<const D: usize> Transport<D> {
     }
 }
 
-/// Point `p`'s row in `rows`: its slots and their `K_pj`.
-#[inline]
-fn row_of(rows: &[Rows], p: usize) -> (&[u32], &[f64]) {
-    let r = &rows[p / LIST_POINTS];
-    let range = r.row[p % LIST_POINTS]..r.row[p % LIST_POINTS + 1];
-    (&r.slot[range.clone()], &r.kernel[range])
-}
-
-/// The cells within the kernel's reach of some point's cell: the cube of side
-/// `2 ceil(r / h) + 1` around each (what [`Axes::ball`] looks at), each line's as one span.
-fn near_cells<const D: usize>(
-    tg: &TransportGrid<D>,
-    points: &[Vector<D>],
-    s: &SinkhornSettings,
-) -> Active<D> {
-    let cells = points.par_iter().map(|x| cell_of(tg, x));
-    let reach = (s.radius() / tg.h).ceil() as usize;
-    Active::around_spans(&tg.grid, line_spans(&tg.grid.dims, cells), reach)
-}
-
-/// Lists every point's row into `rows`: the free cells in its kernel's ball, by their numbers
-/// among the `near` cells, with their `K_pj`.
-fn list_rows<const D: usize>(
-    tg: &TransportGrid<D>,
-    near: &CellNumbers,
-    points: &[Vector<D>],
-    s: &SinkhornSettings,
-    rows: &mut Vec<Rows>,
-) {
-    rows.resize_with(points.len().div_ceil(LIST_POINTS), Rows::default);
-    (rows.par_iter_mut().zip(points.par_chunks(LIST_POINTS))).for_each(|(r, chunk)| {
-        r.row.clear();
-        r.row.push(0);
-        r.slot.clear();
-        r.kernel.clear();
-        let mut axes = Axes::default();
-        for x in chunk {
-            axes.ball(tg, near, x, s, |n, k| {
-                r.slot.push(n as u32);
-                r.kernel.push(k);
-            });
-            r.row.push(r.slot.len());
-        }
-    });
-}
-
-/// The cells the rows reach, in grid order; the rows' slots, listed by the cells' numbers
-/// among the `near` ones, are rewritten to index into them.
-fn reached_cells(near: &CellNumbers, rows: &mut [Rows]) -> Vec<u32> {
-    let index: Vec<AtomicU32> = (0..near.len()).map(|_| AtomicU32::new(u32::MAX)).collect();
-    (rows.par_iter().flat_map_iter(|r| &r.slot))
-        .for_each(|&n| index[n as usize].store(0, Ordering::Relaxed));
-    let mut index: Vec<u32> = index.into_iter().map(AtomicU32::into_inner).collect();
-    let mut active = vec![];
-    for (n, j) in near.cells().enumerate() {
-        if index[n] == 0 {
-            index[n] = active.len() as u32;
-            active.push(j as u32);
-        }
-    }
-    (rows.par_iter_mut().flat_map_iter(|r| &mut r.slot)).for_each(|n| *n = index[*n as usize]);
-    active
-}
-
-/// The points' indices sorted by the cell holding them (stably).
-fn sorted_by_cell<const D: usize>(tg: &TransportGrid<D>, points: &[Vector<D>]) -> Vec<u32> {
-    let mut order: Vec<u32> = (0..points.len() as u32).collect();
-    order.par_sort_by_cached_key(|&p| tg.grid.cell_index(cell_of(tg, &points[p as usize])));
-    order
-}
-
-/// The cell holding `x` (clamped onto the grid).
-fn cell_of<const D: usize>(tg: &TransportGrid<D>, x: &Vector<D>) -> [usize; D] {
-    std::array::from_fn(|k| ((x[k] / tg.h).max(0.0) as usize).min(tg.grid.dims[k] - 1))
-}
-
-/// One point's kernel along each axis: the first cell of its box, and per cell of the box the
-/// squared distance and factor `e^(-d^2 / eps)` (reused from point to point).
-#[derive(Default)]
-struct Axes {
-    lo: Vec<usize>,
-    d2: Vec<Vec<f64>>,
-    factor: Vec<Vec<f64>>,
-}
-
-impl Axes {
-    /// Calls `f(n, K_pj)` for the free cells within the kernel's ball around `x`, in grid
-    /// order, `n` the cell's number among the `near` ones ([`near_cells`], which hold the
-    /// ball's box): `K_pj` is the product of the per-axis factors (the outer axes' first), and
-    /// the ball test is on the sum of the per-axis squares.
-    fn ball<const D: usize>(
-        &mut self,
-        tg: &TransportGrid<D>,
-        near: &CellNumbers,
-        x: &Vector<D>,
-        s: &SinkhornSettings,
-        mut f: impl FnMut(usize, f64),
-    ) {
-        let r = s.radius();
-        let (r2, reach) = (r * r, (r / tg.h).ceil() as usize);
-        let c = cell_of(tg, x);
-        self.lo.clear();
-        self.d2.resize(D, vec![]);
-        self.factor.resize(D, vec![]);
-        for k in 0..D {
-            let (lo, hi) = (
-                c[k].saturating_sub(reach),
-                (c[k] + reach).min(tg.grid.dims[k] - 1),
-            );
-            self.lo.push(lo);
-            self.d2[k].clear();
-            self.d2[k].extend((lo..=hi).map(|i| ((i as f64 + 0.5) * tg.h - x[k]).powi(2)));
-            self.factor[k].clear();
-            self.factor[k].extend(self.d2[k].iter().map(|d2| (-d2 / s.epsilon).exp()));
-        }
-        // An odometer over the outer axes 1..D, the innermost axis 0 run along a grid row.
-        let mut at = [0usize; D];
-        loop {
-            let (mut d2, mut kernel) = (0.0, 1.0);
-            for k in (1..D).rev() {
-                d2 += self.d2[k][at[k]];
-                kernel *= self.factor[k][at[k]];
-            }
-            if d2 <= r2 {
-                let first = std::array::from_fn(|k| self.lo[k] + at[k]);
-                let base = tg.grid.cell_index(first);
-                let number = near.at(first).expect("the near cells hold the ball's box");
-                for (i, (dx2, fx)) in self.d2[0].iter().zip(&self.factor[0]).enumerate() {
-                    if d2 + dx2 <= r2 && tg.free[base + i] {
-                        f(number + i, kernel * fx);
-                    }
-                }
-            }
-            let mut k = 1;
-            while k < D && at[k] + 1 == self.d2[k].len() {
-                at[k] = 0;
-                k += 1;
-            }
-            if k == D {
-                return;
-            }
-            at[k] += 1;
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
+    use super::kernel::cell_of;
     use super::*;
     use rand::rngs::StdRng;
     use rand::{Rng, SeedableRng};

@@ -1,0 +1,562 @@
+//! The kernel matrix `K_pj = e^(-|x_p - x_j|^2 / eps)` of a solve, cut where
+//! `|x_p - x_j|^2 / eps` exceeds [`KERNEL_CUTOFF`](super::KERNEL_CUTOFF) and at blocked cells, in factored form: what
+//! the iterations stream is a point's position and its `d (2 r + 1)` per-axis factors
+//! `e^(-(x_p,k - x_j,k)^2 / eps)`, not a list of its cells and their kernel values.
+//!
+//! **Why factored.** A point's ball reaches about 150 transport cells in 3D at the defaults
+//! (`eps = 0.1`, a grid twice as fine as the simulation's), and each Sinkhorn iteration reads
+//! every row twice (the row update, then the column sums). Listed as a `u32` slot and an `f64`
+//! value per cell, that is 1.8 kB per point and pass, and the iterations are bound by memory
+//! bandwidth (issue 73). Factored, a point's row is its 27 factors and its runs: each line of
+//! cells along axis 0 that its ball reaches, cut at blocked cells, as the slot of its first
+//! cell, where the run starts in the box and how long it is, and which line of the box it is
+//! (8 bytes; about 40 runs in 3D at the defaults). Each `K_pj` is rebuilt as the product of
+//! its factors, which costs a multiplication; the points are visited sorted by cell, so the
+//! column scalings `v_j` that neighbouring points read stay in cache.
+//!
+//! **The same numbers as a listed row.** A cell's `K_pj` is the product of the factors in the
+//! same order (the outer axes' first, then axis 0), the ball test is on the same sum of
+//! per-axis squares, and the cells are visited in grid order: every row sum and every column
+//! sum is computed with the same operations in the same order as from a list of the row.
+//!
+//! **Slots.** The cells some point's ball reaches are the *slots*, numbered in grid order, so
+//! the free cells of a run have consecutive slots. To find them, the cells near the points
+//! ([`Active::around_spans`], the cubes of side `2 ceil(r / h) + 1` around their cells) are
+//! numbered densely, a line of cells along axis 0 at a time, while the kernel is built.
+
+use super::{SinkhornError, SinkhornSettings, TransportGrid};
+use crate::grid::active::{line_spans, Active, CellNumbers};
+use crate::grid::{strides, Vector};
+use crate::solvers::NONE;
+use rayon::prelude::*;
+use std::ops::{AddAssign, Mul, Range};
+use std::sync::atomic::{AtomicBool, Ordering};
+
+/// Points per chunk of the column sums: a `1 / MIN_CHUNKS` share of the points, within
+/// these bounds. It depends on the point count only, so that the summation order does not
+/// depend on the thread count; it is large enough in 3D that the chunks' windows of cells
+/// overlap little, and small enough that a 2D tank of a few thousand points is cut into
+/// chunks for every thread.
+const CHUNK_POINTS: Range<usize> = 256..4096;
+const MIN_CHUNKS: usize = 16;
+
+/// Points per task of the row sums, of the factors and of the runs' listing (small enough
+/// that a 2D tank of a few thousand points is shared by every thread).
+const ROW_GRAIN: usize = 256;
+
+/// Slots per block when the chunks' column sums are added.
+const SLOT_BLOCK: usize = 4096;
+
+/// The kernel matrix of a solve (see the module doc).
+#[derive(Clone, Debug)]
+pub(super) struct Kernel<const D: usize> {
+    /// Factors per axis and point: the side `2 r + 1` of a point's box.
+    side: usize,
+    /// The points sorted by the cell holding them (stably), and each point's place there.
+    order: Vec<u32>,
+    rank: Vec<u32>,
+    /// The points' factors in sorted order: point `order[i]`'s factor along axis `k` at the
+    /// `a`-th cell of its box is `factor[(i D + k) side + a]`.
+    factor: Vec<f64>,
+    /// The points' runs in sorted order, [`ROW_GRAIN`] points to a piece.
+    runs: Vec<Runs>,
+    /// Each slot's cell, in grid order.
+    active: Vec<u32>,
+    /// The chunks of the column sums: sorted points `points`, whose cells are the slots
+    /// `window`.
+    chunks: Vec<Chunk>,
+}
+
+#[derive(Clone, Debug)]
+struct Chunk {
+    points: Range<usize>,
+    window: Range<usize>,
+}
+
+/// A run of a point's row: free cells along axis 0 whose slots are `slot..slot + len`, the
+/// cells `start..start + len` of the point's box along that axis, on the line of the box at
+/// `at` along the outer axes 1, 2.
+#[derive(Clone, Copy, Debug)]
+struct Run {
+    slot: u32,
+    start: u8,
+    len: u8,
+    at: [u8; 2],
+}
+
+/// The runs of [`ROW_GRAIN`] consecutive sorted points: the `i`-th one's are
+/// `run[first[i]..first[i + 1]]`.
+#[derive(Clone, Debug, Default)]
+struct Runs {
+    first: Vec<u32>,
+    run: Vec<Run>,
+}
+
+impl<const D: usize> Kernel<D> {
+    /// No kernel: a plan that only carries scalings to warm-start the next solve.
+    pub(super) fn empty() -> Self {
+        Self {
+            side: 0,
+            order: vec![],
+            rank: vec![],
+            factor: vec![],
+            runs: vec![],
+            active: vec![],
+            chunks: vec![],
+        }
+    }
+
+    /// The kernel of `points` on `tg` (reusing the storage of `reuse`). A point with no free
+    /// cell in its ball is refused ([`SinkhornError::KernelVanishes`], the first one).
+    pub(super) fn new(
+        tg: &TransportGrid<D>,
+        points: &[Vector<D>],
+        s: &SinkhornSettings,
+        reuse: Self,
+    ) -> Result<Self, SinkhornError> {
+        const { assert!(D <= 3, "a run names its line by at most two outer axes") };
+        let ball = Ball::new(tg, points, s);
+        assert!(ball.side() < 256, "a run's place in its box is a byte: epsilon / h^2 too large");
+        let order = sorted_by_cell(tg, points);
+        let mut rank = vec![0; points.len()];
+        (order.iter().enumerate()).for_each(|(i, &p)| rank[p as usize] = i as u32);
+        let x: Vec<Vector<D>> = order.par_iter().map(|&p| points[p as usize]).collect();
+        let (side, mut factor, mut runs) = (ball.side(), reuse.factor, reuse.runs);
+        factor.resize(points.len() * D * side, 0.0);
+        (factor.par_chunks_mut(D * side).zip(&x))
+            .with_min_len(ROW_GRAIN)
+            .for_each(|(f, x)| ball.factors(x, s.epsilon, f));
+        let mut k = Self {
+            side,
+            order,
+            rank,
+            factor,
+            runs: vec![],
+            active: vec![],
+            chunks: vec![],
+        };
+        let slot = k.number_slots(&ball, &x)?;
+        runs.resize_with(x.len().div_ceil(ROW_GRAIN), Runs::default);
+        (runs.par_iter_mut().enumerate()).for_each(|(c, r)| {
+            let points = c * ROW_GRAIN..(c * ROW_GRAIN + ROW_GRAIN).min(x.len());
+            k.list_runs(&ball, &x, &slot, points, r)
+        });
+        k.runs = runs;
+        Ok(k)
+    }
+
+    /// The factors of the point at sorted place `i`.
+    #[inline]
+    fn factors_at(&self, i: usize) -> &[f64] {
+        &self.factor[i * D * self.side..(i + 1) * D * self.side]
+    }
+
+    /// Finds the cells the balls reach (free ones), numbers them as slots in grid order, and
+    /// the chunks' windows of slots; returns each near cell's slot ([`NONE`] if unreached).
+    fn number_slots(&mut self, ball: &Ball<D>, x: &[Vector<D>]) -> Result<Vec<u32>, SinkhornError> {
+        let reached: Vec<AtomicBool> = (0..ball.near.len()).map(|_| false.into()).collect();
+        let n = x.len();
+        let size = (n / MIN_CHUNKS).clamp(CHUNK_POINTS.start, CHUNK_POINTS.end);
+        // Per chunk: the near numbers it reaches (lowest, highest) and its first point (by
+        // index) whose ball holds no free cell.
+        let found: Vec<(usize, usize, Option<u32>)> = (0..n.div_ceil(size))
+            .into_par_iter()
+            .map(|c| {
+                let (mut lo, mut hi, mut empty) = (usize::MAX, 0, None::<u32>);
+                for i in c * size..(c * size + size).min(n) {
+                    let mut any = false;
+                    for l in ball.lines(&x[i]) {
+                        for a in l.cells.clone().filter(|a| ball.tg.is_free(l.cell + a)) {
+                            let near = l.near + a - l.cells.start;
+                            reached[near].store(true, Ordering::Relaxed);
+                            (lo, hi, any) = (lo.min(near), hi.max(near), true);
+                        }
+                    }
+                    if !any {
+                        let p = self.order[i];
+                        empty = Some(empty.map_or(p, |e| e.min(p)));
+                    }
+                }
+                (lo, hi, empty)
+            })
+            .collect();
+        if let Some(p) = found.iter().filter_map(|f| f.2).min() {
+            return Err(SinkhornError::KernelVanishes { point: p as usize });
+        }
+        let mut slot = vec![NONE; ball.near.len()];
+        for (near, cell) in ball.near.cells().enumerate() {
+            if reached[near].load(Ordering::Relaxed) {
+                slot[near] = self.active.len() as u32;
+                self.active.push(cell as u32);
+            }
+        }
+        self.chunks = (found.iter().enumerate())
+            .map(|(c, &(lo, hi, _))| Chunk {
+                points: c * size..(c * size + size).min(n),
+                window: slot[lo] as usize..slot[hi] as usize + 1,
+            })
+            .collect();
+        Ok(slot)
+    }
+
+    /// Lists the runs of the sorted `points` into `r`: each line of a ball, cut at its
+    /// blocked cells (whose `slot` is [`NONE`]).
+    fn list_runs(
+        &self,
+        ball: &Ball<D>,
+        x: &[Vector<D>],
+        slot: &[u32],
+        points: Range<usize>,
+        r: &mut Runs,
+    ) {
+        (r.first.clear(), r.run.clear());
+        r.first.push(0);
+        for i in points {
+            for l in ball.lines(&x[i]) {
+                let at = std::array::from_fn(|k| l.at.get(k + 1).map_or(0, |&a| a as u8));
+                let mut open: Option<Run> = None;
+                for a in l.cells.clone() {
+                    let k = slot[l.near + a - l.cells.start];
+                    match open.as_mut() {
+                        Some(run) if k != NONE && run.slot + run.len as u32 == k => run.len += 1,
+                        _ => {
+                            r.run.extend(open.take());
+                            let (start, len) = (a as u8, 1);
+                            open = (k != NONE).then_some(Run { slot: k, start, len, at });
+                        }
+                    }
+                }
+                r.run.extend(open);
+            }
+            r.first.push(r.run.len() as u32);
+        }
+    }
+
+    /// Each slot's cell: the free cells within the reach of some point, in grid order.
+    pub(super) fn active(&self) -> &[u32] {
+        &self.active
+    }
+
+    /// The points' count.
+    pub(super) fn points(&self) -> usize {
+        self.order.len()
+    }
+
+    /// The runs of the point at sorted place `i`, with its factors.
+    #[inline]
+    fn runs_at(&self, i: usize) -> (&[Run], &[f64]) {
+        let r = &self.runs[i / ROW_GRAIN];
+        let (a, b) = (r.first[i % ROW_GRAIN], r.first[i % ROW_GRAIN + 1]);
+        (&r.run[a as usize..b as usize], self.factors_at(i))
+    }
+
+    /// A run's `K_pj` but for the factor along axis 0: the product of the outer axes' factors,
+    /// the last axis first.
+    #[inline]
+    fn outer(&self, run: &Run, factor: &[f64]) -> f64 {
+        let mut kernel = 1.0;
+        for k in (1..D).rev() {
+            kernel *= factor[k * self.side + run.at[k - 1] as usize];
+        }
+        kernel
+    }
+
+    /// Calls `f(k, K_pj)` for every cell of point `p`'s row, `k` its slot, in grid order.
+    #[inline]
+    pub(super) fn for_each_in_row(&self, p: usize, mut f: impl FnMut(usize, f64)) {
+        let (runs, factor) = self.runs_at(self.rank[p] as usize);
+        for run in runs {
+            let kernel = self.outer(run, factor);
+            let fx = &factor[run.start as usize..][..run.len as usize];
+            for (k, fx) in (run.slot as usize..).zip(fx) {
+                f(k, kernel * fx);
+            }
+        }
+    }
+
+    /// `sum_j K_pj v_j` of point `p`.
+    pub(super) fn row_sum(&self, p: usize, v: &[f64]) -> f64 {
+        self.row_sum_at(self.rank[p] as usize, v)
+    }
+
+    /// `sum_j K_pj v_j` of the point at sorted place `i`.
+    #[inline]
+    fn row_sum_at(&self, i: usize, v: &[f64]) -> f64 {
+        let (runs, factor) = self.runs_at(i);
+        let mut sum = 0.0;
+        for run in runs {
+            let kernel = self.outer(run, factor);
+            let fx = &factor[run.start as usize..][..run.len as usize];
+            let v = &v[run.slot as usize..][..run.len as usize];
+            for (fx, v) in fx.iter().zip(v) {
+                sum += kernel * fx * v;
+            }
+        }
+        sum
+    }
+
+    /// `sum_j K_pj v_j` of every point, by point; the points are visited in sorted order
+    /// (neighbours read the same `v_j`).
+    pub(super) fn row_sums(&self, v: &[f64]) -> Vec<f64> {
+        let sorted: Vec<f64> = (0..self.order.len())
+            .into_par_iter()
+            .with_min_len(ROW_GRAIN)
+            .map(|i| self.row_sum_at(i, v))
+            .collect();
+        self.rank.par_iter().map(|&i| sorted[i as usize]).collect()
+    }
+
+    /// `sum_p K_pj w(p)` for every slot: each chunk of sorted points scatters into its
+    /// window, and the windows are added in chunk order (the same sums whatever the thread
+    /// count).
+    pub(super) fn columns<T>(&self, zero: T, w: impl Fn(usize) -> T + Sync) -> Vec<T>
+    where
+        T: Copy + Send + Sync + AddAssign + Mul<f64, Output = T>,
+    {
+        let parts: Vec<Vec<T>> = (self.chunks.par_iter())
+            .map(|c| {
+                let mut acc = vec![zero; c.window.len()];
+                for i in c.points.clone() {
+                    let wp = w(self.order[i] as usize);
+                    let (runs, factor) = self.runs_at(i);
+                    for run in runs {
+                        let kernel = self.outer(run, factor);
+                        let fx = &factor[run.start as usize..][..run.len as usize];
+                        let at = run.slot as usize - c.window.start;
+                        for (acc, fx) in acc[at..at + fx.len()].iter_mut().zip(fx) {
+                            *acc += wp * (kernel * fx);
+                        }
+                    }
+                }
+                acc
+            })
+            .collect();
+        let mut out = vec![zero; self.active.len()];
+        (out.par_chunks_mut(SLOT_BLOCK).enumerate()).for_each(|(b, out)| {
+            let block = b * SLOT_BLOCK..b * SLOT_BLOCK + out.len();
+            for (c, part) in self.chunks.iter().zip(&parts) {
+                let (lo, hi) = (block.start.max(c.window.start), block.end.min(c.window.end));
+                for k in lo..hi {
+                    out[k - block.start] += part[k - c.window.start];
+                }
+            }
+        });
+        out
+    }
+}
+
+/// What building a kernel needs of the grid: the transport grid, the cells near the points
+/// numbered, the ball's squared radius `KERNEL_CUTOFF eps` (as `r * r`) and its half-width
+/// in cells.
+struct Ball<'a, const D: usize> {
+    tg: &'a TransportGrid<D>,
+    strides: [usize; D],
+    near: CellNumbers,
+    r2: f64,
+    reach: usize,
+}
+
+impl<'a, const D: usize> Ball<'a, D> {
+    fn new(tg: &'a TransportGrid<D>, points: &[Vector<D>], s: &SinkhornSettings) -> Self {
+        let (r, reach) = (s.radius(), (s.radius() / tg.h).ceil() as usize);
+        let cells = points.par_iter().map(|x| cell_of(tg, x));
+        let spans = line_spans(&tg.grid.dims, cells);
+        Self {
+            tg,
+            strides: strides(&tg.grid.dims),
+            near: Active::around_spans(&tg.grid, spans, reach).numbers(&tg.grid),
+            r2: r * r,
+            reach,
+        }
+    }
+
+    fn side(&self) -> usize {
+        2 * self.reach + 1
+    }
+
+    /// The box of the point at `x`: its first cell and its cells per axis.
+    fn bounds(&self, x: &Vector<D>) -> ([usize; D], [usize; D]) {
+        let (c, dims) = (cell_of(self.tg, x), &self.tg.grid.dims);
+        let lo = std::array::from_fn(|k| c[k].saturating_sub(self.reach));
+        let len = std::array::from_fn(|k| (c[k] + self.reach).min(dims[k] - 1) + 1 - lo[k]);
+        (lo, len)
+    }
+
+    /// A point's factors `e^(-(x_k - x_j,k)^2 / eps)` along each axis over its box, into `f`
+    /// (`D` runs of [`Self::side`]).
+    fn factors(&self, x: &Vector<D>, epsilon: f64, f: &mut [f64]) {
+        let (lo, len) = self.bounds(x);
+        for (k, f) in f.chunks_mut(self.side()).enumerate() {
+            for (i, f) in (lo[k]..lo[k] + len[k]).zip(f) {
+                *f = (-((i as f64 + 0.5) * self.tg.h - x[k]).powi(2) / epsilon).exp();
+            }
+        }
+    }
+
+    /// The lines of the kernel's ball around the point at `x`, in grid order.
+    fn lines<'b>(&'b self, x: &'b Vector<D>) -> Lines<'b, D> {
+        let (lo, len) = self.bounds(x);
+        Lines {
+            ball: self,
+            x,
+            lo,
+            len,
+            at: [0; D],
+            done: false,
+        }
+    }
+}
+
+/// A line of cells along axis 0 in a point's ball: the cells `cells` of its box along that
+/// axis, whose first has the number `near` among the near cells; `cell` is the grid index of
+/// the line's cell 0 of the box, `at` the line's place in the box.
+struct Line<const D: usize> {
+    near: usize,
+    cell: usize,
+    cells: Range<usize>,
+    at: [usize; D],
+}
+
+/// The lines of a point's ball ([`Ball::lines`]): an odometer over the outer axes' cells of
+/// its box (axis 1 fastest), keeping the lines the ball reaches. The ball test is on the sum
+/// of the per-axis squares, the last axis first, as [`Kernel::outer`] multiplies the factors.
+struct Lines<'a, const D: usize> {
+    ball: &'a Ball<'a, D>,
+    x: &'a Vector<D>,
+    /// The box: its first cell and its cells per axis.
+    lo: [usize; D],
+    len: [usize; D],
+    at: [usize; D],
+    done: bool,
+}
+
+impl<const D: usize> Lines<'_, D> {
+    /// `(x_j,k - x_k)^2` at the `a`-th cell of the box along axis `k`.
+    fn d2(&self, k: usize, a: usize) -> f64 {
+        (((self.lo[k] + a) as f64 + 0.5) * self.ball.tg.h - self.x[k]).powi(2)
+    }
+
+    /// The odometer's next position; false after the last.
+    fn advance(&mut self) -> bool {
+        let mut k = 1;
+        while k < D && self.at[k] + 1 == self.len[k] {
+            self.at[k] = 0;
+            k += 1;
+        }
+        if k < D {
+            self.at[k] += 1;
+        }
+        k < D
+    }
+}
+
+impl<const D: usize> Iterator for Lines<'_, D> {
+    type Item = Line<D>;
+
+    fn next(&mut self) -> Option<Line<D>> {
+        while !self.done {
+            let at = self.at;
+            let d2 = (1..D).rev().fold(0.0, |d2, k| d2 + self.d2(k, at[k]));
+            self.done = !self.advance();
+            if d2 > self.ball.r2 {
+                continue;
+            }
+            let inside = |a: &usize| d2 + self.d2(0, *a) <= self.ball.r2;
+            let Some(start) = (0..self.len[0]).find(inside) else {
+                continue;
+            };
+            let end = (start..self.len[0]).rfind(inside).expect("start is inside") + 1;
+            let first: [usize; D] = std::array::from_fn(|k| self.lo[k] + at[k]);
+            let near = (self.ball.near.at(first)).expect("the near cells hold the ball's box");
+            return Some(Line {
+                near: near + start,
+                cell: (0..D).map(|k| first[k] * self.ball.strides[k]).sum(),
+                cells: start..end,
+                at,
+            });
+        }
+        None
+    }
+}
+
+/// The points' indices sorted by the cell holding them (stably).
+fn sorted_by_cell<const D: usize>(tg: &TransportGrid<D>, points: &[Vector<D>]) -> Vec<u32> {
+    let mut order: Vec<u32> = (0..points.len() as u32).collect();
+    order.par_sort_by_cached_key(|&p| tg.grid.cell_index(cell_of(tg, &points[p as usize])));
+    order
+}
+
+/// The cell of `tg` holding `x` (clamped onto the grid).
+pub(super) fn cell_of<const D: usize>(tg: &TransportGrid<D>, x: &Vector<D>) -> [usize; D] {
+    std::array::from_fn(|k| ((x[k] / tg.h).max(0.0) as usize).min(tg.grid.dims[k] - 1))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use super::super::KERNEL_CUTOFF;
+    use crate::grid::Grid;
+    use rand::rngs::StdRng;
+    use rand::{Rng, SeedableRng};
+
+    /// Every point's row against the kernel written out cell by cell: the free cells within
+    /// `sqrt(KERNEL_CUTOFF eps)` of it, each with `e^(-|x_p - x_j|^2 / eps)`; and the row and
+    /// column sums against sums over those rows.
+    fn rows_are_the_kernel_written_out<const D: usize>(dims: [usize; D], epsilon: f64) {
+        let mut tg = TransportGrid::new(Grid::new(dims), 0.5);
+        let mut rng = StdRng::seed_from_u64(D as u64);
+        for j in 0..tg.grid.num_cells() {
+            tg.set_free(j, rng.random::<f64>() > 0.2);
+        }
+        let side = |k: usize| dims[k] as f64 * tg.h;
+        let points: Vec<Vector<D>> = (0..300)
+            .map(|_| Vector::<D>::from_fn(|k, _| rng.random::<f64>() * side(k)))
+            .collect();
+        let s = SinkhornSettings {
+            epsilon,
+            delta: 0.1,
+            max_iterations: 1,
+        };
+        let kernel = Kernel::new(&tg, &points, &s, Kernel::empty()).unwrap();
+        let active = kernel.active();
+        let v: Vec<f64> = (0..active.len()).map(|_| rng.random()).collect();
+        let w: Vec<f64> = (0..points.len()).map(|_| rng.random()).collect();
+        let (mut rows, mut columns) = (vec![0.0; points.len()], vec![0.0; active.len()]);
+        for (p, x) in points.iter().enumerate() {
+            let mut listed = vec![];
+            kernel.for_each_in_row(p, |k, kpj| {
+                listed.push((active[k] as usize, kpj));
+                rows[p] += kpj * v[k];
+                columns[k] += kpj * w[p];
+            });
+            let written_out: Vec<(usize, f64)> = (0..tg.grid.num_cells())
+                .filter(|&j| tg.is_free(j))
+                .map(|j| (j, (tg.center(j) - x).norm_squared()))
+                .filter(|&(_, d2)| d2 <= KERNEL_CUTOFF * epsilon * (1.0 - 1e-12))
+                .map(|(j, d2)| (j, (-d2 / epsilon).exp()))
+                .collect();
+            let cells = |l: &[(usize, f64)]| l.iter().map(|c| c.0).collect::<Vec<_>>();
+            let inner = cells(&written_out);
+            assert!(inner.iter().all(|j| cells(&listed).contains(j)), "point {p}");
+            for (j, kpj) in listed {
+                let d2 = (tg.center(j) - x).norm_squared();
+                assert!(tg.is_free(j), "point {p}: blocked cell {j} listed");
+                assert!(d2 <= KERNEL_CUTOFF * epsilon * (1.0 + 1e-12), "point {p}, cell {j}");
+                let exact = (-d2 / epsilon).exp();
+                assert!((kpj / exact - 1.0).abs() < 1e-12, "point {p}, cell {j}");
+            }
+        }
+        let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * b.abs();
+        let sums = kernel.row_sums(&v);
+        assert!(sums.iter().zip(&rows).all(|(&a, &b)| close(a, b)));
+        let cols = kernel.columns(0.0, |p| w[p]);
+        assert!(cols.iter().zip(&columns).all(|(&a, &b)| close(a, b)));
+    }
+
+    #[test]
+    fn rows_are_the_kernel_written_out_2d_and_3d() {
+        rows_are_the_kernel_written_out([24, 18], 0.1);
+        rows_are_the_kernel_written_out([24, 18], 0.4);
+        rows_are_the_kernel_written_out([12, 10, 9], 0.1);
+    }
+}
