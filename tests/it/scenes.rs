@@ -116,9 +116,17 @@ fn every_method_runs_every_built_in_scene_for_a_few_steps() {
             };
             let scene =
                 Scene::load(name, &o).unwrap_or_else(|e| panic!("{name}, {method:?}: {e:#}"));
+            // Every figure a step reports is one its method registers: a report job's
+            // checkpoint keeps the figures by name and a resume looks them up there.
+            let registered = |names: Vec<(&str, f64)>| {
+                for (name, _) in names {
+                    let known = method.info().figures.contains(&name);
+                    assert!(known, "{method:?} reports figure {name}, not registered");
+                }
+            };
             match three {
-                false => drop(run::<2>(&scene, Some(5), |_, _| {})),
-                true => drop(run::<3>(&scene, Some(3), |_, _| {})),
+                false => drop(run::<2>(&scene, Some(5), |_, r| registered(r.method.figures()))),
+                true => drop(run::<3>(&scene, Some(3), |_, r| registered(r.method.figures()))),
             }
         }
     }

@@ -77,7 +77,7 @@ impl MethodType for Nbflip {
         obstacle_modes: &[ObstacleMode::Naive, ObstacleMode::Ignore],
         panels: PANELS,
         layer_views: LAYER_VIEWS,
-        figures: &["nbflip_seeded", "nbflip_deleted"],
+        figures: &["nbflip_seeded", "nbflip_deleted", "nbflip_carved"],
     };
 
     type Settings = NbflipSettings;
