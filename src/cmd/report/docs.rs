@@ -91,7 +91,7 @@ pub fn provenance(command: &str) -> String {
         utc_date(),
         commit(),
         env!("CARGO_PKG_VERSION"),
-        crate::machine::describe(rayon::current_num_threads()),
+        crate::machine::Machine::here(rayon::current_num_threads()),
     )
 }
 
