@@ -57,15 +57,43 @@ pub fn reset_peak_memory() {
     let _ = std::fs::write("/proc/self/clear_refs", "5");
 }
 
-/// The machine in one phrase: `AMD EPYC 7B13 (2 cores, 2 threads, memory copy 11.2 GB/s)`,
-/// with `threads` the worker threads the figures were made with.
-pub fn describe(threads: usize) -> String {
-    format!(
-        "{} ({} cores, {threads} threads, memory copy {:.1} GB/s)",
-        cpu_model(),
-        std::thread::available_parallelism().map_or(0, |n| n.get()),
-        copy_bandwidth_gb_s()
-    )
+/// A machine as the figures made on it depend on: its CPU, its cores, the worker threads the
+/// figures were made with, and its memory copy bandwidth.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Machine {
+    /// The CPU's model name ([`cpu_model`]).
+    pub cpu: String,
+    pub cores: usize,
+    pub threads: usize,
+    /// [`copy_bandwidth_gb_s`], GB/s.
+    pub copy_gb_s: f64,
+}
+
+impl Machine {
+    /// This machine, with `threads` the worker threads the figures are made with.
+    pub fn here(threads: usize) -> Self {
+        Self {
+            cpu: cpu_model(),
+            cores: std::thread::available_parallelism().map_or(0, |n| n.get()),
+            threads,
+            copy_gb_s: copy_bandwidth_gb_s(),
+        }
+    }
+
+    /// The machine in one phrase with its bandwidth as `gb_s` says it (one figure, or the
+    /// range of several machines of this kind): `AMD EPYC 7B13 (2 cores, 2 threads, memory
+    /// copy 11.2 GB/s)`.
+    pub fn with_bandwidth(&self, gb_s: &str) -> String {
+        let (cpu, cores, threads) = (&self.cpu, self.cores, self.threads);
+        format!("{cpu} ({cores} cores, {threads} threads, memory copy {gb_s} GB/s)")
+    }
+}
+
+/// The machine in one phrase ([`Machine::with_bandwidth`], to a tenth of a GB/s).
+impl std::fmt::Display for Machine {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.with_bandwidth(&format!("{:.1}", self.copy_gb_s)))
+    }
 }
 
 #[cfg(test)]
@@ -74,7 +102,7 @@ mod tests {
 
     #[test]
     fn the_machine_line_names_a_cpu_and_a_plausible_bandwidth() {
-        let line = describe(2);
+        let line = Machine::here(2).to_string();
         assert!(
             line.contains("2 threads") && line.contains("GB/s"),
             "{line}"

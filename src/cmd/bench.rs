@@ -22,7 +22,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         args.steps,
         args.warmup,
         crate::sim::transfer::grid_to_particles_mode(),
-        crate::machine::describe(rayon::current_num_threads()),
+        crate::machine::Machine::here(rayon::current_num_threads()),
     );
     let bands: Vec<Option<BandMode>> = match args.band.is_empty() {
         true => vec![None],

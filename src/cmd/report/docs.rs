@@ -2,7 +2,8 @@
 //! hand, so that no figure in the docs is older than the code it describes.
 //!
 //! Writes `docs/results.md` (every table of `report.md`, under a header that says when, at
-//! which commit, on what machine and by which command it was made), `docs/results/` (the
+//! which commit, on what machines its runs ran and by which command it was made
+//! ([`Provenance`])), `docs/results/` (the
 //! plots as PNG and `report.csv`) and the headline table of `README.md`, between its
 //! [`BEGIN`] and [`END`] markers, with the same header line. The tests compare the two
 //! headers, so the README cannot quote a run the results page does not hold. The paper's
@@ -12,8 +13,10 @@
 use super::measure::Measured;
 use super::output::cell;
 use crate::cmd::cli::Matrix;
+use crate::machine::Machine;
 use crate::methods::MethodKind;
 use anyhow::{bail, Context, Result};
+use std::collections::BTreeMap;
 use std::fmt::Write;
 use std::path::{Path, PathBuf};
 
@@ -84,15 +87,85 @@ impl DocsTarget {
     }
 }
 
-/// When, where and how the figures were made: the first line of both generated texts.
-pub fn provenance(command: &str) -> String {
-    format!(
-        "Generated {} at commit `{}` (cellflip {}) on {} by `cellflip {command}`.",
-        utc_date(),
-        commit(),
-        env!("CARGO_PKG_VERSION"),
-        crate::machine::describe(rayon::current_num_threads()),
-    )
+/// When, at which commit and by which command a report is made: read when it starts, since
+/// the checkout may move on during a run of a quarter of an hour (or a sweep of days).
+pub struct Provenance {
+    date: String,
+    commit: String,
+    command: String,
+}
+
+impl Provenance {
+    /// Now, at the checkout's commit, by `command` (as typed after `cellflip`).
+    pub fn now(command: &str) -> Self {
+        Self {
+            date: utc_date(),
+            commit: commit(),
+            command: command.into(),
+        }
+    }
+
+    /// The first line of both generated texts: when, where and how the figures of `results`
+    /// were made, on the machines that ran them ([`machines`]).
+    pub fn line(&self, results: &[Measured]) -> String {
+        format!(
+            "Generated {} at commit `{}` (cellflip {}) on {} by `cellflip {}`.",
+            self.date,
+            self.commit,
+            env!("CARGO_PKG_VERSION"),
+            machines(results),
+            self.command
+        )
+    }
+}
+
+/// The machines that ran `results` (at least one), as each result keeps its own: the one kind
+/// of machine ([`kinds`]), or for several how many jobs ran on each, the most first:
+/// `several machines (2 jobs on X, 1 job on Y)`.
+fn machines(results: &[Measured]) -> String {
+    assert!(!results.is_empty(), "the provenance of a report of no run");
+    match kinds(results).as_slice() {
+        [(_, one)] => one.clone(),
+        several => {
+            let jobs = |n: usize| format!("{n} job{}", if n == 1 { "" } else { "s" });
+            let each: Vec<String> = (several.iter())
+                .map(|(n, what)| format!("{} on {what}", jobs(*n)))
+                .collect();
+            format!("several machines ({})", each.join(", "))
+        }
+    }
+}
+
+/// The kinds of machine (CPU model, cores and threads) that ran `results`, each with how many
+/// and its copy bandwidth, a range where its runs measured several (it moves from run to run,
+/// and between machines of one kind); the most first. Results kept before results recorded
+/// their machine ran on "a machine not recorded".
+fn kinds(results: &[Measured]) -> Vec<(usize, String)> {
+    let mut kinds: BTreeMap<(&str, usize, usize), (&Machine, Vec<f64>)> = BTreeMap::new();
+    for x in results.iter().filter_map(|m| m.machine.as_ref()) {
+        let kind = kinds.entry((&x.cpu, x.cores, x.threads));
+        kind.or_insert((x, vec![])).1.push(x.copy_gb_s);
+    }
+    let mut named: Vec<(usize, String)> = (kinds.values())
+        .map(|(x, gb_s)| (gb_s.len(), x.with_bandwidth(&range(gb_s))))
+        .collect();
+    let unrecorded = results.iter().filter(|m| m.machine.is_none()).count();
+    if unrecorded > 0 {
+        named.push((unrecorded, "a machine not recorded".into()));
+    }
+    named.sort_by_key(|(n, _)| std::cmp::Reverse(*n));
+    named
+}
+
+/// The lowest and the highest of `gb_s`, to a tenth: one figure when they round alike.
+fn range(gb_s: &[f64]) -> String {
+    let lo = gb_s.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = gb_s.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let (lo, hi) = (format!("{lo:.1}"), format!("{hi:.1}"));
+    match lo == hi {
+        true => lo,
+        false => format!("{lo} to {hi}"),
+    }
 }
 
 /// The README's headline: per method, volume range, volume error and cost on the 2D and 3D
@@ -181,7 +254,62 @@ fn civil_from_days(z: i64) -> (i64, u32, u32) {
 
 #[cfg(test)]
 mod tests {
-    use super::civil_from_days;
+    use super::*;
+    use crate::cmd::report::options::tests::args;
+
+    /// One kind of machine (CPU model, cores, threads) is named once, with the range of its
+    /// bandwidths; several are counted, the most first; results that did not record their
+    /// machine are counted as such.
+    #[test]
+    fn the_provenance_names_the_machines_that_ran_the_results() {
+        let spec = &crate::cmd::report::matrix(&args("--scenes dam-2d --methods flip")).unwrap()[0];
+        let ran = |on: &[Option<Machine>]| {
+            let results: Vec<Measured> = (on.iter())
+                .map(|x| Measured {
+                    machine: x.clone(),
+                    ..Measured::new(spec)
+                })
+                .collect();
+            machines(&results)
+        };
+        let epyc = Machine {
+            cpu: "AMD EPYC 7B13".into(),
+            cores: 2,
+            threads: 2,
+            copy_gb_s: 22.6,
+        };
+        let at = |copy_gb_s| {
+            Some(Machine {
+                copy_gb_s,
+                ..epyc.clone()
+            })
+        };
+        let one = "AMD EPYC 7B13 (2 cores, 2 threads, memory copy";
+        assert_eq!(ran(&[at(22.6)]), format!("{one} 22.6 GB/s)"));
+        assert_eq!(ran(&[at(22.64), at(22.55)]), format!("{one} 22.6 GB/s)"));
+        assert_eq!(
+            ran(&[at(22.6), at(11.24), at(20.0)]),
+            format!("{one} 11.2 to 22.6 GB/s)")
+        );
+        let xeon = Machine {
+            cpu: "Intel(R) Xeon(R) CPU E5-2680 v4 @ 2.40GHz".into(),
+            cores: 28,
+            threads: 4,
+            copy_gb_s: 9.0,
+        };
+        let one_thread = Machine {
+            threads: 1,
+            ..epyc.clone()
+        };
+        assert_eq!(
+            ran(&[None, at(22.6), Some(xeon), at(20.0), None, Some(one_thread), None]),
+            "several machines (3 jobs on a machine not recorded, \
+             2 jobs on AMD EPYC 7B13 (2 cores, 2 threads, memory copy 20.0 to 22.6 GB/s), \
+             1 job on AMD EPYC 7B13 (2 cores, 1 threads, memory copy 22.6 GB/s), \
+             1 job on Intel(R) Xeon(R) CPU E5-2680 v4 @ 2.40GHz (28 cores, 4 threads, memory copy 9.0 GB/s))"
+        );
+        assert_eq!(ran(&[None, None]), "a machine not recorded");
+    }
 
     #[test]
     fn days_become_dates() {

@@ -75,17 +75,7 @@ pub fn run(
     files: Option<&RunFiles>,
     resumed: Option<Opened>,
 ) -> Measured {
-    let mut m = Measured {
-        spec: spec.clone(),
-        res: spec.res.unwrap_or(0),
-        seed: spec.seed.unwrap_or(0),
-        status: String::new(),
-        dim: 0,
-        values: BTreeMap::new(),
-        volume: vec![],
-        ke: vec![],
-        front: vec![],
-    };
+    let mut m = Measured::new(spec);
     match super::load(spec) {
         Err(e) => m.status = one_line(&format!("not run: {e:#}")),
         Ok(scene) => {

@@ -3,6 +3,7 @@
 //! ([`super::measure`]) and the runs kept under `--out` ([`super::saved`]).
 
 use super::RunSpec;
+use crate::machine::Machine;
 use crate::validation::MartinMoyceProbe;
 use std::collections::BTreeMap;
 
@@ -15,6 +16,9 @@ pub struct Measured {
     pub seed: u64,
     pub status: String,
     pub dim: usize,
+    /// The machine of the process that ran it (that finished it, when resumed); `None` for a
+    /// result kept before results recorded their machine.
+    pub machine: Option<Machine>,
     /// The values of [`super::measure::COLUMNS`] from `particles` on, then the method figures.
     pub values: BTreeMap<String, f64>,
     /// `(t, V/V* %)` and `(t, kinetic energy per unit mass)` after every step.
@@ -25,6 +29,22 @@ pub struct Measured {
 }
 
 impl Measured {
+    /// A run of `spec` not measured yet, on this machine (with the threads it has).
+    pub fn new(spec: &RunSpec) -> Self {
+        Self {
+            spec: spec.clone(),
+            res: spec.res.unwrap_or(0),
+            seed: spec.seed.unwrap_or(0),
+            status: String::new(),
+            dim: 0,
+            machine: Some(Machine::here(rayon::current_num_threads())),
+            values: BTreeMap::new(),
+            volume: vec![],
+            ke: vec![],
+            front: vec![],
+        }
+    }
+
     pub fn ok(&self) -> bool {
         self.status == "ok"
     }

@@ -290,7 +290,7 @@ pub fn report(args: &ReportArgs) -> Result<()> {
     check_loads(&jobs)?;
     // When and at which commit the binary ran, read before the matrix: the checkout may move on
     // during a run of a quarter of an hour.
-    let header = docs::provenance(&command());
+    let provenance = docs::Provenance::now(&command());
     let docs = docs_target(args)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create the output folder '{}'", args.out.display()))?;
@@ -302,7 +302,7 @@ pub fn report(args: &ReportArgs) -> Result<()> {
     if args.job.is_empty() {
         // An interrupted matrix would leave the manual with half its runs: keep the pages.
         let to_docs = docs.filter(|_| !interrupted);
-        write(args, &specs, &args.out, &header, to_docs.as_ref())?;
+        write(args, &specs, &args.out, &provenance, to_docs.as_ref())?;
     }
     if interrupted {
         anyhow::bail!(
@@ -317,9 +317,9 @@ pub fn report(args: &ReportArgs) -> Result<()> {
 /// `--merge DIR`: the report (with `--docs`, the manual's pages) of the matrix `args` ask for
 /// ([`sweep::merged`]) from the results kept in `dir`, nothing run.
 fn merge(args: &ReportArgs, dir: &Path) -> Result<()> {
-    let header = docs::provenance(&command());
+    let provenance = docs::Provenance::now(&command());
     let specs = matrix(args)?;
-    write(args, &specs, dir, &header, docs_target(args)?.as_ref())
+    write(args, &specs, dir, &provenance, docs_target(args)?.as_ref())
 }
 
 /// With `--docs`, the manual's pages in the folder the command runs from (checked first).
@@ -330,16 +330,18 @@ fn docs_target(args: &ReportArgs) -> Result<Option<docs::DocsTarget>> {
     }
 }
 
-/// Writes the report of the results kept in `dir` there (or the manual's pages), lists the
-/// jobs without a result and says where it all went.
+/// Writes the report of the results kept in `dir` there (or the manual's pages), under the
+/// provenance line of the machines that ran them, lists the jobs without a result and says
+/// where it all went.
 fn write(
     args: &ReportArgs,
     specs: &[RunSpec],
     dir: &Path,
-    header: &str,
+    provenance: &docs::Provenance,
     docs: Option<&docs::DocsTarget>,
 ) -> Result<()> {
     let (results, missing) = sweep::gather(dir, specs, &options::MatrixOptions::of(args))?;
+    let header = provenance.line(&results);
     for (spec, why) in &missing {
         eprintln!(
             "missing: {} {} {}: {why}",
@@ -350,8 +352,8 @@ fn write(
     }
     let not_run = sweep::not_run(&missing)?;
     match docs {
-        Some(target) => write_docs(target, specs, &results, header, &not_run)?,
-        None => write_all(dir, specs, &results, header, &not_run)?,
+        Some(target) => write_docs(target, specs, &results, &header, &not_run)?,
+        None => write_all(dir, specs, &results, &header, &not_run)?,
     }
     if !args.quiet {
         let failed = results.iter().filter(|m| !m.ok());
@@ -512,4 +514,48 @@ fn write_docs(
     std::fs::write(&target.page, text)
         .with_context(|| format!("cannot write '{}'", target.page.display()))?;
     target.write_headline(&docs::headline(results, header))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::machine::Machine;
+    use options::tests::args;
+
+    /// A merge names the machines that ran its jobs, as each result keeps its own, not the one
+    /// that merges them; a result kept before results recorded their machine still merges,
+    /// "on a machine not recorded".
+    #[test]
+    fn a_merge_names_the_machines_that_ran_its_jobs() {
+        let dir = std::env::temp_dir().join(format!("cellflip-merge-{}", std::process::id()));
+        let line = "--scenes dam-2d --methods flip,ccp,idp --res 24 --duration 0.05 -q --merge";
+        let args = args(&format!("{line} {}", dir.display()));
+        let specs = matrix(&args).unwrap();
+        let node = |cpu: &str, copy_gb_s| {
+            Some(Machine {
+                cpu: cpu.into(),
+                cores: 64,
+                threads: 8,
+                copy_gb_s,
+            })
+        };
+        let machines = [node("node-a", 30.0), node("node-b", 12.5), None];
+        for (spec, machine) in specs.iter().zip(machines) {
+            let files = saved::RunFiles::of(&dir, spec, &options::MatrixOptions::of(&args));
+            let m = Measured {
+                status: "ok".into(),
+                machine,
+                ..Measured::new(spec)
+            };
+            saved::save_result(&files, &m).unwrap();
+        }
+        report(&args).unwrap();
+        let md = std::fs::read_to_string(dir.join("report.md")).unwrap();
+        let line = md.lines().find(|l| l.starts_with("Generated ")).unwrap();
+        let on = " on several machines (1 job on node-a (64 cores, 8 threads, memory copy 30.0 \
+                  GB/s), 1 job on node-b (64 cores, 8 threads, memory copy 12.5 GB/s), 1 job on a \
+                  machine not recorded) by `cellflip ";
+        assert!(line.contains(on), "{line}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }

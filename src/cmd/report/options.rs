@@ -103,11 +103,12 @@ pub fn shell_word(w: &str) -> String {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use clap::Parser;
 
-    fn args(line: &str) -> ReportArgs {
+    /// `cellflip report` with the options of `line` (split at spaces).
+    pub fn args(line: &str) -> ReportArgs {
         let words = ["cellflip", "report"]
             .into_iter()
             .chain(line.split_whitespace());

@@ -401,6 +401,7 @@ mod tests {
             seed: 1,
             status: "ok".into(),
             dim: 3,
+            machine: None,
             values: [("n_mean", n), ("held_mean", held)]
                 .map(|(k, v)| (k.to_string(), v))
                 .into(),

@@ -10,6 +10,7 @@ use super::measured::{Gathered, Measured};
 use super::options::MatrixOptions;
 use super::RunSpec;
 use crate::checkpoint::{Checkpoints, Opened, Origin};
+use crate::machine::Machine;
 use crate::metrics::{Stage, StageTimes};
 use crate::runner::Summary;
 use crate::scene::Scene;
@@ -74,6 +75,9 @@ pub fn save_result(files: &RunFiles, m: &Measured) -> Result<()> {
     w.meta("res", m.res.to_string());
     w.meta("seed", m.seed.to_string());
     w.meta("dim", m.dim.to_string());
+    if let Some(machine) = &m.machine {
+        write_machine(&mut w, machine);
+    }
     let names: Vec<&str> = m.values.keys().map(String::as_str).collect();
     w.meta("values", names.join("\n"));
     w.owned(
@@ -103,20 +107,16 @@ pub fn load_result(path: &Path, spec: &RunSpec) -> Result<Option<Measured>> {
                 "kept by another build ({program})"
             )));
         }
-        let number = |k: &str| -> Result<u64, SnapshotError> {
-            let v = r.meta(k)?;
-            v.parse()
-                .map_err(|_| SnapshotError::Header(format!("meta.{k} is '{v}'")))
-        };
         let names = r.meta("values")?;
         let values = r.slice::<f64>("values", None)?;
         let names: Vec<&str> = names.split('\n').filter(|n| !n.is_empty()).collect();
         Ok(Measured {
             spec: spec.clone(),
-            res: number("res")? as usize,
-            seed: number("seed")?,
+            res: parsed(&r, "res")?,
+            seed: parsed(&r, "seed")?,
             status: r.meta("status")?.to_string(),
-            dim: number("dim")? as usize,
+            dim: parsed(&r, "dim")?,
+            machine: read_machine(&r)?,
             values: names.iter().map(|n| n.to_string()).zip(values).collect(),
             volume: read_pairs(&r, "volume")?,
             ke: read_pairs(&r, "ke")?,
@@ -126,6 +126,35 @@ pub fn load_result(path: &Path, spec: &RunSpec) -> Result<Option<Measured>> {
     read()
         .map(Some)
         .with_context(|| format!("'{}'", path.display()))
+}
+
+/// The machine that ran a result, under `machine.*`.
+fn write_machine(w: &mut Writer<'_>, machine: &Machine) {
+    w.meta("machine.cpu", &*machine.cpu);
+    w.meta("machine.cores", machine.cores.to_string());
+    w.meta("machine.threads", machine.threads.to_string());
+    w.meta("machine.copy_gb_s", machine.copy_gb_s.to_string());
+}
+
+/// The machine [`write_machine`] kept; `None` in a result kept before results recorded it
+/// (no `machine.cpu`).
+fn read_machine(r: &Reader) -> Result<Option<Machine>, SnapshotError> {
+    let Ok(cpu) = r.meta("machine.cpu") else {
+        return Ok(None);
+    };
+    Ok(Some(Machine {
+        cpu: cpu.to_string(),
+        cores: parsed(r, "machine.cores")?,
+        threads: parsed(r, "machine.threads")?,
+        copy_gb_s: parsed(r, "machine.copy_gb_s")?,
+    }))
+}
+
+/// The metadata string `k` read as a number.
+fn parsed<T: std::str::FromStr>(r: &Reader, k: &str) -> Result<T, SnapshotError> {
+    let v = r.meta(k)?;
+    v.parse()
+        .map_err(|_| SnapshotError::Header(format!("meta.{k} is '{v}'")))
 }
 
 /// The matrix a result kept by this build was planned from; `None` for a file that is not
@@ -268,4 +297,68 @@ pub fn restore_progress(
         .collect();
     let spent = Duration::from_secs_f64(r.scalar("report.spent")?);
     Ok((r.scalar("report.lowest")?, spent))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cmd::report::Source;
+    use crate::methods::MethodKind;
+
+    fn spec() -> RunSpec {
+        RunSpec {
+            label: "dam-2d".into(),
+            source: Source::Named("dam-2d".into()),
+            method: MethodKind::ALL[0],
+            res: Some(24),
+            seed: None,
+            duration: Some(0.05),
+            accuracy: true,
+            stability: false,
+            budget: None,
+        }
+    }
+
+    /// A kept result names the machine that ran it; one kept before results did (the keys of
+    /// those a sweep at commit 3b9a88e kept: no `matrix`, no `machine.*`) still reads, with
+    /// its machine not recorded.
+    #[test]
+    fn a_result_keeps_its_machine_and_an_older_one_reads_without() {
+        let dir = std::env::temp_dir().join(format!("cellflip-saved-{}", std::process::id()));
+        let files = RunFiles::of(&dir, &spec(), &MatrixOptions::default());
+        let machine = Machine {
+            cpu: "Intel(R) Xeon(R) CPU E5-2680 v4 @ 2.40GHz".into(),
+            cores: 28,
+            threads: 4,
+            copy_gb_s: 9.876_543_21,
+        };
+        let m = Measured {
+            status: "ok".into(),
+            machine: Some(machine.clone()),
+            ..Measured::new(&spec())
+        };
+        save_result(&files, &m).unwrap();
+        let kept = load_result(&files.result, &spec()).unwrap().unwrap();
+        assert_eq!(kept.machine, Some(machine));
+
+        let mut w = Writer::default();
+        for (k, v) in [
+            ("program", crate::checkpoint::build()),
+            ("status", "ok"),
+            ("res", "24"),
+            ("seed", "1"),
+            ("dim", "2"),
+            ("values", "steps\nvolume_error"),
+        ] {
+            w.meta(k, v);
+        }
+        w.owned("values", &[2], vec![12.0, 0.5]);
+        for name in ["volume", "ke", "front"] {
+            w.owned::<f64>(name, &[0, 2], vec![]);
+        }
+        w.write_file(&files.result).unwrap();
+        let old = load_result(&files.result, &spec()).unwrap().unwrap();
+        assert_eq!((&old.machine, old.get("steps")), (&None, 12.0));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }
