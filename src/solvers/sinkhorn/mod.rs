@@ -71,6 +71,10 @@ use std::ops::{AddAssign, Mul};
 /// below the tolerances `delta` the iteration is run to.
 pub const KERNEL_CUTOFF: f64 = 27.631_021_115_928_547;
 
+/// Iterations over which the column error may grow under over-relaxation (it overshoots
+/// before it settles); after them a growing error falls back to plain Sinkhorn.
+const RELAXED_START: u32 = 10;
+
 /// Slots per task of the column updates.
 const SLOTS_PER_TASK: usize = 2048;
 
@@ -302,16 +306,19 @@ impl<const D: usize> Transport<D> {
         if let Some(w) = warm {
             t.start_from(w)?;
         }
-        let mut next = vec![];
+        let (mut next, mut relax) = (vec![], true);
         loop {
             t.update_rows()?;
             let c = t.kernel.columns(0.0, |p| t.u[p]);
-            let normal;
-            (t.error, normal) = t.column_update(&c, &mut next);
+            let (last, normal);
+            (last, (t.error, normal)) = (t.error, t.column_update(&c, &mut next, relax));
             t.converged = t.error <= s.delta;
             if t.converged || t.iterations >= s.max_iterations {
                 break;
             }
+            // Past the first steps, an error that grows ends the over-relaxation: plain
+            // Sinkhorn from there on, which converges from any start (Sinkhorn 1967).
+            relax &= t.iterations <= RELAXED_START || t.error <= last;
             t.adopt(&mut next, normal)?;
         }
         Ok(t)
@@ -343,7 +350,7 @@ impl<const D: usize> Transport<D> {
             .collect();
         let c = self.kernel.columns(0.0, |p| self.u[p]);
         let mut next = vec![];
-        let (_, normal) = self.column_update(&c, &mut next);
+        let (_, normal) = self.column_update(&c, &mut next, false);
         self.adopt(&mut next, normal)
     }
 
@@ -399,15 +406,37 @@ impl<const D: usize> Transport<D> {
     /// The column update, every cell's marginal met, from `C_j` (per slot in `c`), into
     /// `next`; returns the largest relative column error of the current scalings and whether
     /// the new ones are all finite and positive (one pass for both).
-    fn column_update(&self, c: &[f64], next: &mut Vec<f64>) -> (f64, bool) {
+    fn column_update(&self, c: &[f64], next: &mut Vec<f64>, relax: bool) -> (f64, bool) {
         next.resize(self.v.len(), 0.0);
         (next.par_iter_mut().zip(&self.v).zip(c).enumerate())
             .with_min_len(SLOTS_PER_TASK)
             .map(|(k, ((next, &v), &c))| {
-                *next = self.column_scaling(k, c, v);
+                let exact = self.column_scaling(k, c, v);
+                *next = match relax {
+                    true => self.overrelaxed(v, exact),
+                    false => exact,
+                };
                 (self.column_error(k, v * c, v), next.is_normal())
             })
             .reduce(|| (0.0, true), |(a, p), (b, q)| (a.max(b), p && q))
+    }
+
+    /// The over-relaxed column scaling `v (v* / v)^omega` from the current `v` and the exact
+    /// update `v*`, `omega = 3/2` (`g <- g + omega (g* - g)` on `g = log v`; Thibault,
+    /// Chizat, Dossal, Papadakis, "Overrelaxed Sinkhorn-Knopp algorithm for regularized
+    /// optimal transport", Algorithms 14(5), 2021; Lehmann et al., "A note on overrelaxation
+    /// in the Sinkhorn algorithm", Optim. Lett. 16, 2022, prove global convergence for
+    /// `omega` in a range above 1), under the capacity form no more than 1. The value of
+    /// `omega` is ours, measured: on dam-3d at 48^3 (steps 151-160, 34.5 iterations a step
+    /// unrelaxed) 1.3, 1.5, 1.65 and 1.8 took 25.6, 20.4, 21.9 and 23.6
+    /// (docs/benchmarks/powerpic.md); 3/2 costs a square root, not a power.
+    fn overrelaxed(&self, v: f64, exact: f64) -> f64 {
+        let ratio = exact / v;
+        let relaxed = v * ratio * ratio.sqrt();
+        match self.air {
+            Air::Capacity => relaxed.min(1.0),
+            Air::Baseline { .. } => relaxed,
+        }
     }
 
     /// The column scaling `v_j` that makes slot `k`'s column meet its marginal, given
