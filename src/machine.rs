@@ -84,9 +84,14 @@ impl Machine {
     /// range of several machines of this kind): `AMD EPYC 7B13 (2 cores, 2 threads, memory
     /// copy 11.2 GB/s)`.
     pub fn with_bandwidth(&self, gb_s: &str) -> String {
-        let (cpu, cores, threads) = (&self.cpu, self.cores, self.threads);
-        format!("{cpu} ({cores} cores, {threads} threads, memory copy {gb_s} GB/s)")
+        let (cores, threads) = (count(self.cores, "core"), count(self.threads, "thread"));
+        format!("{} ({cores}, {threads}, memory copy {gb_s} GB/s)", self.cpu)
     }
+}
+
+/// `n` things, `thing` in the plural but for one.
+pub fn count(n: usize, thing: &str) -> String {
+    format!("{n} {thing}{}", if n == 1 { "" } else { "s" })
 }
 
 /// The machine in one phrase ([`Machine::with_bandwidth`], to a tenth of a GB/s).
@@ -107,6 +112,8 @@ mod tests {
             line.contains("2 threads") && line.contains("GB/s"),
             "{line}"
         );
+        let one = Machine::here(1).to_string();
+        assert!(one.contains(" 1 thread,"), "{one}");
         // Anything a machine of ours can do: DDR memory copies at 1 to 1000 GB/s.
         let bw = copy_bandwidth_gb_s();
         assert!((1.0..1000.0).contains(&bw), "{bw} GB/s");

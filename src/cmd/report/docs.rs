@@ -13,7 +13,7 @@
 use super::measure::Measured;
 use super::output::cell;
 use crate::cmd::cli::Matrix;
-use crate::machine::Machine;
+use crate::machine::{count, Machine};
 use crate::methods::MethodKind;
 use anyhow::{bail, Context, Result};
 use std::collections::BTreeMap;
@@ -127,9 +127,8 @@ fn machines(results: &[Measured]) -> String {
     match kinds(results).as_slice() {
         [(_, one)] => one.clone(),
         several => {
-            let jobs = |n: usize| format!("{n} job{}", if n == 1 { "" } else { "s" });
             let each: Vec<String> = (several.iter())
-                .map(|(n, what)| format!("{} on {what}", jobs(*n)))
+                .map(|(n, what)| format!("{} on {what}", count(*n, "job")))
                 .collect();
             format!("several machines ({})", each.join(", "))
         }
@@ -305,7 +304,7 @@ mod tests {
             ran(&[None, at(22.6), Some(xeon), at(20.0), None, Some(one_thread), None]),
             "several machines (3 jobs on a machine not recorded, \
              2 jobs on AMD EPYC 7B13 (2 cores, 2 threads, memory copy 20.0 to 22.6 GB/s), \
-             1 job on AMD EPYC 7B13 (2 cores, 1 threads, memory copy 22.6 GB/s), \
+             1 job on AMD EPYC 7B13 (2 cores, 1 thread, memory copy 22.6 GB/s), \
              1 job on Intel(R) Xeon(R) CPU E5-2680 v4 @ 2.40GHz (28 cores, 4 threads, memory copy 9.0 GB/s))"
         );
         assert_eq!(ran(&[None, None]), "a machine not recorded");
