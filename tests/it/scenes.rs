@@ -125,8 +125,12 @@ fn every_method_runs_every_built_in_scene_for_a_few_steps() {
                 }
             };
             match three {
-                false => drop(run::<2>(&scene, Some(5), |_, r| registered(r.method.figures()))),
-                true => drop(run::<3>(&scene, Some(3), |_, r| registered(r.method.figures()))),
+                false => drop(run::<2>(&scene, Some(5), |_, r| {
+                    registered(r.method.figures())
+                })),
+                true => drop(run::<3>(&scene, Some(3), |_, r| {
+                    registered(r.method.figures())
+                })),
             }
         }
     }

@@ -116,7 +116,10 @@ impl<const D: usize> Kernel<D> {
     ) -> Result<Self, SinkhornError> {
         const { assert!(D <= 3, "a run names its line by at most two outer axes") };
         let ball = Ball::new(tg, points, s);
-        assert!(ball.side() < 256, "a run's place in its box is a byte: epsilon / h^2 too large");
+        assert!(
+            ball.side() < 256,
+            "a run's place in its box is a byte: epsilon / h^2 too large"
+        );
         let order = sorted_by_cell(tg, points);
         let mut rank = vec![0; points.len()];
         (order.iter().enumerate()).for_each(|(i, &p)| rank[p as usize] = i as u32);
@@ -222,7 +225,12 @@ impl<const D: usize> Kernel<D> {
                         _ => {
                             r.run.extend(open.take());
                             let (start, len) = (a as u8, 1);
-                            open = (k != NONE).then_some(Run { slot: k, start, len, at });
+                            open = (k != NONE).then_some(Run {
+                                slot: k,
+                                start,
+                                len,
+                                at,
+                            });
                         }
                     }
                 }
@@ -493,8 +501,8 @@ pub(super) fn cell_of<const D: usize>(tg: &TransportGrid<D>, x: &Vector<D>) -> [
 
 #[cfg(test)]
 mod tests {
-    use super::*;
     use super::super::KERNEL_CUTOFF;
+    use super::*;
     use crate::grid::Grid;
     use rand::rngs::StdRng;
     use rand::{Rng, SeedableRng};
@@ -537,11 +545,17 @@ mod tests {
                 .collect();
             let cells = |l: &[(usize, f64)]| l.iter().map(|c| c.0).collect::<Vec<_>>();
             let inner = cells(&written_out);
-            assert!(inner.iter().all(|j| cells(&listed).contains(j)), "point {p}");
+            assert!(
+                inner.iter().all(|j| cells(&listed).contains(j)),
+                "point {p}"
+            );
             for (j, kpj) in listed {
                 let d2 = (tg.center(j) - x).norm_squared();
                 assert!(tg.is_free(j), "point {p}: blocked cell {j} listed");
-                assert!(d2 <= KERNEL_CUTOFF * epsilon * (1.0 + 1e-12), "point {p}, cell {j}");
+                assert!(
+                    d2 <= KERNEL_CUTOFF * epsilon * (1.0 + 1e-12),
+                    "point {p}, cell {j}"
+                );
                 let exact = (-d2 / epsilon).exp();
                 assert!((kpj / exact - 1.0).abs() < 1e-12, "point {p}, cell {j}");
             }

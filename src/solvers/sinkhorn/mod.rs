@@ -300,7 +300,9 @@ impl<const D: usize> Transport<D> {
                 capacity,
             });
         }
-        let storage = warm.as_mut().map(|w| std::mem::replace(&mut w.kernel, Kernel::empty()));
+        let storage = warm
+            .as_mut()
+            .map(|w| std::mem::replace(&mut w.kernel, Kernel::empty()));
         let kernel = Kernel::new(tg, points, s, storage.unwrap_or_else(Kernel::empty))?;
         let mut t = Self::new(tg, air, kernel, volume);
         if let Some(w) = warm {
