@@ -306,7 +306,6 @@ impl<const D: usize> Active<D> {
 }
 
 /// The dense numbers of an [`Active`] set's cells ([`Active::numbers`]).
-#[derive(Clone, Debug, Default)]
 pub struct CellNumbers {
     n0: usize,
     /// Per axis from 1 on, the step between lines of cells along it.
