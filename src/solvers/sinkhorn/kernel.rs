@@ -305,6 +305,7 @@ impl<const D: usize> Kernel<D> {
 
     /// `sum_j K_pj v_j` of every point, by point; the points are visited in sorted order
     /// (neighbours read the same `v_j`).
+    #[cfg(test)]
     pub(super) fn row_sums(&self, v: &[f64]) -> Vec<f64> {
         let sorted: Vec<f64> = (0..self.order.len())
             .into_par_iter()
@@ -325,24 +326,64 @@ impl<const D: usize> Kernel<D> {
             .map(|c| {
                 let mut acc = vec![zero; c.window.len()];
                 for i in c.points.clone() {
-                    let wp = w(self.order[i] as usize);
-                    let (runs, factor) = self.runs_at(i);
-                    for run in runs {
-                        let kernel = self.outer(run, factor);
-                        let fx = &factor[run.start as usize..][..run.len as usize];
-                        let at = run.slot as usize - c.window.start;
-                        for (acc, fx) in acc[at..at + fx.len()].iter_mut().zip(fx) {
-                            *acc += wp * (kernel * fx);
-                        }
-                    }
+                    self.scatter_row(i, w(self.order[i] as usize), c, &mut acc);
                 }
                 acc
             })
             .collect();
+        self.add_windows(zero, &parts)
+    }
+
+    /// A Sinkhorn row update and the column sums of its result in one pass over the rows
+    /// (each row is read once, not twice): every point's row scaling `u_p = volume / sum_j
+    /// K_pj v_j`, by point, and every slot's `C_j = sum_p K_pj u_p`. The numbers are those of
+    /// [`Self::row_sums`] then [`Self::columns`] with `w = u`, bit for bit.
+    pub(super) fn rows_then_columns(&self, v: &[f64], volume: f64) -> (Vec<f64>, Vec<f64>) {
+        let parts: Vec<(Vec<f64>, Vec<f64>)> = (self.chunks.par_iter())
+            .map(|c| {
+                let mut acc = vec![0.0; c.window.len()];
+                let u: Vec<f64> = (c.points.clone())
+                    .map(|i| {
+                        let u = volume / self.row_sum_at(i, v);
+                        self.scatter_row(i, u, c, &mut acc);
+                        u
+                    })
+                    .collect();
+                (u, acc)
+            })
+            .collect();
+        let sorted: Vec<f64> = parts.iter().flat_map(|(u, _)| u).copied().collect();
+        let u = self.rank.par_iter().map(|&i| sorted[i as usize]).collect();
+        let sums: Vec<Vec<f64>> = parts.into_iter().map(|(_, acc)| acc).collect();
+        (u, self.add_windows(0.0, &sums))
+    }
+
+    /// Adds `w K_pj` of the point at sorted place `i` into the window `acc` of its chunk `c`.
+    #[inline]
+    fn scatter_row<T>(&self, i: usize, w: T, c: &Chunk, acc: &mut [T])
+    where
+        T: Copy + AddAssign + Mul<f64, Output = T>,
+    {
+        let (runs, factor) = self.runs_at(i);
+        for run in runs {
+            let kernel = self.outer(run, factor);
+            let fx = &factor[run.start as usize..][..run.len as usize];
+            let at = run.slot as usize - c.window.start;
+            for (acc, fx) in acc[at..at + fx.len()].iter_mut().zip(fx) {
+                *acc += w * (kernel * fx);
+            }
+        }
+    }
+
+    /// The chunks' windows `parts` added into one value per slot, in chunk order.
+    fn add_windows<T>(&self, zero: T, parts: &[Vec<T>]) -> Vec<T>
+    where
+        T: Copy + Send + Sync + AddAssign,
+    {
         let mut out = vec![zero; self.active.len()];
         (out.par_chunks_mut(SLOT_BLOCK).enumerate()).for_each(|(b, out)| {
             let block = b * SLOT_BLOCK..b * SLOT_BLOCK + out.len();
-            for (c, part) in self.chunks.iter().zip(&parts) {
+            for (c, part) in self.chunks.iter().zip(parts) {
                 let (lo, hi) = (block.start.max(c.window.start), block.end.min(c.window.end));
                 for k in lo..hi {
                     out[k - block.start] += part[k - c.window.start];
@@ -565,6 +606,11 @@ mod tests {
         assert!(sums.iter().zip(&rows).all(|(&a, &b)| close(a, b)));
         let cols = kernel.columns(0.0, |p| w[p]);
         assert!(cols.iter().zip(&columns).all(|(&a, &b)| close(a, b)));
+        // The fused row update and column sums: the same numbers as the two passes, bit for bit.
+        let (u, fused) = kernel.rows_then_columns(&v, 0.25);
+        let apart: Vec<f64> = sums.iter().map(|s| 0.25 / s).collect();
+        assert_eq!(u, apart);
+        assert_eq!(fused, kernel.columns(0.0, |p| apart[p]));
     }
 
     #[test]

@@ -310,8 +310,7 @@ impl<const D: usize> Transport<D> {
         }
         let (mut next, mut relax) = (vec![], true);
         loop {
-            t.update_rows()?;
-            let c = t.kernel.columns(0.0, |p| t.u[p]);
+            let c = t.update_rows()?;
             let (last, normal);
             (last, (t.error, normal)) = (t.error, t.column_update(&c, &mut next, relax));
             t.converged = t.error <= s.delta;
@@ -386,19 +385,19 @@ impl<const D: usize> Transport<D> {
         self.volume / self.kernel.row_sum(p, &self.v)
     }
 
-    /// Row update: every point's volume exact.
-    fn update_rows(&mut self) -> Result<(), SinkhornError> {
-        let (sums, volume) = (self.kernel.row_sums(&self.v), self.volume);
-        let normal = (self.u.par_iter_mut().zip(sums))
-            .with_min_len(ROW_GRAIN)
-            .map(|(u, sum)| {
-                *u = volume / sum;
-                u.is_normal()
-            })
-            .reduce(|| true, |a, b| a && b);
+    /// Row update, every point's volume exact; returns the column sums `C_j = sum_p K_pj u_p`
+    /// of the new `u` (one pass over the rows for both).
+    fn update_rows(&mut self) -> Result<Vec<f64>, SinkhornError> {
+        let c;
+        (self.u, c) = self.kernel.rows_then_columns(&self.v, self.volume);
         self.iterations += 1;
-        match normal {
-            true => Ok(()),
+        match self
+            .u
+            .par_iter()
+            .with_min_len(ROW_GRAIN)
+            .all(|u| u.is_normal())
+        {
+            true => Ok(c),
             false => Err(SinkhornError::Diverged {
                 iteration: self.iterations,
             }),
