@@ -84,6 +84,13 @@ struct Run {
     at: [u8; 2],
 }
 
+impl Run {
+    /// The slot after the run's last.
+    fn end(&self) -> usize {
+        self.slot as usize + self.len as usize
+    }
+}
+
 /// The runs of [`ROW_GRAIN`] consecutive sorted points: the `i`-th one's are
 /// `run[first[i]..first[i + 1]]`.
 #[derive(Clone, Debug, Default)]
@@ -108,6 +115,10 @@ impl<const D: usize> Kernel<D> {
 
     /// The kernel of `points` on `tg` (reusing the storage of `reuse`). A point with no free
     /// cell in its ball is refused ([`SinkhornError::KernelVanishes`], the first one).
+    ///
+    /// One walk over the balls: each piece of sorted points writes its factors and lists its
+    /// runs with the near cells' numbers, marking the cells it reaches; the reached cells are
+    /// then numbered as slots, and the runs renamed to them.
     pub(super) fn new(
         tg: &TransportGrid<D>,
         points: &[Vector<D>],
@@ -126,25 +137,32 @@ impl<const D: usize> Kernel<D> {
         let x: Vec<Vector<D>> = order.par_iter().map(|&p| points[p as usize]).collect();
         let (side, mut factor, mut runs) = (ball.side(), reuse.factor, reuse.runs);
         factor.resize(points.len() * D * side, 0.0);
-        (factor.par_chunks_mut(D * side).zip(&x))
-            .with_min_len(ROW_GRAIN)
-            .for_each(|(f, x)| ball.factors(x, s.epsilon, f));
+        runs.resize_with(x.len().div_ceil(ROW_GRAIN), Runs::default);
+        let reached: Vec<AtomicBool> = (0..ball.near.len()).map(|_| false.into()).collect();
+        (factor
+            .par_chunks_mut(ROW_GRAIN * D * side)
+            .zip(&mut runs)
+            .enumerate())
+        .for_each(|(c, (f, r))| {
+            let x = &x[c * ROW_GRAIN..(c * ROW_GRAIN + ROW_GRAIN).min(x.len())];
+            ball.walk(x, s.epsilon, f, r, &reached)
+        });
         let mut k = Self {
             side,
             order,
             rank,
             factor,
-            runs: vec![],
+            runs,
             active: vec![],
             chunks: vec![],
         };
-        let slot = k.number_slots(&ball, &x)?;
-        runs.resize_with(x.len().div_ceil(ROW_GRAIN), Runs::default);
-        (runs.par_iter_mut().enumerate()).for_each(|(c, r)| {
-            let points = c * ROW_GRAIN..(c * ROW_GRAIN + ROW_GRAIN).min(x.len());
-            k.list_runs(&ball, &x, &slot, points, r)
-        });
-        k.runs = runs;
+        let empty = (0..x.len())
+            .into_par_iter()
+            .filter(|&i| k.runs_at(i).0.is_empty());
+        if let Some(p) = empty.map(|i| k.order[i]).min() {
+            return Err(SinkhornError::KernelVanishes { point: p as usize });
+        }
+        k.number_slots(&ball, &reached);
         Ok(k)
     }
 
@@ -154,38 +172,10 @@ impl<const D: usize> Kernel<D> {
         &self.factor[i * D * self.side..(i + 1) * D * self.side]
     }
 
-    /// Finds the cells the balls reach (free ones), numbers them as slots in grid order, and
-    /// the chunks' windows of slots; returns each near cell's slot ([`NONE`] if unreached).
-    fn number_slots(&mut self, ball: &Ball<D>, x: &[Vector<D>]) -> Result<Vec<u32>, SinkhornError> {
-        let reached: Vec<AtomicBool> = (0..ball.near.len()).map(|_| false.into()).collect();
-        let n = x.len();
-        let size = (n / MIN_CHUNKS).clamp(CHUNK_POINTS.start, CHUNK_POINTS.end);
-        // Per chunk: the near numbers it reaches (lowest, highest) and its first point (by
-        // index) whose ball holds no free cell.
-        let found: Vec<(usize, usize, Option<u32>)> = (0..n.div_ceil(size))
-            .into_par_iter()
-            .map(|c| {
-                let (mut lo, mut hi, mut empty) = (usize::MAX, 0, None::<u32>);
-                for i in c * size..(c * size + size).min(n) {
-                    let mut any = false;
-                    for l in ball.lines(&x[i]) {
-                        for a in l.cells.clone().filter(|a| ball.tg.is_free(l.cell + a)) {
-                            let near = l.near + a - l.cells.start;
-                            reached[near].store(true, Ordering::Relaxed);
-                            (lo, hi, any) = (lo.min(near), hi.max(near), true);
-                        }
-                    }
-                    if !any {
-                        let p = self.order[i];
-                        empty = Some(empty.map_or(p, |e| e.min(p)));
-                    }
-                }
-                (lo, hi, empty)
-            })
-            .collect();
-        if let Some(p) = found.iter().filter_map(|f| f.2).min() {
-            return Err(SinkhornError::KernelVanishes { point: p as usize });
-        }
+    /// Numbers the `reached` near cells as slots in grid order, renames the runs' first cells
+    /// from near numbers to slots, and cuts the sorted points into the chunks of the column
+    /// sums with their windows of slots.
+    fn number_slots(&mut self, ball: &Ball<D>, reached: &[AtomicBool]) {
         let mut slot = vec![NONE; ball.near.len()];
         for (near, cell) in ball.near.cells().enumerate() {
             if reached[near].load(Ordering::Relaxed) {
@@ -193,51 +183,27 @@ impl<const D: usize> Kernel<D> {
                 self.active.push(cell as u32);
             }
         }
-        self.chunks = (found.iter().enumerate())
-            .map(|(c, &(lo, hi, _))| Chunk {
-                points: c * size..(c * size + size).min(n),
-                window: slot[lo] as usize..slot[hi] as usize + 1,
+        (self.runs.par_iter_mut().flat_map(|r| &mut r.run))
+            .for_each(|run| run.slot = slot[run.slot as usize]);
+        let n = self.order.len();
+        let size = (n / MIN_CHUNKS).clamp(CHUNK_POINTS.start, CHUNK_POINTS.end);
+        self.chunks = (0..n.div_ceil(size))
+            .into_par_iter()
+            .map(|c| {
+                let points = c * size..(c * size + size).min(n);
+                let rows = points.clone().map(|i| self.runs_at(i).0);
+                let lo = rows
+                    .clone()
+                    .map(|r| r[0].slot)
+                    .min()
+                    .expect("a chunk has points");
+                let end = rows.map(|r| r[r.len() - 1].end()).max();
+                Chunk {
+                    points,
+                    window: lo as usize..end.expect("a chunk has points"),
+                }
             })
             .collect();
-        Ok(slot)
-    }
-
-    /// Lists the runs of the sorted `points` into `r`: each line of a ball, cut at its
-    /// blocked cells (whose `slot` is [`NONE`]).
-    fn list_runs(
-        &self,
-        ball: &Ball<D>,
-        x: &[Vector<D>],
-        slot: &[u32],
-        points: Range<usize>,
-        r: &mut Runs,
-    ) {
-        (r.first.clear(), r.run.clear());
-        r.first.push(0);
-        for i in points {
-            for l in ball.lines(&x[i]) {
-                let at = std::array::from_fn(|k| l.at.get(k + 1).map_or(0, |&a| a as u8));
-                let mut open: Option<Run> = None;
-                for a in l.cells.clone() {
-                    let k = slot[l.near + a - l.cells.start];
-                    match open.as_mut() {
-                        Some(run) if k != NONE && run.slot + run.len as u32 == k => run.len += 1,
-                        _ => {
-                            r.run.extend(open.take());
-                            let (start, len) = (a as u8, 1);
-                            open = (k != NONE).then_some(Run {
-                                slot: k,
-                                start,
-                                len,
-                                at,
-                            });
-                        }
-                    }
-                }
-                r.run.extend(open);
-            }
-            r.first.push(r.run.len() as u32);
-        }
     }
 
     /// Each slot's cell: the free cells within the reach of some point, in grid order.
@@ -431,23 +397,63 @@ impl<'a, const D: usize> Ball<'a, D> {
         (lo, len)
     }
 
-    /// A point's factors `e^(-(x_k - x_j,k)^2 / eps)` along each axis over its box, into `f`
-    /// (`D` runs of [`Self::side`]).
-    fn factors(&self, x: &Vector<D>, epsilon: f64, f: &mut [f64]) {
-        let (lo, len) = self.bounds(x);
-        for (k, f) in f.chunks_mut(self.side()).enumerate() {
-            for (i, f) in (lo[k]..lo[k] + len[k]).zip(f) {
-                *f = (-((i as f64 + 0.5) * self.tg.h - x[k]).powi(2) / epsilon).exp();
+    /// Walks the balls of the sorted points `x`: writes each point's factors
+    /// `e^(-(x_k - x_j,k)^2 / eps)` along each axis over its box into `factor` (`D` runs of
+    /// [`Self::side`] a point) and lists its runs into `r`, each line of its ball cut at its
+    /// blocked cells, a run's first cell named by its near number; marks the cells reached.
+    fn walk(
+        &self,
+        x: &[Vector<D>],
+        epsilon: f64,
+        factor: &mut [f64],
+        r: &mut Runs,
+        reached: &[AtomicBool],
+    ) {
+        (r.first.clear(), r.run.clear());
+        r.first.push(0);
+        for (x, f) in x.iter().zip(factor.chunks_mut(D * self.side())) {
+            let (lo, len) = self.bounds(x);
+            for (k, f) in f.chunks_mut(self.side()).enumerate() {
+                for (i, f) in (lo[k]..lo[k] + len[k]).zip(f) {
+                    *f = ((i as f64 + 0.5) * self.tg.h - x[k]).powi(2);
+                }
             }
+            for l in self.lines(lo, len, f) {
+                let at = std::array::from_fn(|k| l.at.get(k + 1).map_or(0, |&a| a as u8));
+                let mut open: Option<Run> = None;
+                for a in l.cells.clone() {
+                    if !self.tg.is_free(l.cell + a) {
+                        r.run.extend(open.take());
+                        continue;
+                    }
+                    let near = l.near + a - l.cells.start;
+                    reached[near].store(true, Ordering::Relaxed);
+                    match open.as_mut() {
+                        Some(run) => run.len += 1,
+                        None => {
+                            let (slot, start, len) = (near as u32, a as u8, 1);
+                            open = Some(Run {
+                                slot,
+                                start,
+                                len,
+                                at,
+                            })
+                        }
+                    }
+                }
+                r.run.extend(open);
+            }
+            f.iter_mut().for_each(|f| *f = (-*f / epsilon).exp());
+            r.first.push(r.run.len() as u32);
         }
     }
 
-    /// The lines of the kernel's ball around the point at `x`, in grid order.
-    fn lines<'b>(&'b self, x: &'b Vector<D>) -> Lines<'b, D> {
-        let (lo, len) = self.bounds(x);
+    /// The lines of the kernel's ball in the box `lo`, `len`, in grid order, from the squared
+    /// distances `d2` along each axis over the box (as [`Self::walk`] lays them out).
+    fn lines<'b>(&'b self, lo: [usize; D], len: [usize; D], d2: &'b [f64]) -> Lines<'b, D> {
         Lines {
             ball: self,
-            x,
+            d2,
             lo,
             len,
             at: [0; D],
@@ -471,7 +477,8 @@ struct Line<const D: usize> {
 /// of the per-axis squares, the last axis first, as [`Kernel::outer`] multiplies the factors.
 struct Lines<'a, const D: usize> {
     ball: &'a Ball<'a, D>,
-    x: &'a Vector<D>,
+    /// `(x_j,k - x_k)^2` at the `a`-th cell of the box along axis `k`: `d2[k side + a]`.
+    d2: &'a [f64],
     /// The box: its first cell and its cells per axis.
     lo: [usize; D],
     len: [usize; D],
@@ -482,7 +489,7 @@ struct Lines<'a, const D: usize> {
 impl<const D: usize> Lines<'_, D> {
     /// `(x_j,k - x_k)^2` at the `a`-th cell of the box along axis `k`.
     fn d2(&self, k: usize, a: usize) -> f64 {
-        (((self.lo[k] + a) as f64 + 0.5) * self.ball.tg.h - self.x[k]).powi(2)
+        self.d2[k * self.ball.side() + a]
     }
 
     /// The odometer's next position; false after the last.
