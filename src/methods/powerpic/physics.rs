@@ -179,17 +179,18 @@ impl<const D: usize> FluidMethod<D> for PowerPicSim<D> {
         let plan = self.solve(s)?;
         let tg = &self.tg;
         let vel = &s.particles.vel;
-        let mass = plan.columns(0.0, |_| 1.0);
-        let momentum = plan.columns(Vector::<D>::zeros(), |p| vel[p]);
+        let sums = plan.columns(MassMomentum(0.0, Vector::zeros()), |p| {
+            MassMomentum(1.0, vel[p])
+        });
         let (mut centres, mut velocities, mut masses) = (vec![], vec![], vec![]);
-        for ((&j, &m), mv) in plan.active_cells().iter().zip(&mass).zip(&momentum) {
+        for (&j, &MassMomentum(m, mv)) in plan.active_cells().iter().zip(&sums) {
             if m > 0.0 {
                 centres.push(tg.center(j as usize));
                 velocities.push(mv / m);
                 masses.push(m);
             }
         }
-        self.fill = mass;
+        self.fill = sums.iter().map(|s| s.0).collect();
         self.plan = Some(plan);
         self.air_volume = self.air_in_liquid(s);
         Ok(transfer::weighted_to_grid(
@@ -338,6 +339,24 @@ impl<const D: usize> MethodRecording<D> for PowerPicSim<D> {}
 /// (`u_p`, `v_j`: exponentials of the dual potentials).
 fn scaling(x: &f64) -> Option<String> {
     (!(x.is_finite() && *x > 0.0)).then(|| format!("scaling {x} is not a finite positive number"))
+}
+
+/// A transport cell's mass and momentum, summed together in one pass over the plan's rows
+/// (each component as it would be alone).
+#[derive(Clone, Copy)]
+struct MassMomentum<const D: usize>(f64, Vector<D>);
+
+impl<const D: usize> std::ops::AddAssign for MassMomentum<D> {
+    fn add_assign(&mut self, o: Self) {
+        (self.0 += o.0, self.1 += o.1);
+    }
+}
+
+impl<const D: usize> std::ops::Mul<f64> for MassMomentum<D> {
+    type Output = Self;
+    fn mul(self, a: f64) -> Self {
+        Self(self.0 * a, self.1 * a)
+    }
 }
 
 #[cfg(test)]
