@@ -73,6 +73,14 @@ struct Chunk {
     window: Range<usize>,
 }
 
+/// What [`Kernel::rows_then_columns`] gives: each point's exact row scaling and their column
+/// sums, and, when the rows are relaxed, the scalings taken and their column sums.
+pub(super) struct RowUpdate {
+    pub exact: Vec<f64>,
+    pub sums: Vec<f64>,
+    pub relaxed: Option<(Vec<f64>, Vec<f64>)>,
+}
+
 /// A run of a point's row: free cells along axis 0 whose slots are `slot..slot + len`, the
 /// cells `start..start + len` of the point's box along that axis, on the line of the box at
 /// `at` along the outer axes 1, 2.
@@ -301,16 +309,53 @@ impl<const D: usize> Kernel<D> {
     }
 
     /// A Sinkhorn row update and the column sums of its result in one pass over the rows
-    /// (each row is read once, not twice): every point's row scaling `u_p = volume / sum_j
-    /// K_pj v_j`, by point, and every slot's `C_j = sum_p K_pj u_p`. The numbers are those of
-    /// [`Self::row_sums`] then [`Self::columns`] with `w = u`, bit for bit.
-    pub(super) fn rows_then_columns(&self, v: &[f64], volume: f64) -> (Vec<f64>, Vec<f64>) {
-        let parts: Vec<(Vec<f64>, Vec<f64>)> = (self.chunks.par_iter())
+    /// (each row is read once, not twice): every point's exact row scaling `u*_p = volume /
+    /// sum_j K_pj v_j`, by point, and every slot's `C*_j = sum_p K_pj u*_p`; the numbers of
+    /// [`Self::row_sums`] then [`Self::columns`] with `w = u*`, bit for bit. With `relax`, each
+    /// point also takes the scaling `relax(p, u*_p)`, and the column sums of those come too.
+    pub(super) fn rows_then_columns(
+        &self,
+        v: &[f64],
+        volume: f64,
+        relax: Option<impl Fn(usize, f64) -> f64 + Sync>,
+    ) -> RowUpdate {
+        let Some(relax) = relax else {
+            let (exact, sums) = self.rows_and_sums(v, volume, 0.0, |_, u| u);
+            return RowUpdate {
+                exact,
+                relaxed: None,
+                sums,
+            };
+        };
+        let pair = |p, u| Vector::<2>::new(relax(p, u), u);
+        let (u, sums) = self.rows_and_sums(v, volume, Vector::<2>::zeros(), pair);
+        let split = |x: Vec<Vector<2>>, k: usize| x.par_iter().map(|x| x[k]).collect();
+        let (relaxed, relaxed_sums) = (split(u.clone(), 0), split(sums.clone(), 0));
+        RowUpdate {
+            exact: split(u, 1),
+            relaxed: Some((relaxed, relaxed_sums)),
+            sums: split(sums, 1),
+        }
+    }
+
+    /// The fused pass of [`Self::rows_then_columns`]: each point's `w(p, u*_p)`, by point, and
+    /// their column sums.
+    fn rows_and_sums<T>(
+        &self,
+        v: &[f64],
+        volume: f64,
+        zero: T,
+        w: impl Fn(usize, f64) -> T + Sync,
+    ) -> (Vec<T>, Vec<T>)
+    where
+        T: Copy + Send + Sync + AddAssign + Mul<f64, Output = T>,
+    {
+        let parts: Vec<(Vec<T>, Vec<T>)> = (self.chunks.par_iter())
             .map(|c| {
-                let mut acc = vec![0.0; c.window.len()];
-                let u: Vec<f64> = (c.points.clone())
+                let mut acc = vec![zero; c.window.len()];
+                let u = (c.points.clone())
                     .map(|i| {
-                        let u = volume / self.row_sum_at(i, v);
+                        let u = w(self.order[i] as usize, volume / self.row_sum_at(i, v));
                         self.scatter_row(i, u, c, &mut acc);
                         u
                     })
@@ -318,10 +363,10 @@ impl<const D: usize> Kernel<D> {
                 (u, acc)
             })
             .collect();
-        let sorted: Vec<f64> = parts.iter().flat_map(|(u, _)| u).copied().collect();
+        let sorted: Vec<T> = parts.iter().flat_map(|(u, _)| u).copied().collect();
         let u = self.rank.par_iter().map(|&i| sorted[i as usize]).collect();
-        let sums: Vec<Vec<f64>> = parts.into_iter().map(|(_, acc)| acc).collect();
-        (u, self.add_windows(0.0, &sums))
+        let sums: Vec<Vec<T>> = parts.into_iter().map(|(_, acc)| acc).collect();
+        (u, self.add_windows(zero, &sums))
     }
 
     /// Adds `w K_pj` of the point at sorted place `i` into the window `acc` of its chunk `c`.
@@ -614,10 +659,20 @@ mod tests {
         let cols = kernel.columns(0.0, |p| w[p]);
         assert!(cols.iter().zip(&columns).all(|(&a, &b)| close(a, b)));
         // The fused row update and column sums: the same numbers as the two passes, bit for bit.
-        let (u, fused) = kernel.rows_then_columns(&v, 0.25);
+        let exact = kernel.rows_then_columns(&v, 0.25, None::<fn(usize, f64) -> f64>);
         let apart: Vec<f64> = sums.iter().map(|s| 0.25 / s).collect();
-        assert_eq!(u, apart);
-        assert_eq!(fused, kernel.columns(0.0, |p| apart[p]));
+        assert_eq!(exact.exact, apart);
+        assert_eq!(exact.sums, kernel.columns(0.0, |p| apart[p]));
+        assert!(exact.relaxed.is_none());
+        // Relaxed: the same exact scalings and sums, and the sums of the scalings taken.
+        let relaxed = kernel.rows_then_columns(&v, 0.25, Some(|p, u| u * w[p]));
+        let taken: Vec<f64> = apart.iter().zip(&w).map(|(u, w)| u * w).collect();
+        assert_eq!((&relaxed.exact, &relaxed.sums), (&exact.exact, &exact.sums));
+        let (u, sums) = relaxed.relaxed.expect("relaxed rows");
+        assert_eq!(
+            (u, sums),
+            (taken.clone(), kernel.columns(0.0, |p| taken[p]))
+        );
     }
 
     #[test]
