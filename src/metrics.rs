@@ -2,7 +2,7 @@
 
 use crate::grid::active::Active;
 use crate::grid::{Grid, MacField, Vector};
-use crate::sim::markings::{CellKind, Markings};
+use crate::stages::markings::{CellKind, Markings};
 use crate::PAR_GRAIN;
 use rayon::prelude::*;
 use std::time::Duration;
@@ -270,7 +270,7 @@ mod tests {
                     dir.normalize() * speed
                 })
                 .collect();
-            crate::sim::transfer::limit_speeds(&mut vel, max_speed);
+            crate::stages::transfer::limit_speeds(&mut vel, max_speed);
             assert_eq!(check_speed_bound(&vel, max_speed), Ok(()));
             vel[1234] = vel[1234].normalize() * (max_speed * (1.0 + 1e-9));
             let err = check_speed_bound(&vel, max_speed).unwrap_err();

@@ -3,8 +3,8 @@
 //! happened from one [`Summary`], printed in one place ([`Summary::print`]).
 
 use crate::metrics::{median, Stage, StageTimes};
-use crate::sim::StepError;
-use crate::simulation::{Simulation, StepReport};
+use crate::stages::StepError;
+use crate::step::{Simulation, StepReport};
 use std::time::{Duration, Instant};
 
 /// When a run ends.

@@ -1,7 +1,7 @@
 //! A running simulation: the state, the method that steps it, and one time step as a list of
 //! named stages (paper alg. flip; alg. band for the band methods).
 //!
-//! This module sits above the methods: [`Simulation::step`] calls the stages of [`crate::sim`]
+//! This module sits above the methods: [`Simulation::step`] calls the stages of [`crate::stages`]
 //! (the library of the paper's steps, which knows no method) and, where methods differ, the
 //! hooks of [`FluidMethod`]. After every step it checks the invariants every method keeps,
 //! then the method's own.
@@ -9,9 +9,11 @@
 use crate::grid::Vector;
 use crate::methods::{FluidMethod, MethodReport, MethodSettings, MethodSummary, NoReport};
 use crate::metrics::{self, InvariantViolation, Stage, StageTimes};
-use crate::sim::{advect, emit, forces, pressure, timestep, transfer, SimConfig, State, StepError};
 use crate::snapshot::{Reader, SnapshotError, Writer};
 use crate::solvers::pcg::PcgStats;
+use crate::stages::{
+    advect, emit, forces, pressure, timestep, transfer, SimConfig, State, StepError,
+};
 
 /// What one step did.
 #[derive(Debug)]

@@ -3,8 +3,8 @@
 use crate::methods::ccp::{BandMode, Solver};
 use crate::methods::{MethodFlags, MethodKind};
 use crate::record::{parse_memory_limit, Moves};
-use crate::sim::solids::ObstacleMode;
 use crate::solvers::pcg::Preconditioner;
+use crate::stages::solids::ObstacleMode;
 use clap::{Args, Parser, Subcommand};
 use std::net::IpAddr;
 use std::path::PathBuf;

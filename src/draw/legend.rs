@@ -7,7 +7,7 @@
 //! band_method, `def.depth`) in their own view. The deep, whose particles are imaginary, is its
 //! own class in the markings (not a bubble) and has the same colour as the deep band level.
 
-use crate::sim::markings::{DepthLevel, MarkingClass};
+use crate::stages::markings::{DepthLevel, MarkingClass};
 
 /// A class of a cell layer: its id in the layer's images or points, label and colour (RGBA).
 pub type Class = (u16, &'static str, [u8; 4]);

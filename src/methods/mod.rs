@@ -19,7 +19,7 @@
 //! | [`FluidMethod::finish_step`] | after the step | what the method did, as a [`MethodReport`] |
 //!
 //! The hooks that change only the particles (lines 4 and 6, and the resampling before line 7)
-//! get a [`crate::sim::ParticlesMut`]: the particles and the random stream mutable, the grid,
+//! get a [`crate::stages::ParticlesMut`]: the particles and the random stream mutable, the grid,
 //! markings, solids and velocity read-only; `start` and `after_markings` may change the
 //! markings too (the band's exchange with the deep), so they get the whole state.
 //!
@@ -354,7 +354,7 @@ mod tests {
         assert_eq!(by, ["ccp", "nbflip"]);
         let r = MethodFlags::default().with("band-r", 5u32);
         let (default_r, mut s) = (
-            crate::sim::band::DEFAULT_BAND_R,
+            crate::stages::band::DEFAULT_BAND_R,
             MethodSettings::new(MethodKind::Nbflip),
         );
         s.apply_flags(&r);

@@ -30,7 +30,7 @@ pub use stream::Stream;
 use crate::draw::legend;
 use crate::out::BoxError;
 use crate::scene::Scene;
-use crate::simulation::{Simulation, StepReport};
+use crate::step::{Simulation, StepReport};
 use layout::RunFacts;
 use rerun::blueprint::{Blueprint, Tabs, TimeSeriesView, Vertical};
 use std::path::Path;

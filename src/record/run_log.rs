@@ -11,8 +11,8 @@ use crate::grid::Vector;
 use crate::metrics::Stage;
 use crate::particles::Region;
 use crate::scene::Scene;
-use crate::sim::markings::MarkingClass;
-use crate::simulation::{Simulation, StepReport};
+use crate::stages::markings::MarkingClass;
+use crate::step::{Simulation, StepReport};
 use std::cell::RefCell;
 
 /// Draws one run, step by step.

@@ -138,7 +138,7 @@ pub struct PcgSettings {
     /// MIC(0) safety cut-off sigma (Bridson: 0.25).
     pub sigma: f64,
     /// The preconditioner a caller that knows the grid builds
-    /// ([`crate::sim::pressure::Poisson::solve`], which resolves [`Preconditioner::Auto`]
+    /// ([`crate::stages::pressure::Poisson::solve`], which resolves [`Preconditioner::Auto`]
     /// by the system's size); [`solve`] has only the matrix and takes MIC(0).
     pub preconditioner: Preconditioner,
 }

@@ -2,7 +2,7 @@
 //! alg. band, one file per step, and the [`State`] they read and write.
 //!
 //! It knows no method: the step that calls these stages in order, and the methods' hooks
-//! between them, sit above it (`crate::simulation`).
+//! between them, sit above it (`crate::step`).
 
 pub mod advect;
 pub mod band;

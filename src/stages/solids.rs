@@ -19,7 +19,7 @@
 use crate::grid::active::{hull, line_hulls};
 use crate::grid::{Grid, Vector};
 use crate::particles::Region;
-use crate::sim::markings::{Markings, SolidCells};
+use crate::stages::markings::{Markings, SolidCells};
 use std::collections::VecDeque;
 
 /// `lambda_penalty` of eq. solid_penalty (the paper's 1000), in squared cells.

@@ -10,10 +10,10 @@ use cellflip::methods::MethodFlags;
 use cellflip::methods::MethodKind;
 use cellflip::runner::{Limit, Runner};
 use cellflip::scene::Overrides;
-use cellflip::sim::markings::Markings;
-use cellflip::sim::StepError;
-use cellflip::simulation::Simulation;
 use cellflip::solvers::{lp, min_cost_flow, mps};
+use cellflip::stages::markings::Markings;
+use cellflip::stages::StepError;
+use cellflip::step::Simulation;
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 

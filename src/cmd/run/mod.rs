@@ -10,7 +10,7 @@ use crate::methods::StepFile;
 use crate::record::{Drawing, Recorder, Sink, WebServe};
 use crate::runner::{Limit, Runner};
 use crate::scene::{peak_memory_mib, MemoryEstimate, Overrides, Scene};
-use crate::simulation::Simulation;
+use crate::step::Simulation;
 use anyhow::{anyhow, bail, Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::path::{Path, PathBuf};

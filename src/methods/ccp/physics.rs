@@ -9,11 +9,11 @@ use crate::draw::{depth_level_classes, Log};
 use crate::grid::{MacField, NearCells, Vector};
 use crate::methods::seam::{FluidMethod, MethodRecording, MethodReport};
 use crate::metrics::InvariantViolation;
-use crate::sim::band::Band;
-use crate::sim::markings::{DepthLevel, Markings};
-use crate::sim::transfer::{self, Known};
-use crate::sim::{ParticlesMut, State, StepError};
 use crate::snapshot::{check_elements, not_finite, Reader, SnapshotError, Writer};
+use crate::stages::band::Band;
+use crate::stages::markings::{DepthLevel, Markings};
+use crate::stages::transfer::{self, Known};
+use crate::stages::{ParticlesMut, State, StepError};
 use std::path::{Path, PathBuf};
 
 /// The paper's method in a running simulation.

@@ -7,7 +7,7 @@ pub use super::correct::problem::Directions;
 pub use super::correct::Solver;
 use crate::methods::options::{Flag, FlagValue};
 use crate::methods::seam::{SettingError, StepFile};
-use crate::sim::band::{check_band_r, DEFAULT_BAND_R};
+use crate::stages::band::{check_band_r, DEFAULT_BAND_R};
 use std::path::{Path, PathBuf};
 
 /// Method ccp's settings: `[simulation.ccp]` in a scene file (or, for a file whose method is

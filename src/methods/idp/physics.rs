@@ -4,11 +4,11 @@ use crate::draw::Log;
 use crate::grid::active::{par_runs, Active};
 use crate::grid::{for_each_cell_weight, Grid, MacField, Vector};
 use crate::methods::seam::{FluidMethod, MethodRecording, MethodReport};
-use crate::sim::advect::{displace, CELL_MARGIN};
-use crate::sim::pressure::Poisson;
-use crate::sim::solids::clearing_distance;
-use crate::sim::{ParticlesMut, State, StepError};
 use crate::solvers::pcg::{PcgSettings, PcgStats};
+use crate::stages::advect::{displace, CELL_MARGIN};
+use crate::stages::pressure::Poisson;
+use crate::stages::solids::clearing_distance;
+use crate::stages::{ParticlesMut, State, StepError};
 use rand::seq::SliceRandom;
 use rand::Rng;
 use rayon::prelude::*;
@@ -562,8 +562,8 @@ mod tests {
     use super::*;
     use crate::methods::MethodKind;
     use crate::scene::{Overrides, Scene};
-    use crate::simulation::Simulation;
     use crate::solvers::pcg::Preconditioner;
+    use crate::step::Simulation;
 
     /// Particle positions and the second solve after a dam-2d step of idp, the steps before
     /// it with MIC(0) and that one with `last` (both solves of the step take it).

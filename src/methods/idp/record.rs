@@ -5,7 +5,7 @@ use super::physics::{ErrorClass, IdpReport};
 use crate::draw::{Layer, LayerView, Log, Needs, Panel, Style};
 use crate::methods::seam::{MethodReport, MethodSummary};
 use crate::metrics::median;
-use crate::sim::State;
+use crate::stages::State;
 use std::any::Any;
 
 pub(super) const PANELS: &[Panel] = &[

@@ -40,8 +40,8 @@ use super::options::{Flag, FlagValue};
 use super::seam::{
     FluidMethod, MethodInfo, MethodSummary, MethodType, SettingContext, SettingError,
 };
-use crate::sim::band::{check_band_r, DEFAULT_BAND_R};
-use crate::sim::solids::ObstacleMode;
+use crate::stages::band::{check_band_r, DEFAULT_BAND_R};
+use crate::stages::solids::ObstacleMode;
 use physics::NbflipSim;
 use record::{Totals, LAYER_VIEWS, PANELS};
 

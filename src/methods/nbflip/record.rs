@@ -5,8 +5,8 @@ use super::physics::{level, NbflipReport};
 use crate::draw::{Image, Layer, LayerView, Log, Needs, Panel};
 use crate::methods::seam::{MethodReport, MethodSummary};
 use crate::metrics::median;
-use crate::sim::markings::DepthLevel;
-use crate::sim::State;
+use crate::stages::markings::DepthLevel;
+use crate::stages::State;
 use std::any::Any;
 
 pub(super) const PANELS: &[Panel] = &[

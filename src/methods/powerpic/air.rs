@@ -9,7 +9,7 @@
 //! surface cell is expected to be partly air.
 
 use crate::metrics::cell_volume;
-use crate::sim::markings::Markings;
+use crate::stages::markings::Markings;
 
 /// `b_j` of a free transport cell of volume `v_j` in simulation cell `c`, from the markings of
 /// the simulation grid at `mu` particles per cell.

@@ -76,7 +76,7 @@ use super::options::{Flag, FlagValue};
 use super::seam::{
     FluidMethod, MethodInfo, MethodSummary, MethodType, SettingContext, SettingError,
 };
-use crate::sim::solids::ObstacleMode;
+use crate::stages::solids::ObstacleMode;
 use physics::PowerPicSim;
 use record::{Totals, LAYER_VIEWS, PANELS};
 

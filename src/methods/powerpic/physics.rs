@@ -6,11 +6,11 @@ use crate::draw::Image;
 use crate::grid::{Grid, MacField, Vector};
 use crate::methods::seam::{FluidMethod, MethodRecording, MethodReport};
 use crate::metrics::InvariantViolation;
-use crate::sim::advect::displace;
-use crate::sim::transfer::{self, Known};
-use crate::sim::{ParticlesMut, State, StepError};
 use crate::snapshot::{check_elements, check_indices, Reader, SnapshotError, Writer};
 use crate::solvers::sinkhorn::{Air, SinkhornError, Transport, TransportGrid};
+use crate::stages::advect::displace;
+use crate::stages::transfer::{self, Known};
+use crate::stages::{ParticlesMut, State, StepError};
 use rayon::prelude::*;
 
 /// Power PIC in a running simulation.
@@ -345,7 +345,7 @@ mod tests {
     use super::*;
     use crate::methods::MethodKind;
     use crate::scene::{Overrides, Scene};
-    use crate::simulation::Simulation;
+    use crate::step::Simulation;
 
     #[test]
     fn the_blocked_transport_cells_follow_a_falling_obstacle_as_a_fresh_set_up_finds_them() {

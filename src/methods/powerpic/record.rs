@@ -4,7 +4,7 @@
 use super::physics::PowerPicReport;
 use crate::draw::{LayerView, Log, Needs, Panel};
 use crate::methods::seam::{MethodReport, MethodSummary};
-use crate::sim::State;
+use crate::stages::State;
 use std::any::Any;
 
 pub(super) const PANELS: &[Panel] = &[

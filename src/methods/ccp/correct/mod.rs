@@ -14,9 +14,9 @@ pub mod paths;
 pub mod problem;
 
 use crate::grid::{Grid, Vector};
-use crate::sim::markings::Markings;
 use crate::solvers::min_cost_flow::{self, FlowStats};
 use crate::solvers::{lp, mps};
+use crate::stages::markings::Markings;
 use band::{BandContext, BandCorrection, BandVariant, VariantFailure, ILP_CROSS_CHECK_CANDIDATES};
 use paths::BandScene;
 use problem::{BuildError, CorrectionProblem, Directions};

@@ -17,9 +17,9 @@
 
 use crate::grid::active::{Active, CellNumbers};
 use crate::grid::{closest_along, Cell, Grid, Vector};
-use crate::sim::advect::CELL_MARGIN;
-use crate::sim::markings::{CellKind, DepthLevel, Markings};
 use crate::solvers::min_cost_flow::BoundedAssignment;
+use crate::stages::advect::CELL_MARGIN;
+use crate::stages::markings::{CellKind, DepthLevel, Markings};
 use crate::PAR_GRAIN_PARTICLES;
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, Ordering};
