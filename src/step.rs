@@ -8,9 +8,10 @@
 
 use crate::grid::Vector;
 use crate::methods::{FluidMethod, MethodReport, MethodSettings, MethodSummary, NoReport};
-use crate::metrics::{self, InvariantViolation, Stage, StageTimes};
+use crate::metrics::{self, Stage, StageTimes};
 use crate::snapshot::{Reader, SnapshotError, Writer};
 use crate::solvers::pcg::PcgStats;
+use crate::stages::invariants::{self, InvariantViolation};
 use crate::stages::{
     advect, emit, forces, pressure, timestep, transfer, SimConfig, State, StepError,
 };
@@ -172,7 +173,7 @@ impl<const D: usize> Simulation<D> {
         let have_at = rep.times.time(Stage::GridToParticles, || {
             m.grid_to_particles(s.particles_mut(), &u, &u_old, u_at_particles)
         });
-        metrics::check_speed_bound(&s.particles.vel, s.config.max_speed)?;
+        invariants::check_speed_bound(&s.particles.vel, s.config.max_speed)?;
         // Line 5: advection (and, with the band, of the grid velocity).
         m.before_advection(s);
         rep.times.time(Stage::Advect, || {
@@ -223,7 +224,7 @@ impl<const D: usize> Simulation<D> {
             ))
         })?;
         let p = &s.particles;
-        metrics::check_particles(&s.grid, &p.pos, &p.vel, s.solids.particle_free(), expected)?;
+        invariants::check_particles(&s.grid, &p.pos, &p.vel, s.solids.particle_free(), expected)?;
         self.method.check_invariants(s)
     }
 }

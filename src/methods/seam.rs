@@ -9,8 +9,8 @@ use super::cost::{Footprint, StepCost};
 use super::options::Flag;
 use crate::draw::{LayerView, Log, Panel};
 use crate::grid::{Grid, MacField, NearCells, Vector};
-use crate::metrics::InvariantViolation;
 use crate::snapshot::{Reader, SnapshotError, Writer};
+use crate::stages::invariants::InvariantViolation;
 use crate::stages::markings::Markings;
 use crate::stages::solids::ObstacleMode;
 use crate::stages::transfer::{self, Known};
@@ -166,7 +166,7 @@ pub trait FluidMethod<const D: usize>: MethodRecording<D> + Send {
 
     /// Alg. flip line 4: the grid velocity back to the particles (`u_old` is the field before
     /// forces and projection), their speeds bounded by `max_speed` (checked after every step's
-    /// transfer: [`crate::metrics::check_speed_bound`]). Returns true when it wrote
+    /// transfer: [`crate::stages::invariants::check_speed_bound`]). Returns true when it wrote
     /// `u(x_p)` per particle to `at` and the particles have not moved, for the advection (line
     /// 5) to use instead of interpolating `u` again at the same points.
     fn grid_to_particles(

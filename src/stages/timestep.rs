@@ -3,8 +3,8 @@
 
 use crate::grid::active::Active;
 use crate::grid::{nan_max, Grid, MacField, Vector};
-use crate::metrics::InvariantViolation;
 use crate::solvers::pcg::PcgStats;
+use crate::stages::invariants::InvariantViolation;
 use crate::stages::State;
 
 /// The time step for the coming step: at most `max_dt`, and small enough that the current

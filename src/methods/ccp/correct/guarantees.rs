@@ -4,7 +4,7 @@
 use super::problem::cell_bounds;
 use crate::grid::active::Active;
 use crate::grid::{Grid, Vector};
-use crate::metrics::InvariantViolation;
+use crate::stages::invariants::InvariantViolation;
 use crate::stages::markings::Markings;
 
 /// The guarantees of the correction step (paper eq. problem3, or eq. band_con_update with the
