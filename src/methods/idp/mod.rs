@@ -60,27 +60,20 @@
 
 mod physics;
 mod record;
+mod settings;
 
 pub use physics::{
-    density_errors, project_density, push_out, ErrorClass, IdpReport, Inputs, Resample, SolidShare,
-    CLAMP, PUSH_MARGIN, RESAMPLE_BELOW,
+    density_errors, project_density, push_out, ErrorClass, Inputs, Resample, SolidShare, CLAMP,
+    PUSH_MARGIN, RESAMPLE_BELOW,
 };
+pub use record::IdpReport;
+pub use settings::IdpSettings;
 
 use super::cost::{Footprint, StepCost};
 use super::seam::{FluidMethod, MethodInfo, MethodSummary, MethodType};
 use crate::stages::solids::ObstacleMode;
 use physics::IdpSim;
 use record::{Totals, LAYER_VIEWS, PANELS};
-
-/// Method idp's settings: `[simulation.idp]` in a scene file.
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct IdpSettings {
-    /// Resample cells over twice the rest density (`simulation.idp.resample`, or
-    /// `simulation.idp_resample` in a file whose method is idp; Kugelstadt et al.'s optional
-    /// step, off as in their 3D scene).
-    pub resample: bool,
-}
 
 /// Implicit density projection, as registered.
 pub struct Idp;

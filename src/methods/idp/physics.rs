@@ -1,10 +1,11 @@
 //! Method idp's step: the hooks it implements (see the module doc of `super`).
 
+use super::record::IdpReport;
 use crate::draw::Log;
 use crate::grid::active::{par_runs, Active};
 use crate::grid::{for_each_cell_weight, Grid, MacField, Vector};
 use crate::methods::seam::{FluidMethod, MethodRecording, MethodReport};
-use crate::solvers::pcg::{PcgSettings, PcgStats};
+use crate::solvers::pcg::PcgSettings;
 use crate::stages::advect::{displace, CELL_MARGIN};
 use crate::stages::pressure::Poisson;
 use crate::stages::solids::clearing_distance;
@@ -100,28 +101,6 @@ pub struct Inputs<'a, const D: usize> {
 pub struct Resample<'a, const D: usize, R: Rng> {
     pub velocity: &'a MacField<D>,
     pub rng: &'a mut R,
-}
-
-/// What one projection did.
-#[derive(Clone, Debug, Default)]
-pub struct IdpReport<const D: usize> {
-    pub pcg: PcgStats,
-    /// Each cell's [`ErrorClass`], for recordings.
-    pub class: Vec<u8>,
-    /// `(before, after)` of every k-th particle, at most [`MAX_ARROWS`].
-    pub moves: Vec<(Vector<D>, Vector<D>)>,
-    /// The largest particle displacement, cells.
-    pub max_displacement: f64,
-    /// Fluid cells more than one particle over the rest density (`s < -1/mu`).
-    pub overdense: usize,
-    /// Cells whose density error was clamped.
-    pub clamped: usize,
-    /// Under-dense surface cells that left the solve.
-    pub surface: usize,
-    /// Particles pushed out of solids.
-    pub pushed: usize,
-    /// Cells resampled.
-    pub resampled: usize,
 }
 
 /// The projection: density error, surface rule, clamp, second solve, displacement, move.
@@ -562,7 +541,7 @@ mod tests {
     use super::*;
     use crate::methods::MethodKind;
     use crate::scene::{Overrides, Scene};
-    use crate::solvers::pcg::Preconditioner;
+    use crate::solvers::pcg::{PcgStats, Preconditioner};
     use crate::step::Simulation;
 
     /// Particle positions and the second solve after a dam-2d step of idp, the steps before

@@ -1,12 +1,36 @@
 //! What method idp records and sums up: its panels and density-error view, its step report's
 //! scalars and drawings, and the run's totals.
 
-use super::physics::{ErrorClass, IdpReport};
+use super::physics::ErrorClass;
 use crate::draw::{Layer, LayerView, Log, Needs, Panel, Style};
+use crate::grid::Vector;
 use crate::methods::seam::{MethodReport, MethodSummary};
 use crate::metrics::median;
+use crate::solvers::pcg::PcgStats;
 use crate::stages::State;
 use std::any::Any;
+
+/// What one projection did.
+#[derive(Clone, Debug, Default)]
+pub struct IdpReport<const D: usize> {
+    pub pcg: PcgStats,
+    /// Each cell's [`ErrorClass`], for recordings.
+    pub class: Vec<u8>,
+    /// `(before, after)` of every k-th particle, at most `MAX_ARROWS`.
+    pub moves: Vec<(Vector<D>, Vector<D>)>,
+    /// The largest particle displacement, cells.
+    pub max_displacement: f64,
+    /// Fluid cells more than one particle over the rest density (`s < -1/mu`).
+    pub overdense: usize,
+    /// Cells whose density error was clamped.
+    pub clamped: usize,
+    /// Under-dense surface cells that left the solve.
+    pub surface: usize,
+    /// Particles pushed out of solids.
+    pub pushed: usize,
+    /// Cells resampled.
+    pub resampled: usize,
+}
 
 pub(super) const PANELS: &[Panel] = &[
     Panel {

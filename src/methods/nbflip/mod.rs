@@ -32,40 +32,21 @@ pub mod levelset;
 mod physics;
 mod record;
 pub mod region;
+mod settings;
 
-pub use physics::{combine, level, NbflipReport, Resampling};
+pub use physics::{combine, level, Resampling};
+pub use record::NbflipReport;
+pub use settings::NbflipSettings;
 
 use super::cost::{Footprint, StepCost};
-use super::options::{Flag, FlagValue};
+use super::options::Flag;
 use super::seam::{
     FluidMethod, MethodInfo, MethodSummary, MethodType, SettingContext, SettingError,
 };
-use crate::stages::band::{check_band_r, DEFAULT_BAND_R};
+use crate::stages::band::check_band_r;
 use crate::stages::solids::ObstacleMode;
 use physics::NbflipSim;
 use record::{Totals, LAYER_VIEWS, PANELS};
-
-/// Method nbflip's settings: `[simulation.nbflip]` in a scene file.
-#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct NbflipSettings {
-    /// `R`: the band's depth in cells (`simulation.nbflip.band_r`, or `simulation.band_r` in a
-    /// file whose method has a band; `--band-r`).
-    pub band_r: u32,
-    /// Work on the level set only near the surface (`simulation.nbflip.narrow`, default
-    /// true); false works on the whole grid every step, with the same results (for measuring
-    /// and for tests).
-    pub narrow: bool,
-}
-
-impl Default for NbflipSettings {
-    fn default() -> Self {
-        Self {
-            band_r: DEFAULT_BAND_R,
-            narrow: true,
-        }
-    }
-}
 
 /// Narrow-band FLIP, as registered.
 pub struct Nbflip;
@@ -81,12 +62,7 @@ impl MethodType for Nbflip {
     };
 
     type Settings = NbflipSettings;
-    const FLAGS: &'static [Flag<NbflipSettings>] = &[Flag {
-        name: "band-r",
-        help: "Depth R in cells of the band of particles kept below the level set's zero.",
-        value: FlagValue::number::<u32>(),
-        set: |s, v| v.try_into().map(|x| s.band_r = x),
-    }];
+    const FLAGS: &'static [Flag<NbflipSettings>] = settings::FLAGS;
 
     fn check(s: &NbflipSettings, _ctx: SettingContext) -> Result<(), SettingError> {
         check_band_r(s.band_r).map_err(|why| SettingError::range("band_r", why.to_string()))

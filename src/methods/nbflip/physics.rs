@@ -1,6 +1,7 @@
 //! Method nbflip's step: the hooks it implements (see the module doc of `super`).
 
 use super::levelset::{particle_radius, LevelSet, March, Side};
+use super::record::NbflipReport;
 use super::region::{Margin, Region};
 use crate::draw::{depth_level_classes, Log};
 use crate::grid::active::Active;
@@ -501,44 +502,5 @@ impl<const D: usize> Resampling<'_, D> {
             }
         }
         rep
-    }
-}
-
-/// What nbflip did in one step: its resampling, the particles it holds, and the band levels
-/// of every cell by the level set.
-#[derive(Clone, Debug, Default)]
-pub struct NbflipReport {
-    pub seeded: usize,
-    /// Particles deleted inside a solid (an `ignore` obstacle moved over them).
-    pub covered: usize,
-    /// Particles deleted outside the liquid (`phi > 0`).
-    pub outside: usize,
-    /// Particles deleted below the band (`phi < -R`).
-    pub below: usize,
-    /// Particles deleted beyond `2 mu` in a cell away from the surface.
-    pub crowded: usize,
-    /// Particles held after the step.
-    pub particles: usize,
-    /// Cells of liquid the obstacles newly covered in the step (`ignore`: liquid lost).
-    pub carved: usize,
-    /// Cells the level set was last rebuilt on (all cells with the dense level set).
-    pub cells_worked: usize,
-    /// `R` and the level set after the step.
-    pub band_r: u32,
-    pub phi: Arc<LevelSet>,
-}
-
-impl NbflipReport {
-    pub fn deleted(&self) -> usize {
-        self.covered + self.outside + self.below + self.crowded
-    }
-
-    /// Adds another resampling of the same step (after emission and at the end).
-    pub(super) fn add(&mut self, other: &NbflipReport) {
-        self.seeded += other.seeded;
-        self.covered += other.covered;
-        self.outside += other.outside;
-        self.below += other.below;
-        self.crowded += other.crowded;
     }
 }

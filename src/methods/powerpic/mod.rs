@@ -68,11 +68,11 @@ mod physics;
 mod record;
 mod settings;
 
-pub use physics::PowerPicReport;
+pub use record::PowerPicReport;
 pub use settings::{AirForm, PowerPicSettings};
 
 use super::cost::{Footprint, StepCost};
-use super::options::{Flag, FlagValue};
+use super::options::Flag;
 use super::seam::{
     FluidMethod, MethodInfo, MethodSummary, MethodType, SettingContext, SettingError,
 };
@@ -100,14 +100,7 @@ impl MethodType for Powerpic {
     };
 
     type Settings = PowerPicSettings;
-    const FLAGS: &'static [Flag<PowerPicSettings>] = &[Flag {
-        name: "air",
-        help: "How the free surface's air is costed (overrides `simulation.powerpic.air`): \
-               baseline (pulled towards the air baseline estimated from the markings) or \
-               capacity (free).",
-        value: FlagValue::choice::<AirForm>(),
-        set: |s, v| v.try_into().map(|x| s.air = x),
-    }];
+    const FLAGS: &'static [Flag<PowerPicSettings>] = settings::FLAGS;
 
     fn check(s: &PowerPicSettings, ctx: SettingContext) -> Result<(), SettingError> {
         s.check(ctx)

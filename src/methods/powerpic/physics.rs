@@ -1,6 +1,7 @@
 //! Method powerpic's step: the hooks it implements (see the module doc of `super`).
 
 use super::air::air_baseline;
+use super::record::PowerPicReport;
 use super::settings::{AirForm, PowerPicSettings};
 use crate::draw::Image;
 use crate::grid::{Grid, MacField, Vector};
@@ -313,23 +314,6 @@ fn fraction_image<const D: usize>(
     Image::of_listed_cells(tg.grid.dims, plan.active_cells(), |k| {
         (fill[k] / cell_volume) as f32
     })
-}
-
-/// What Power PIC did in one step.
-#[derive(Clone, Debug, Default)]
-pub struct PowerPicReport {
-    /// Whether a transport was solved this step (the other fields are zero otherwise).
-    pub solved: bool,
-    /// Sinkhorn's row updates.
-    pub iterations: u32,
-    /// The largest relative column error when it stopped.
-    pub marginal_error: f64,
-    /// Whether it met `delta` (otherwise it stopped at its cap).
-    pub converged: bool,
-    /// Empty volume of the transport cells in the liquid's cells, cells.
-    pub air_volume: f64,
-    /// The transport grid's fluid fraction (2D; the mid slice in 3D).
-    pub fraction: Image,
 }
 
 impl<const D: usize> MethodRecording<D> for PowerPicSim<D> {}

@@ -1,0 +1,34 @@
+//! Method nbflip's settings: `[simulation.nbflip]` in a scene file, and its flag.
+
+use crate::methods::options::{Flag, FlagValue};
+use crate::stages::band::DEFAULT_BAND_R;
+
+/// Method nbflip's settings: `[simulation.nbflip]` in a scene file.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct NbflipSettings {
+    /// `R`: the band's depth in cells (`simulation.nbflip.band_r`, or `simulation.band_r` in a
+    /// file whose method has a band; `--band-r`).
+    pub band_r: u32,
+    /// Work on the level set only near the surface (`simulation.nbflip.narrow`, default
+    /// true); false works on the whole grid every step, with the same results (for measuring
+    /// and for tests).
+    pub narrow: bool,
+}
+
+impl Default for NbflipSettings {
+    fn default() -> Self {
+        Self {
+            band_r: DEFAULT_BAND_R,
+            narrow: true,
+        }
+    }
+}
+
+/// Method nbflip's command-line flag.
+pub const FLAGS: &[Flag<NbflipSettings>] = &[Flag {
+    name: "band-r",
+    help: "Depth R in cells of the band of particles kept below the level set's zero.",
+    value: FlagValue::number::<u32>(),
+    set: |s, v| v.try_into().map(|x| s.band_r = x),
+}];
