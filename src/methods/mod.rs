@@ -6,17 +6,18 @@
 //!
 //! | hook | alg. flip / alg. band | who uses it |
 //! |---|---|---|
-//! | [`FluidMethod::start`] | after the first markings | ccp with the band: first exchange with the deep |
-//! | [`FluidMethod::emitter_count`] | emission | the band methods: the deep counts as full |
+//! | [`FluidMethod::start`] | after the first markings | ccp with the band: first exchange with the deep; nbflip: its first level set and resampling; powerpic: its transport grid |
+//! | [`FluidMethod::emitter_count`] | emission | the band methods: the deep counts as full (asked for the cells of emitters that emit) |
 //! | [`FluidMethod::particles_not_held`] | the particle-count invariant | ccp's deep, nbflip's resampling |
-//! | [`FluidMethod::particles_to_grid`] | line 1 | ccp with the band: the velocity combination |
-//! | [`FluidMethod::grid_to_particles`] | line 4 | FLIP/PIC blend by default |
+//! | [`FluidMethod::particles_to_grid`] | line 1 | the band methods: the velocity combination; powerpic: the transport |
+//! | [`FluidMethod::grid_to_particles`] | line 4 | FLIP/PIC blend by default; powerpic: through the transport, and the move to the kernel's barycentre |
 //! | [`FluidMethod::before_advection`], [`FluidMethod::next_grid_velocity`] | line 5 | ccp keeps `x_bar`; the band advects the grid velocity |
-//! | [`FluidMethod::correct_positions`] | line 6 | ccp: eq. problem3 and the band corrections |
+//! | [`FluidMethod::correct_positions`] | line 6 | ccp: eq. problem3 and the band corrections; idp: the density projection |
 //! | [`FluidMethod::holds_liquid`] | line 6, the obstacles' move (sec. soilds) | nbflip: a `naive` obstacle waits for the level set's inside too |
 //! | [`FluidMethod::before_markings`], [`FluidMethod::after_markings`] | line 7, alg. band line 9 | the band methods: the deep; nbflip's level set and resampling |
 //! | [`FluidMethod::check_invariants`] | after the step | what the method guarantees |
 //! | [`FluidMethod::finish_step`] | after the step | what the method did, as a [`MethodReport`] |
+//! | [`FluidMethod::save_state`], [`FluidMethod::restore_state`] | a checkpoint | what it carries from one step to the next: ccp's deep and prices, nbflip's level set, powerpic's scalings |
 //!
 //! The hooks that change only the particles (lines 4 and 6, and the resampling before line 7)
 //! get a [`crate::stages::ParticlesMut`]: the particles and the random stream mutable, the grid,
