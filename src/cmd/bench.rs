@@ -39,7 +39,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
             let overrides = Overrides {
                 cells: Some(res),
                 method: args.method,
-                pressure: args.pressure.preconditioner,
+                pressure: args.pressure.preconditioner.map(Into::into),
                 flags,
                 ..Default::default()
             };

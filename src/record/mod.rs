@@ -39,15 +39,14 @@ pub use stream::Stream;
 use crate::out::BoxError;
 use std::path::PathBuf;
 
-/// How the correction's moves are drawn (`--moves`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+/// How the correction's moves are drawn (the command line's `--moves`, `crate::cmd::cli`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Moves {
-    /// From `x_hat` (after advection) to `x` (after the correction): the exact displacement,
-    /// often a small fraction of a cell (the moved particles are highlighted).
+    /// An arrow `x_hat -> x` per moved particle, the particles highlighted.
     #[default]
     Arrows,
-    /// From the centre of the cell the particle was advected into to the centre of the cell
-    /// the correction put it in: every move at least one cell long.
+    /// An arrow per moved particle between the centres of its cells before and after the
+    /// correction.
     Hops,
 }
 

@@ -28,8 +28,8 @@ impl RunArgs {
             cells: self.scale.res,
             ppc: self.scale.ppc,
             seed: self.scale.seed,
-            obstacle: self.obstacle,
-            pressure: self.pressure.preconditioner,
+            obstacle: self.obstacle.map(Into::into),
+            pressure: self.pressure.preconditioner.map(Into::into),
             flags: self.methods.clone(),
         }
     }
@@ -97,7 +97,7 @@ fn run_dim<const D: usize>(
 ) -> Result<()> {
     let drawing = Drawing {
         surface: !args.no_surface,
-        moves: args.moves,
+        moves: args.moves.into(),
         slice: parse_slice(args.slice.as_deref(), D)?,
     };
     let recorder = sink
