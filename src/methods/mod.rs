@@ -53,8 +53,8 @@ mod seam;
 pub use cost::{Footprint, Holds, StartPeak, StepCost};
 pub use options::{Flag, FlagValue, MethodFlags};
 pub use seam::{
-    BandChoice, FluidMethod, MethodInfo, MethodRecording, MethodReport, MethodSummary, MethodType,
-    NoReport, NoSettings, NoSummary, SettingContext, SettingError, StepFile,
+    BandChoice, Export, FluidMethod, MethodInfo, MethodRecording, MethodReport, MethodSummary,
+    MethodType, NoReport, NoSettings, NoSummary, SettingContext, SettingError, StepFile,
 };
 
 /// Registers the methods (each module declared above, where `cargo fmt` sees it): makes

@@ -59,6 +59,18 @@ pub struct StepFile {
     pub path: PathBuf,
 }
 
+/// A file a step hands over to be written, because the command line asked for it (ccp's
+/// `--export-lp N`: the problem its correction solved): its path ([`StepFile::path`], or one
+/// beside it), what it is, for the run's summary, and its text. No hook writes a file: the
+/// run's observer writes these ([`crate::runner::Exports`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Export<'a> {
+    pub path: &'a Path,
+    /// E.g. `the correction problem of step 3`.
+    pub what: String,
+    pub text: &'a str,
+}
+
 /// A method without settings of its own: its scene table, if given, must be empty.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -277,6 +289,11 @@ pub trait MethodReport<const D: usize>: Any + Debug + Send {
     /// Per-step figures for `cellflip report`: solver statistics by name (each name listed
     /// in [`MethodInfo::figures`]).
     fn figures(&self) -> Vec<(&'static str, f64)> {
+        vec![]
+    }
+
+    /// The files this step hands over to be written ([`Export`]).
+    fn exports(&self) -> Vec<Export<'_>> {
         vec![]
     }
 

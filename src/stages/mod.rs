@@ -110,13 +110,6 @@ pub enum StepError {
     /// A guarantee broke: a bug, or a state the method cannot go on from.
     #[error(transparent)]
     Invariant(#[from] invariants::InvariantViolation),
-    /// A file the run was asked to write (ccp's `--export-lp`).
-    #[error("cannot write '{}'", .path.display())]
-    Write {
-        path: std::path::PathBuf,
-        #[source]
-        error: std::io::Error,
-    },
     /// A method's solver failed: the setting that causes it (e.g.
     /// `simulation.powerpic.epsilon`), the solver, and why.
     #[error("{setting}: {solver} failed")]

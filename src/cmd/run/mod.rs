@@ -8,7 +8,7 @@ use crate::frames::FrameWorker;
 use crate::interrupt::{self, Watchdog};
 use crate::methods::StepFile;
 use crate::record::{Drawing, Recorder, Sink, WebServe};
-use crate::runner::{Limit, Runner};
+use crate::runner::{Exports, Limit, Runner};
 use crate::scene::{peak_memory_mib, MemoryEstimate, Overrides, Scene};
 use crate::step::Simulation;
 use anyhow::{anyhow, bail, Context, Result};
@@ -199,7 +199,9 @@ fn simulate<const D: usize>(
     let interrupted = || interrupt::signal().is_some();
     let cadence = Cadence::of(args.record_every, D);
     let mut last_time_secs = runner.sim.state.time_secs;
+    let mut exports = Exports::default();
     let result = runner.run(limit, interrupted, |sim, rep| {
+        exports.write(sim, rep)?;
         let s = &sim.state;
         let full = cadence.records(s.steps, last_time_secs, s.time_secs);
         if let Some(r) = recorder {
@@ -221,6 +223,7 @@ fn simulate<const D: usize>(
         show_progress(&say.bar, sim, limit, visible);
         Ok(())
     });
+    runner.summary.written = exports.written;
     // A run that ended well or was stopped by a signal leaves a checkpoint of its last step
     // (a failed step may have left the state half-way).
     let last = match (&result, saver.as_mut()) {
