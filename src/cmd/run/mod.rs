@@ -63,7 +63,11 @@ pub fn run(args: &RunArgs) -> Result<()> {
         Some(n) => Limit::Steps(n),
         None => Limit::SimSeconds(scene.duration_secs()),
     };
-    parse_slice(args.slice.as_deref(), scene.dim())?;
+    let drawing = Drawing {
+        surface: !args.no_surface,
+        moves: args.moves.into(),
+        slice: parse_slice(args.slice.as_deref(), scene.dim())?,
+    };
     let (sink, continued) = recording_of(args, &scene, resumed.as_ref())?;
     let mut method = scene.method.clone();
     let files = method.files(&files_stem(&scene, sink.as_ref().and_then(Sink::file))?);
@@ -81,8 +85,24 @@ pub fn run(args: &RunArgs) -> Result<()> {
     };
     interrupt::install()?;
     match scene.dim() {
-        2 => run_dim::<2>(&scene, &estimate, limit, sink.as_ref(), args, start),
-        3 => run_dim::<3>(&scene, &estimate, limit, sink.as_ref(), args, start),
+        2 => run_dim::<2>(
+            &scene,
+            &estimate,
+            limit,
+            sink.as_ref(),
+            drawing,
+            args,
+            start,
+        ),
+        3 => run_dim::<3>(
+            &scene,
+            &estimate,
+            limit,
+            sink.as_ref(),
+            drawing,
+            args,
+            start,
+        ),
         d => unreachable!("scene checks the dimension, got {d}"),
     }
 }
@@ -92,14 +112,10 @@ fn run_dim<const D: usize>(
     estimate: &MemoryEstimate,
     limit: Limit,
     sink: Option<&Sink>,
+    drawing: Drawing,
     args: &RunArgs,
     start: Start,
 ) -> Result<()> {
-    let drawing = Drawing {
-        surface: !args.no_surface,
-        moves: args.moves.into(),
-        slice: parse_slice(args.slice.as_deref(), D)?,
-    };
     let recorder = sink
         .map(|s| Recorder::create(s, scene, drawing, start.continued.as_ref()))
         .transpose()?;
