@@ -63,10 +63,10 @@ mod record;
 mod settings;
 
 pub use physics::{
-    density_errors, project_density, push_out, ErrorClass, Inputs, Resample, SolidShare, CLAMP,
-    PUSH_MARGIN, RESAMPLE_BELOW,
+    density_errors, project_density, push_out, Inputs, Resample, SolidShare, CLAMP, PUSH_MARGIN,
+    RESAMPLE_BELOW,
 };
-pub use record::IdpReport;
+pub use record::{ErrorClass, IdpReport};
 pub use settings::IdpSettings;
 
 use super::cost::{Footprint, StepCost};

@@ -1,6 +1,6 @@
 //! Method idp's step: the hooks it implements (see the module doc of `super`).
 
-use super::record::IdpReport;
+use super::record::{ErrorClass, IdpReport};
 use crate::draw::Log;
 use crate::grid::active::{par_runs, Active};
 use crate::grid::{for_each_cell_weight, Grid, MacField, Vector};
@@ -483,25 +483,7 @@ fn resample_degenerate<const D: usize, R: Rng>(
     degenerate.len()
 }
 
-/// The density error of a cell, in classes for recordings.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[repr(u8)]
-pub enum ErrorClass {
-    NotFluid = 0,
-    /// Under-dense at the surface: left the solve.
-    Surface = 1,
-    /// `s <= -0.5` (clamped, or resampled).
-    OverClamped = 2,
-    /// `-0.5 < s < -0.05`.
-    Over = 3,
-    /// `|s| <= 0.05`.
-    Rest = 4,
-    /// `0.05 < s < 0.5`.
-    Under = 5,
-    /// `s >= 0.5`.
-    UnderClamped = 6,
-}
-
+/// The class of a cell's density error (the classes, their labels and colours: `super::record`).
 impl ErrorClass {
     /// Errors within this of 0 count as at rest.
     const REST: f64 = 0.05;
@@ -516,23 +498,6 @@ impl ErrorClass {
             _ if s < CLAMP => ErrorClass::Under,
             _ => ErrorClass::UnderClamped,
         }
-    }
-
-    /// Labels and colours: over-dense red, under-dense blue, at rest faint grey.
-    fn table() -> [(u16, &'static str, [u8; 4]); 7] {
-        [
-            (0, "not fluid", [0, 0, 0, 0]),
-            (
-                1,
-                "surface, under-dense (left the solve)",
-                [60, 180, 75, 110],
-            ),
-            (2, "over-dense, clamped (s <= -0.5)", [200, 20, 20, 200]),
-            (3, "over-dense (-0.5 < s < -0.05)", [240, 120, 100, 160]),
-            (4, "at rest (|s| <= 0.05)", [128, 128, 128, 40]),
-            (5, "under-dense (0.05 < s < 0.5)", [110, 150, 240, 160]),
-            (6, "under-dense, clamped (s >= 0.5)", [30, 60, 200, 200]),
-        ]
     }
 }
 

@@ -34,7 +34,8 @@ mod record;
 pub mod region;
 mod settings;
 
-pub use physics::{combine, level, Resampling};
+pub use levelset::level;
+pub use physics::{combine, Resampling};
 pub use record::NbflipReport;
 pub use settings::NbflipSettings;
 

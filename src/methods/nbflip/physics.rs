@@ -1,6 +1,6 @@
 //! Method nbflip's step: the hooks it implements (see the module doc of `super`).
 
-use super::levelset::{particle_radius, LevelSet, March, Side};
+use super::levelset::{level, surface_layer, LevelSet, March, Side};
 use super::record::NbflipReport;
 use super::region::{Margin, Region};
 use crate::draw::{depth_level_classes, Log};
@@ -220,19 +220,6 @@ impl<const D: usize> NbflipSim<D> {
     }
 }
 
-/// The level of cell `c` in a band `R` deep, read from the level set at its centre: surface
-/// above [`surface_layer`], band down to the combine band `-(R - 1)`, interface down to `-R`
-/// (particles, but the grid's velocity), deep below.
-pub fn level<const D: usize>(phi: &LevelSet, solid: &[bool], r: f64, c: usize) -> DepthLevel {
-    match phi.phi[c] {
-        v if solid[c] || v >= 0.0 => DepthLevel::NotFluid,
-        v if v > surface_layer(D) => DepthLevel::Surface,
-        v if v >= -(r - 1.0) => DepthLevel::Band,
-        v if v >= -r => DepthLevel::Interface,
-        _ => DepthLevel::Deep,
-    }
-}
-
 /// Step 1, the velocity combination: faces of the liquid (next to a fluid cell of `m`) with
 /// particle weight inside the combine band `phi >= -(R - 1)` keep the particles' velocity `u`,
 /// its other faces take the advected grid velocity `grid_u` (MantaFlow's `combineGridVel` with
@@ -262,13 +249,6 @@ fn obstacle_cells<const D: usize>(solids: &Solids<D>) -> Vec<usize> {
     cells.sort_unstable();
     cells.dedup();
     cells
-}
-
-/// The level set above which a particle is "at the surface": one cell diagonal plus 1 %
-/// (MantaFlow's `adjustNumber`, `SURFACE_LS`). Cells above it are not seeded, and their
-/// particles are never thinned.
-fn surface_layer(dim: usize) -> f64 {
-    -2.0 * particle_radius(dim)
 }
 
 impl<const D: usize> FluidMethod<D> for NbflipSim<D> {

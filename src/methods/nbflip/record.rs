@@ -1,8 +1,7 @@
 //! What method nbflip records and sums up: its panels and band-level view, its step report's
 //! scalars and the band levels by the level set, and the run's totals.
 
-use super::levelset::LevelSet;
-use super::physics::level;
+use super::levelset::{level, LevelSet};
 use crate::draw::{Image, Layer, LayerView, Log, Needs, Panel};
 use crate::methods::seam::{MethodReport, MethodSummary};
 use crate::metrics::median;
