@@ -28,13 +28,16 @@
 //! ([`MethodRecording::record_setup`]: its layers' classes; [`MethodRecording::is_deep`]: the
 //! cells it holds no particles in), [`MethodReport::record`] (one step's scalars and drawings,
 //! in the vocabulary of [`crate::draw`]) and [`MethodSummary`] (the run's totals, gathered from
-//! the reports).
+//! the reports). A method writes no file: what a step hands over to be written (ccp's
+//! exported problems) is in its report ([`MethodReport::exports`]), which the run's observer
+//! writes.
 //!
 //! Adding a method: a folder here whose `mod.rs` registers a type implementing [`MethodType`]
 //! (its [`MethodInfo`], its `Settings` type with their `check`, how to build its step and its
 //! summary), with its step in `physics.rs` (implementing [`FluidMethod`] and
-//! [`MethodRecording`]) and its recording in `record.rs` (its panels, its [`MethodReport`] and
-//! [`MethodSummary`]); then one line in the [`methods!`] list below, which makes its settings
+//! [`MethodRecording`]), its settings and flags in `settings.rs`, and its report types and
+//! recording in `record.rs` (its panels, its [`MethodReport`] and [`MethodSummary`]); then one
+//! line in the [`methods!`] list below, which makes its settings
 //! a field of [`MethodSettings`] named after its folder. `flip` is the smallest example, `idp`
 //! a typical one. Its options are declared once, beside its settings: the keys of its scene
 //! table are its `Settings` as serde reads them, its flags are [`MethodType::FLAGS`]
