@@ -35,7 +35,7 @@
 //! Adding a method: a folder here whose `mod.rs` registers a type implementing [`MethodType`]
 //! (its [`MethodInfo`], its `Settings` type with their `check`, how to build its step and its
 //! summary), with its step in `physics.rs` (implementing [`FluidMethod`] and
-//! [`MethodRecording`]), its settings and flags in `settings.rs`, and its report types and
+//! [`MethodRecording`]), its `Settings` in `settings.rs`, and its report types and
 //! recording in `record.rs` (its panels, its [`MethodReport`] and [`MethodSummary`]); then one
 //! line in the [`methods!`] list below, which makes its settings
 //! a field of [`MethodSettings`] named after its folder. `flip` is the smallest example, `idp`

@@ -84,25 +84,10 @@ pub fn run(args: &RunArgs) -> Result<()> {
         read,
     };
     interrupt::install()?;
+    let sink = sink.as_ref();
     match scene.dim() {
-        2 => run_dim::<2>(
-            &scene,
-            &estimate,
-            limit,
-            sink.as_ref(),
-            drawing,
-            args,
-            start,
-        ),
-        3 => run_dim::<3>(
-            &scene,
-            &estimate,
-            limit,
-            sink.as_ref(),
-            drawing,
-            args,
-            start,
-        ),
+        2 => run_dim::<2>(&scene, &estimate, limit, sink, drawing, args, start),
+        3 => run_dim::<3>(&scene, &estimate, limit, sink, drawing, args, start),
         d => unreachable!("scene checks the dimension, got {d}"),
     }
 }

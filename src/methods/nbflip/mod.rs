@@ -40,7 +40,7 @@ pub use record::NbflipReport;
 pub use settings::NbflipSettings;
 
 use super::cost::{Footprint, StepCost};
-use super::options::Flag;
+use super::options::{Flag, FlagValue};
 use super::seam::{
     FluidMethod, MethodInfo, MethodSummary, MethodType, SettingContext, SettingError,
 };
@@ -63,7 +63,12 @@ impl MethodType for Nbflip {
     };
 
     type Settings = NbflipSettings;
-    const FLAGS: &'static [Flag<NbflipSettings>] = settings::FLAGS;
+    const FLAGS: &'static [Flag<NbflipSettings>] = &[Flag {
+        name: "band-r",
+        help: "Depth R in cells of the band of particles kept below the level set's zero.",
+        value: FlagValue::number::<u32>(),
+        set: |s, v| v.try_into().map(|x| s.band_r = x),
+    }];
 
     fn check(s: &NbflipSettings, _ctx: SettingContext) -> Result<(), SettingError> {
         check_band_r(s.band_r).map_err(|why| SettingError::range("band_r", why.to_string()))

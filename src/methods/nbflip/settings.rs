@@ -1,6 +1,5 @@
-//! Method nbflip's settings: `[simulation.nbflip]` in a scene file, and its flag.
+//! Method nbflip's settings: `[simulation.nbflip]` in a scene file.
 
-use crate::methods::options::{Flag, FlagValue};
 use crate::stages::band::DEFAULT_BAND_R;
 
 /// Method nbflip's settings: `[simulation.nbflip]` in a scene file.
@@ -24,11 +23,3 @@ impl Default for NbflipSettings {
         }
     }
 }
-
-/// Method nbflip's command-line flag.
-pub const FLAGS: &[Flag<NbflipSettings>] = &[Flag {
-    name: "band-r",
-    help: "Depth R in cells of the band of particles kept below the level set's zero.",
-    value: FlagValue::number::<u32>(),
-    set: |s, v| v.try_into().map(|x| s.band_r = x),
-}];

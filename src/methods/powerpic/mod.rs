@@ -72,7 +72,7 @@ pub use record::PowerPicReport;
 pub use settings::{AirForm, PowerPicSettings};
 
 use super::cost::{Footprint, StepCost};
-use super::options::Flag;
+use super::options::{Flag, FlagValue};
 use super::seam::{
     FluidMethod, MethodInfo, MethodSummary, MethodType, SettingContext, SettingError,
 };
@@ -100,7 +100,14 @@ impl MethodType for Powerpic {
     };
 
     type Settings = PowerPicSettings;
-    const FLAGS: &'static [Flag<PowerPicSettings>] = settings::FLAGS;
+    const FLAGS: &'static [Flag<PowerPicSettings>] = &[Flag {
+        name: "air",
+        help: "How the free surface's air is costed (overrides `simulation.powerpic.air`): \
+               baseline (pulled towards the air baseline estimated from the markings) or \
+               capacity (free).",
+        value: FlagValue::choice::<AirForm>(),
+        set: |s, v| v.try_into().map(|x| s.air = x),
+    }];
 
     fn check(s: &PowerPicSettings, ctx: SettingContext) -> Result<(), SettingError> {
         s.check(ctx)

@@ -1,7 +1,6 @@
 //! Power PIC's settings: `[simulation.powerpic]` in a scene file (defaults: Levi's, sec.
 //! Evaluation).
 
-use crate::methods::options::{Flag, FlagValue};
 use crate::methods::seam::{SettingContext, SettingError};
 use crate::solvers::sinkhorn::SinkhornSettings;
 use serde::{Deserialize, Serialize};
@@ -125,13 +124,3 @@ impl PowerPicSettings {
         }
     }
 }
-
-/// Power PIC's command-line flag.
-pub const FLAGS: &[Flag<PowerPicSettings>] = &[Flag {
-    name: "air",
-    help: "How the free surface's air is costed (overrides `simulation.powerpic.air`): \
-           baseline (pulled towards the air baseline estimated from the markings) or \
-           capacity (free).",
-    value: FlagValue::choice::<AirForm>(),
-    set: |s, v| v.try_into().map(|x| s.air = x),
-}];
