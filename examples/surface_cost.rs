@@ -8,7 +8,7 @@
 //! the median time with the mesh's size, beside the median time of the steps taken.
 
 use cellflip::scene::{Overrides, Scene};
-use cellflip::simulation::Simulation;
+use cellflip::step::Simulation;
 use cellflip::surface::reconstruct;
 use std::time::Instant;
 

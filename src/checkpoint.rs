@@ -9,8 +9,8 @@
 
 use crate::frames::{FrameError, FrameWorker};
 use crate::record::Recorder;
-use crate::simulation::Simulation;
 use crate::snapshot::{self, Reader, SnapshotError, Writer};
+use crate::step::Simulation;
 use std::fs::File;
 use std::path::{Path, PathBuf};
 

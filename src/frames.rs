@@ -17,7 +17,7 @@
 //! next [`FrameWorker::submit`] or [`FrameWorker::finish`] returns it, naming the file.
 
 use crate::out::BoxError;
-use crate::simulation::Simulation;
+use crate::step::Simulation;
 use crate::surface::{Liquid, SurfaceMesh};
 use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
 use std::thread::JoinHandle;

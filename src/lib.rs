@@ -12,23 +12,40 @@ pub const PAR_GRAIN: usize = 16384;
 /// As [`PAR_GRAIN`] for a particle's stencil work (tens of face reads or writes each).
 pub const PAR_GRAIN_PARTICLES: usize = 1024;
 
-pub mod checkpoint;
-pub mod cmd;
-pub mod draw;
-pub mod frames;
+// The modules by layer, from the bottom (CODE_STYLE.md, "Layers"): each imports only from its
+// own layer and those before it. Data, numerics and measures that know no fluid method:
 pub mod grid;
 pub mod interrupt;
 pub mod machine;
-pub mod methods;
 pub mod metrics;
 pub mod out;
 pub mod particles;
-pub mod record;
-pub mod runner;
-pub mod scene;
-pub mod sim;
-pub mod simulation;
 pub mod snapshot;
 pub mod solvers;
+
+// The paper's stages, which know no method.
+pub mod stages;
+
+// The drawing vocabulary a method records in.
+pub mod draw;
+
+// The fluid methods, behind one seam.
+pub mod methods;
+
+// The step, the scene files, the step loop and what runs beside it.
+pub mod scene;
+pub mod step;
+
+pub mod runner;
 pub mod surface;
+
+pub mod frames;
 pub mod validation;
+
+// The recordings (the only module that imports rerun), then a run's checkpoints.
+pub mod record;
+
+pub mod checkpoint;
+
+// The commands.
+pub mod cmd;

@@ -1,10 +1,12 @@
 //! The one step loop: every command (`run`, `bench`, `validate`, `report`) and the tests step a
 //! simulation through [`Runner::run`], with an observer called after each step, and read what
-//! happened from one [`Summary`], printed in one place ([`Summary::print`]).
+//! happened from one [`Summary`], printed in one place ([`Summary::print`]). The files a step
+//! hands over (ccp's `--export-lp`) are written by an observer, through [`Exports`].
 
 use crate::metrics::{median, Stage, StageTimes};
-use crate::sim::StepError;
-use crate::simulation::{Simulation, StepReport};
+use crate::stages::StepError;
+use crate::step::{Simulation, StepReport};
+use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 /// When a run ends.
@@ -47,6 +49,8 @@ pub struct Summary {
     pub obstacles: Vec<(String, f64, u64)>,
     /// What the method says about the run.
     pub method_lines: Vec<String>,
+    /// The files written for the steps ([`Exports`]), one line each.
+    pub written: Vec<String>,
 }
 
 impl Summary {
@@ -150,6 +154,7 @@ impl Summary {
             );
         }
         self.method_lines.iter().for_each(|l| crate::outln!("{l}"));
+        self.written.iter().for_each(|l| crate::outln!("{l}"));
         let total: Duration = self.step_times.iter().map(|t| t.total()).sum();
         crate::outln!(
             "{:<10} {:>10} {:>12} {:>8}",
@@ -238,5 +243,45 @@ impl<const D: usize> Runner<D> {
     pub fn reset_summary(&mut self) {
         self.summary = Summary::new(&self.sim);
         self.sim.reset_summary();
+    }
+}
+
+/// Writes the files steps hand over ([`MethodReport::exports`]: ccp's `--export-lp N`, the
+/// problem its correction solved), for an observer of [`Runner::run`] to call after each step,
+/// and keeps a line for the summary of each ([`Summary::written`]).
+///
+/// [`MethodReport::exports`]: crate::methods::MethodReport::exports
+#[derive(Debug, Default)]
+pub struct Exports {
+    pub written: Vec<String>,
+}
+
+/// A file a step handed over that could not be written: the step, the file and why.
+#[derive(Debug, thiserror::Error)]
+#[error("step {step}: cannot write '{}'", .path.display())]
+pub struct ExportFailed {
+    pub step: u64,
+    pub path: PathBuf,
+    #[source]
+    pub error: std::io::Error,
+}
+
+impl Exports {
+    /// Writes the files of `rep`, the report of `sim`'s last step.
+    pub fn write<const D: usize>(
+        &mut self,
+        sim: &Simulation<D>,
+        rep: &StepReport<D>,
+    ) -> Result<(), ExportFailed> {
+        for e in rep.method.exports() {
+            std::fs::write(e.path, e.text).map_err(|error| ExportFailed {
+                step: sim.state.steps,
+                path: e.path.to_path_buf(),
+                error,
+            })?;
+            self.written
+                .push(format!("wrote {} to {}", e.what, e.path.display()));
+        }
+        Ok(())
     }
 }

@@ -35,7 +35,7 @@
 //! [`SMOOTHING_LENGTH_PER_RADIUS`], [`CUBE_SIZE_PER_RADIUS`], [`ISO_SURFACE`]. With 8 particles
 //! per cell (dam-3d) the kernel reaches one cell and the marching-cubes grid is half a cell.
 
-use crate::simulation::Simulation;
+use crate::step::Simulation;
 use splashsurf_lib::nalgebra::Vector3;
 use splashsurf_lib::{reconstruct_surface, Parameters};
 

@@ -4,7 +4,7 @@
 
 use crate::runner::{Limit, Runner, StepFailed};
 use crate::scene::{LoadError, Overrides, Scene};
-use crate::simulation::Simulation;
+use crate::step::Simulation;
 
 /// Surge front, `T = t sqrt(2 g / a)`, `Z = x / a` (Martin & Moyce 1952, table 2).
 pub const SURGE_FRONT_CSV: &str = include_str!("../validation/martin_moyce_1952.csv");

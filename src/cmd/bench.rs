@@ -7,8 +7,8 @@ use crate::methods::ccp::BandMode;
 use crate::metrics::{median, Stage};
 use crate::runner::{Limit, Runner};
 use crate::scene::{peak_memory_mib, MemoryEstimate, Overrides, Scene};
-use crate::simulation::Simulation;
 use crate::solvers::pcg::Preconditioner;
+use crate::step::Simulation;
 use anyhow::{bail, Result};
 use std::time::Duration;
 
@@ -21,7 +21,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
         args.scene,
         args.steps,
         args.warmup,
-        crate::sim::transfer::grid_to_particles_mode(),
+        crate::stages::transfer::grid_to_particles_mode(),
         crate::machine::Machine::here(rayon::current_num_threads()),
     );
     let bands: Vec<Option<BandMode>> = match args.band.is_empty() {
@@ -39,7 +39,7 @@ pub fn bench(args: &BenchArgs) -> Result<()> {
             let overrides = Overrides {
                 cells: Some(res),
                 method: args.method,
-                pressure: args.pressure.preconditioner,
+                pressure: args.pressure.preconditioner.map(Into::into),
                 flags,
                 ..Default::default()
             };

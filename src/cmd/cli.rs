@@ -1,10 +1,13 @@
-//! Command-line definitions (clap) and nothing else.
+//! Command-line definitions (clap) and nothing else. The library below takes plain enums and
+//! numbers: where a flag's values are one of its enums, a mirror here names and explains them
+//! for `--help` and maps onto it (`PreconditionerArg` onto `Preconditioner`, ...); the methods'
+//! own flags come from their folders (`crate::methods::options`).
 
 use crate::methods::ccp::{BandMode, Solver};
 use crate::methods::{MethodFlags, MethodKind};
 use crate::record::{parse_memory_limit, Moves};
-use crate::sim::solids::ObstacleMode;
 use crate::solvers::pcg::Preconditioner;
+use crate::stages::solids::ObstacleMode;
 use clap::{Args, Parser, Subcommand};
 use std::net::IpAddr;
 use std::path::PathBuf;
@@ -126,7 +129,8 @@ fn parse_compared(s: &str) -> Result<(MethodKind, Option<ObstacleMode>), String>
     })?;
     let obstacle = o
         .map(|o| {
-            ObstacleMode::from_str(o, false)
+            ObstacleArg::from_str(o, false)
+                .map(ObstacleMode::from)
                 .map_err(|_| format!("unknown obstacle mode '{o}' (couple, naive or ignore)"))
         })
         .transpose()?;
@@ -318,7 +322,7 @@ pub struct RunArgs {
     /// How obstacles pass particles (overrides `simulation.obstacle`): couple (ccp), or for
     /// the other methods naive (wait for free cells) or ignore (move regardless).
     #[arg(long, value_enum)]
-    pub obstacle: Option<ObstacleMode>,
+    pub obstacle: Option<ObstacleArg>,
     /// The pressure solve.
     #[command(flatten)]
     pub pressure: PressureArgs,
@@ -343,8 +347,8 @@ pub struct RunArgs {
     /// How the recording draws the correction's moves: arrows (from x_hat to x, often a small
     /// fraction of a cell) or hops (from the cell the particle was advected into to the cell
     /// it was put in).
-    #[arg(long, value_enum, default_value_t = Moves::Arrows)]
-    pub moves: Moves,
+    #[arg(long, value_enum, default_value_t = MovesArg::Arrows)]
+    pub moves: MovesArg,
     /// 3D: the slice the recording draws as a 2D view: an axis (x, y or z) and, after `=`, a
     /// position as a fraction of the tank along it (e.g. `x=0.3`) [default: z=0.5].
     #[arg(long, value_name = "AXIS[=FRACTION]")]
@@ -371,7 +375,75 @@ pub struct PressureArgs {
     /// and 100,000 in 3D, mic0 below), mic0
     /// (modified incomplete Cholesky) or multigrid (a geometric V-cycle).
     #[arg(long = "pressure", value_enum, value_name = "PRECONDITIONER")]
-    pub preconditioner: Option<Preconditioner>,
+    pub preconditioner: Option<PreconditionerArg>,
+}
+
+/// `--pressure`'s values: [`Preconditioner`] as the command line names and explains it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum PreconditionerArg {
+    /// By the system's size: multigrid from 10,000 unknown rows in 2D and 100,000 in 3D
+    /// (`Preconditioner::AUTO_ROWS`), MIC(0) below, where the multigrid's set-up and heavier
+    /// iterations do not pay (the crossover measured in docs/benchmarks/pressure.md).
+    Auto,
+    /// Modified incomplete Cholesky: cheap per iteration, but its triangular solves are
+    /// sequential and its iteration count grows with the grid.
+    Mic0,
+    /// A geometric multigrid V-cycle (McAdams et al. 2010; `solvers::multigrid`): several
+    /// MIC(0) iterations' work per iteration, but an iteration count nearly independent of
+    /// the grid, and parallel.
+    Multigrid,
+}
+
+impl From<PreconditionerArg> for Preconditioner {
+    fn from(p: PreconditionerArg) -> Self {
+        match p {
+            PreconditionerArg::Auto => Preconditioner::Auto,
+            PreconditionerArg::Mic0 => Preconditioner::Mic0,
+            PreconditionerArg::Multigrid => Preconditioner::Multigrid,
+        }
+    }
+}
+
+/// `--obstacle`'s values (and `compare --methods`'): [`ObstacleMode`] as the command line
+/// names and explains it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum ObstacleArg {
+    /// Method ccp: through the correction (sec. 7).
+    Couple,
+    /// Move regardless; the particles covered count as lost volume.
+    Ignore,
+    /// Wait until the cells it would enter hold no liquid.
+    Naive,
+}
+
+impl From<ObstacleArg> for ObstacleMode {
+    fn from(o: ObstacleArg) -> Self {
+        match o {
+            ObstacleArg::Couple => ObstacleMode::Couple,
+            ObstacleArg::Ignore => ObstacleMode::Ignore,
+            ObstacleArg::Naive => ObstacleMode::Naive,
+        }
+    }
+}
+
+/// `--moves`' values: the recording's [`Moves`] as the command line names and explains them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum MovesArg {
+    /// From `x_hat` (after advection) to `x` (after the correction): the exact displacement,
+    /// often a small fraction of a cell (the moved particles are highlighted).
+    Arrows,
+    /// From the centre of the cell the particle was advected into to the centre of the cell
+    /// the correction put it in: every move at least one cell long.
+    Hops,
+}
+
+impl From<MovesArg> for Moves {
+    fn from(m: MovesArg) -> Self {
+        match m {
+            MovesArg::Arrows => Moves::Arrows,
+            MovesArg::Hops => Moves::Hops,
+        }
+    }
 }
 
 /// Checkpoints of `run`: writing them, and going on from one (docs/checkpoints.md).

@@ -1,5 +1,5 @@
 //! The commands: what `cellflip <command>` does, on top of the library (the paper's steps in
-//! `sim/`, the methods in `methods/`, the step in `simulation.rs`, scenes, recordings). Each
+//! `stages/`, the methods in `methods/`, the step in `step.rs`, scenes, recordings). Each
 //! module is one command and its own machinery, and nothing below imports from here: the
 //! library's core stands apart from its command line (CODE_STYLE.md, "Layers").
 

@@ -7,7 +7,51 @@
 //! band_method, `def.depth`) in their own view. The deep, whose particles are imaginary, is its
 //! own class in the markings (not a bubble) and has the same colour as the deep band level.
 
-use crate::sim::markings::{DepthLevel, MarkingClass};
+use crate::stages::markings::{CellKind, DepthLevel, Markings};
+
+/// The markings layer's class ids (one byte per cell): a cell's kind, surface and fill as a
+/// recording draws them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
+pub enum MarkingClass {
+    Empty = 0,
+    Surface = 1,
+    Inner = 2,
+    /// An inner cell holding fewer than `mu` particles (def. bubble).
+    Bubble = 3,
+    Solid = 4,
+}
+
+impl MarkingClass {
+    pub const ALL: [MarkingClass; 5] = [
+        MarkingClass::Empty,
+        MarkingClass::Surface,
+        MarkingClass::Inner,
+        MarkingClass::Bubble,
+        MarkingClass::Solid,
+    ];
+
+    /// Cell `c`'s class in `markings` with `mu` particles per full cell.
+    pub fn of(markings: &Markings, c: usize, mu: u32) -> Self {
+        match markings.kind[c] {
+            CellKind::Empty => MarkingClass::Empty,
+            CellKind::Solid => MarkingClass::Solid,
+            CellKind::Fluid if markings.surface[c] => MarkingClass::Surface,
+            CellKind::Fluid if markings.count[c] < mu => MarkingClass::Bubble,
+            CellKind::Fluid => MarkingClass::Inner,
+        }
+    }
+
+    pub fn label(self) -> &'static str {
+        match self {
+            MarkingClass::Empty => "empty",
+            MarkingClass::Surface => "surface",
+            MarkingClass::Inner => "inner",
+            MarkingClass::Bubble => "bubble",
+            MarkingClass::Solid => "solid",
+        }
+    }
+}
 
 /// A class of a cell layer: its id in the layer's images or points, label and colour (RGBA).
 pub type Class = (u16, &'static str, [u8; 4]);
@@ -172,6 +216,21 @@ pub fn markdown(max_speed_ms: f64, band: bool) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_deep_cell_short_of_mu_is_a_bubble_3d() {
+        // A 3x3x3 box of single particles but its corner (2, 2, 2): cell (0, 0, 0) is inner.
+        let g = crate::grid::Grid::new([3, 3, 3]);
+        let corner = g.cell_index([2, 2, 2]);
+        let pos: Vec<_> = (0..27)
+            .filter(|&c| c != corner)
+            .map(|c| g.center(g.cell_coords(c)))
+            .collect();
+        let m = Markings::compute(&g, &pos, &[false; 27]);
+        let c = g.cell_index([0, 0, 0]);
+        assert_eq!(MarkingClass::of(&m, c, 2), MarkingClass::Bubble);
+        assert_eq!(MarkingClass::of(&m, c, 1), MarkingClass::Inner);
+    }
 
     #[test]
     fn the_speed_ramp_runs_from_its_first_stop_to_its_last() {

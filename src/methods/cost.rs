@@ -18,8 +18,8 @@ pub struct Footprint {
     /// the band's bookkeeping).
     pub per_fluid_cell: f64,
     pub per_particle: f64,
-    /// Per active cell of the seeded liquid's first markings (within `sim::ACTIVE_MARGIN` of
-    /// its cells, `sim::active_cells`): the fields a step writes only there once they are
+    /// Per active cell of the seeded liquid's first markings (within `stages::ACTIVE_MARGIN` of
+    /// its cells, `stages::active_cells`): the fields a step writes only there once they are
     /// larger than the allocator's mmap threshold (0 but for ccp's band in 3D; the other fits
     /// count those in `per_cell`).
     pub per_active_cell: f64,

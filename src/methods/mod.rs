@@ -6,20 +6,21 @@
 //!
 //! | hook | alg. flip / alg. band | who uses it |
 //! |---|---|---|
-//! | [`FluidMethod::start`] | after the first markings | ccp with the band: first exchange with the deep |
-//! | [`FluidMethod::emitter_count`] | emission | the band methods: the deep counts as full |
+//! | [`FluidMethod::start`] | after the first markings | ccp with the band: first exchange with the deep; nbflip: its first level set and resampling; powerpic: its transport grid |
+//! | [`FluidMethod::emitter_count`] | emission | the band methods: the deep counts as full (asked for the cells of emitters that emit) |
 //! | [`FluidMethod::particles_not_held`] | the particle-count invariant | ccp's deep, nbflip's resampling |
-//! | [`FluidMethod::particles_to_grid`] | line 1 | ccp with the band: the velocity combination |
-//! | [`FluidMethod::grid_to_particles`] | line 4 | FLIP/PIC blend by default |
+//! | [`FluidMethod::particles_to_grid`] | line 1 | the band methods: the velocity combination; powerpic: the transport |
+//! | [`FluidMethod::grid_to_particles`] | line 4 | FLIP/PIC blend by default; powerpic: through the transport, and the move to the kernel's barycentre |
 //! | [`FluidMethod::before_advection`], [`FluidMethod::next_grid_velocity`] | line 5 | ccp keeps `x_bar`; the band advects the grid velocity |
-//! | [`FluidMethod::correct_positions`] | line 6 | ccp: eq. problem3 and the band corrections |
+//! | [`FluidMethod::correct_positions`] | line 6 | ccp: eq. problem3 and the band corrections; idp: the density projection |
 //! | [`FluidMethod::holds_liquid`] | line 6, the obstacles' move (sec. soilds) | nbflip: a `naive` obstacle waits for the level set's inside too |
 //! | [`FluidMethod::before_markings`], [`FluidMethod::after_markings`] | line 7, alg. band line 9 | the band methods: the deep; nbflip's level set and resampling |
 //! | [`FluidMethod::check_invariants`] | after the step | what the method guarantees |
 //! | [`FluidMethod::finish_step`] | after the step | what the method did, as a [`MethodReport`] |
+//! | [`FluidMethod::save_state`], [`FluidMethod::restore_state`] | a checkpoint | what it carries from one step to the next: ccp's deep and prices, nbflip's level set, powerpic's scalings |
 //!
 //! The hooks that change only the particles (lines 4 and 6, and the resampling before line 7)
-//! get a [`crate::sim::ParticlesMut`]: the particles and the random stream mutable, the grid,
+//! get a [`crate::stages::ParticlesMut`]: the particles and the random stream mutable, the grid,
 //! markings, solids and velocity read-only; `start` and `after_markings` may change the
 //! markings too (the band's exchange with the deep), so they get the whole state.
 //!
@@ -27,13 +28,16 @@
 //! ([`MethodRecording::record_setup`]: its layers' classes; [`MethodRecording::is_deep`]: the
 //! cells it holds no particles in), [`MethodReport::record`] (one step's scalars and drawings,
 //! in the vocabulary of [`crate::draw`]) and [`MethodSummary`] (the run's totals, gathered from
-//! the reports).
+//! the reports). A method writes no file: what a step hands over to be written (ccp's
+//! exported problems) is in its report ([`MethodReport::exports`]), which the run's observer
+//! writes.
 //!
 //! Adding a method: a folder here whose `mod.rs` registers a type implementing [`MethodType`]
 //! (its [`MethodInfo`], its `Settings` type with their `check`, how to build its step and its
 //! summary), with its step in `physics.rs` (implementing [`FluidMethod`] and
-//! [`MethodRecording`]) and its recording in `record.rs` (its panels, its [`MethodReport`] and
-//! [`MethodSummary`]); then one line in the [`methods!`] list below, which makes its settings
+//! [`MethodRecording`]), its `Settings` in `settings.rs`, and its report types and
+//! recording in `record.rs` (its panels, its [`MethodReport`] and [`MethodSummary`]); then one
+//! line in the [`methods!`] list below, which makes its settings
 //! a field of [`MethodSettings`] named after its folder. `flip` is the smallest example, `idp`
 //! a typical one. Its options are declared once, beside its settings: the keys of its scene
 //! table are its `Settings` as serde reads them, its flags are [`MethodType::FLAGS`]
@@ -52,8 +56,8 @@ mod seam;
 pub use cost::{Footprint, Holds, StartPeak, StepCost};
 pub use options::{Flag, FlagValue, MethodFlags};
 pub use seam::{
-    BandChoice, FluidMethod, MethodInfo, MethodRecording, MethodReport, MethodSummary, MethodType,
-    NoReport, NoSettings, NoSummary, SettingContext, SettingError, StepFile,
+    BandChoice, Export, FluidMethod, MethodInfo, MethodRecording, MethodReport, MethodSummary,
+    MethodType, NoReport, NoSettings, NoSummary, SettingContext, SettingError, StepFile,
 };
 
 /// Registers the methods (each module declared above, where `cargo fmt` sees it): makes
@@ -354,7 +358,7 @@ mod tests {
         assert_eq!(by, ["ccp", "nbflip"]);
         let r = MethodFlags::default().with("band-r", 5u32);
         let (default_r, mut s) = (
-            crate::sim::band::DEFAULT_BAND_R,
+            crate::stages::band::DEFAULT_BAND_R,
             MethodSettings::new(MethodKind::Nbflip),
         );
         s.apply_flags(&r);

@@ -9,12 +9,12 @@ use super::cost::{Footprint, StepCost};
 use super::options::Flag;
 use crate::draw::{LayerView, Log, Panel};
 use crate::grid::{Grid, MacField, NearCells, Vector};
-use crate::metrics::InvariantViolation;
-use crate::sim::markings::Markings;
-use crate::sim::solids::ObstacleMode;
-use crate::sim::transfer::{self, Known};
-use crate::sim::{ParticlesMut, State, StepError};
 use crate::snapshot::{Reader, SnapshotError, Writer};
+use crate::stages::invariants::InvariantViolation;
+use crate::stages::markings::Markings;
+use crate::stages::solids::ObstacleMode;
+use crate::stages::transfer::{self, Known};
+use crate::stages::{ParticlesMut, State, StepError};
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use std::any::Any;
@@ -57,6 +57,18 @@ pub struct StepFile {
     pub flag: &'static str,
     pub step: u64,
     pub path: PathBuf,
+}
+
+/// A file a step hands over to be written, because the command line asked for it (ccp's
+/// `--export-lp N`: the problem its correction solved): its path ([`StepFile::path`], or one
+/// beside it), what it is, for the run's summary, and its text. No hook writes a file: the
+/// run's observer writes these ([`crate::runner::Exports`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Export<'a> {
+    pub path: &'a Path,
+    /// E.g. `the correction problem of step 3`.
+    pub what: String,
+    pub text: &'a str,
 }
 
 /// A method without settings of its own: its scene table, if given, must be empty.
@@ -166,7 +178,7 @@ pub trait FluidMethod<const D: usize>: MethodRecording<D> + Send {
 
     /// Alg. flip line 4: the grid velocity back to the particles (`u_old` is the field before
     /// forces and projection), their speeds bounded by `max_speed` (checked after every step's
-    /// transfer: [`crate::metrics::check_speed_bound`]). Returns true when it wrote
+    /// transfer: [`crate::stages::invariants::check_speed_bound`]). Returns true when it wrote
     /// `u(x_p)` per particle to `at` and the particles have not moved, for the advection (line
     /// 5) to use instead of interpolating `u` again at the same points.
     fn grid_to_particles(
@@ -277,6 +289,11 @@ pub trait MethodReport<const D: usize>: Any + Debug + Send {
     /// Per-step figures for `cellflip report`: solver statistics by name (each name listed
     /// in [`MethodInfo::figures`]).
     fn figures(&self) -> Vec<(&'static str, f64)> {
+        vec![]
+    }
+
+    /// The files this step hands over to be written ([`Export`]).
+    fn exports(&self) -> Vec<Export<'_>> {
         vec![]
     }
 

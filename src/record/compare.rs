@@ -16,7 +16,7 @@ use crate::draw::legend;
 use crate::draw::Log;
 use crate::grid::Vector;
 use crate::scene::Scene;
-use crate::simulation::{Simulation, StepReport};
+use crate::step::{Simulation, StepReport};
 
 /// One run of a comparison, as the recording names and colours it.
 pub struct ComparedRun<'a> {

@@ -4,15 +4,14 @@
 
 use super::canvas::PointLook;
 use super::{Canvas, Drawing, Moves, Plane, Stream};
-use crate::draw::legend::{self, speed_color, NEW_SOLID_COLOR, OBSTACLE_COLOR};
+use crate::draw::legend::{self, speed_color, MarkingClass, NEW_SOLID_COLOR, OBSTACLE_COLOR};
 use crate::draw::{Layer, Log};
 use crate::frames::{Frame, FrameNeeds, FrameSink};
 use crate::grid::Vector;
 use crate::metrics::Stage;
 use crate::particles::Region;
 use crate::scene::Scene;
-use crate::sim::markings::MarkingClass;
-use crate::simulation::{Simulation, StepReport};
+use crate::step::{Simulation, StepReport};
 use std::cell::RefCell;
 
 /// Draws one run, step by step.
@@ -151,7 +150,7 @@ impl RunLog {
         let mu = s.config.mu();
         let class = |cell| match sim.method.is_deep(s, cell) {
             true => legend::DEEP as u8,
-            false => s.markings.class(cell, mu) as u8,
+            false => MarkingClass::of(&s.markings, cell, mu) as u8,
         };
         let hidden = [
             MarkingClass::Empty as u8,

@@ -2,7 +2,7 @@
 //! emitter, obstacle). Every error is a [`SceneError`]: the file, the key, a kind that tests
 //! match, and the reason in words.
 
-use super::simulation::BadValue;
+use super::tables::BadValue;
 use super::{
     EmitterFile, MotionKind, ObstacleFile, RegionFile, Scene, SceneFile, Shape, SimulationFile,
 };
@@ -538,7 +538,7 @@ pub(super) fn method_keys(source: &str, s: &SimulationFile) -> Checked<()> {
 /// The run ends in about [`MAX_STEPS`] steps at most, however the fluid moves: a step is
 /// never much shorter (a factor of 2 at most) than the smallest of `max_dt`, `cfl` cells at
 /// `max_speed`, and the time gravity takes to move a resting particle `cfl` cells (see
-/// `sim::timestep`). The key named is the one that sets that shortest step.
+/// `stages::timestep`). The key named is the one that sets that shortest step.
 fn step_count(ch: &Checker, s: &SimulationFile) -> Checked<()> {
     let g = s
         .gravity
@@ -687,7 +687,7 @@ fn obstacle_mode(
     ch: &Checker,
     s: &SimulationFile,
     method: &MethodSettings,
-) -> Checked<crate::sim::solids::ObstacleMode> {
+) -> Checked<crate::stages::solids::ObstacleMode> {
     let info = method.kind.info();
     let mode = s.obstacle.unwrap_or(info.obstacle_modes[0]);
     if info.obstacle_modes.contains(&mode) {

@@ -20,9 +20,9 @@ use super::Scene;
 use super::{ErrorKind, SceneError};
 use crate::grid::{Grid, NearCells};
 use crate::methods::Holds;
-use crate::sim::markings::Markings;
-use crate::sim::solids::Solids;
-use crate::sim::SimConfig;
+use crate::stages::markings::Markings;
+use crate::stages::solids::Solids;
+use crate::stages::SimConfig;
 
 /// The process before any simulation: code, the thread pool, the scene.
 const BASE_BYTES: f64 = 12.0 * MIB;

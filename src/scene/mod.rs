@@ -7,19 +7,19 @@
 mod check;
 mod limits;
 mod memory;
-mod simulation;
+mod tables;
 
 pub use check::{ErrorKind, SceneError};
 pub use memory::{ensure_fit, peak_memory_mib, MemoryEstimate};
-pub use simulation::SimulationFile;
+pub use tables::SimulationFile;
 
 use crate::grid::Vector;
 use crate::methods::{MethodFlags, MethodKind, MethodSettings};
 use crate::particles::{Region, SpiralBlock};
-use crate::sim::emit::Emitter;
-use crate::sim::solids::{Motion, Obstacle, ObstacleMode};
-use crate::sim::SimConfig;
 use crate::solvers::pcg::Preconditioner;
+use crate::stages::emit::Emitter;
+use crate::stages::solids::{Motion, Obstacle, ObstacleMode};
+use crate::stages::SimConfig;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 

@@ -8,7 +8,7 @@
 //! negative Laplacian in unit cells: `-1` between neighbouring unknowns, and on the diagonal
 //! the number of neighbours that are unknown or [`CellClass::Dirichlet`] (a known zero);
 //! [`CellClass::Neumann`] cells and the outside of the grid add nothing. This is exactly the
-//! matrix `crate::sim::pressure::Poisson` builds (empty cells Dirichlet, solid cells Neumann),
+//! matrix `crate::stages::pressure::Poisson` builds (empty cells Dirichlet, solid cells Neumann),
 //! so the finest level smooths the very system CG solves. The classes, rather than the
 //! matrix, are the input because coarsening needs them: a matrix row tells how many
 //! neighbours are Dirichlet, not which.

@@ -69,32 +69,20 @@ impl<const D: usize> StencilMatrix<D> {
     }
 }
 
-/// Which preconditioner CG runs with (scene key `simulation.pressure_preconditioner`, flag
-/// `--pressure`).
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    serde::Serialize,
-    serde::Deserialize,
-    clap::ValueEnum,
-)]
+/// Which preconditioner CG runs with (scene key `simulation.pressure_preconditioner`; the
+/// command line's `--pressure` takes the same names, `crate::cmd::cli`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Preconditioner {
-    /// By the system's size: multigrid from 10,000 unknown rows in 2D and 100,000 in 3D
-    /// (`Preconditioner::AUTO_ROWS`), MIC(0) below, where the multigrid's set-up and heavier
-    /// iterations do not pay (the crossover measured in docs/benchmarks/pressure.md).
+    /// [`Preconditioner::Multigrid`] from [`Preconditioner::AUTO_ROWS`] rows,
+    /// [`Preconditioner::Mic0`] below ([`Preconditioner::for_size`]).
     #[default]
     Auto,
-    /// Modified incomplete Cholesky: cheap per iteration, but its triangular solves are
-    /// sequential and its iteration count grows with the grid.
+    /// MIC(0), modified incomplete Cholesky: cheap iterations; sequential triangular solves; an
+    /// iteration count that grows with the grid.
     Mic0,
-    /// A geometric multigrid V-cycle (McAdams et al. 2010; `solvers::multigrid`): several
-    /// MIC(0) iterations' work per iteration, but an iteration count nearly independent of
-    /// the grid, and parallel.
+    /// The geometric multigrid V-cycle of [`crate::solvers::multigrid`] (McAdams et al. 2010):
+    /// heavier, parallel iterations, their count nearly independent of the grid.
     Multigrid,
 }
 
@@ -138,7 +126,7 @@ pub struct PcgSettings {
     /// MIC(0) safety cut-off sigma (Bridson: 0.25).
     pub sigma: f64,
     /// The preconditioner a caller that knows the grid builds
-    /// ([`crate::sim::pressure::Poisson::solve`], which resolves [`Preconditioner::Auto`]
+    /// ([`crate::stages::pressure::Poisson::solve`], which resolves [`Preconditioner::Auto`]
     /// by the system's size); [`solve`] has only the matrix and takes MIC(0).
     pub preconditioner: Preconditioner,
 }

@@ -7,7 +7,7 @@ use crate::common::{load, simulation};
 use cellflip::grid::active::Active;
 use cellflip::methods::MethodKind;
 use cellflip::scene::Overrides;
-use cellflip::sim::markings::{CellKind, Markings};
+use cellflip::stages::markings::{CellKind, Markings};
 
 /// Steps `name` at `cells` twice, once as the program does and once with every cell active
 /// before each step, and checks that the reports and states agree exactly.

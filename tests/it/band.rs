@@ -13,10 +13,10 @@ use cellflip::methods::MethodFlags;
 use cellflip::methods::MethodKind;
 use cellflip::runner::Limit;
 use cellflip::scene::Overrides;
-use cellflip::sim::band::Band;
-use cellflip::sim::markings::{DepthLevel, Markings};
-use cellflip::sim::solids::{ObstacleMode, Solids};
-use cellflip::simulation::Simulation;
+use cellflip::stages::band::Band;
+use cellflip::stages::markings::{DepthLevel, Markings};
+use cellflip::stages::solids::{ObstacleMode, Solids};
+use cellflip::step::Simulation;
 
 /// Runs `steps` steps of a scene with method ccp and the given band, checking every step: the
 /// invariants (inside `step`: cell bounds after the correction, particles plus `n_deep` equal

@@ -9,14 +9,14 @@ use cellflip::methods::ccp::BandMode;
 use cellflip::methods::MethodKind;
 use cellflip::runner::{Limit, Runner};
 use cellflip::scene::{Overrides, Scene};
-use cellflip::sim::solids::ObstacleMode;
-use cellflip::simulation::Simulation;
 use cellflip::snapshot::{Reader, Writer};
+use cellflip::stages::solids::ObstacleMode;
+use cellflip::step::Simulation;
 
 /// The digest of the state after a step, with that step's report when there is one.
 fn digest_of<const D: usize>(
     sim: &Simulation<D>,
-    rep: Option<&cellflip::simulation::StepReport<D>>,
+    rep: Option<&cellflip::step::StepReport<D>>,
 ) -> String {
     let mut d = Digest::default();
     if let Some(rep) = rep {

@@ -10,7 +10,7 @@ use cellflip::methods::idp::IdpReport;
 use cellflip::methods::{MethodFlags, MethodKind};
 use cellflip::runner::{Limit, Runner};
 use cellflip::scene::{Overrides, Scene};
-use cellflip::simulation::{Simulation, StepReport};
+use cellflip::step::{Simulation, StepReport};
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};

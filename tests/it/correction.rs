@@ -8,12 +8,11 @@ use cellflip::methods::ccp::correct::problem;
 use cellflip::methods::ccp::{BandMode, Directions};
 use cellflip::methods::MethodFlags;
 use cellflip::methods::MethodKind;
-use cellflip::runner::{Limit, Runner};
+use cellflip::runner::{ExportFailed, Exports, Limit, Runner};
 use cellflip::scene::Overrides;
-use cellflip::sim::markings::Markings;
-use cellflip::sim::StepError;
-use cellflip::simulation::Simulation;
 use cellflip::solvers::{lp, min_cost_flow, mps};
+use cellflip::stages::markings::Markings;
+use cellflip::step::Simulation;
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
@@ -435,8 +434,8 @@ fn volume_never_drops_below_100_percent_3d() {
     );
 }
 
-/// A file the step was asked to write and cannot: the step fails, naming the step and the file
-/// (`StepError::Write`), instead of going on without it.
+/// A file a step hands over and its observer cannot write: the run fails, naming the step and
+/// the file (`ExportFailed`), instead of going on without it.
 #[test]
 fn an_export_that_cannot_be_written_fails_its_step_naming_the_file() {
     let o = Overrides {
@@ -455,10 +454,15 @@ fn an_export_that_cannot_be_written_fails_its_step_naming_the_file() {
         ("export-lp", 2, &path)
     );
     let sim = Simulation::<2>::new(scene.config::<2>(), &method);
-    let e = Runner::new(sim).run_to(Limit::Steps(3)).unwrap_err();
-    assert_eq!(e.step, 2, "{e:?}");
-    assert!(
-        matches!(&e.error, StepError::Write { path: p, .. } if *p == path),
-        "{e:?}"
-    );
+    let mut exports = Exports::default();
+    let e = Runner::new(sim)
+        .run(
+            Limit::Steps(3),
+            || false,
+            |sim, rep| exports.write(sim, rep).map_err(anyhow::Error::from),
+        )
+        .unwrap_err();
+    let e = e.downcast::<ExportFailed>().expect("the export failed");
+    assert_eq!((e.step, &e.path), (2, &path), "{e:?}");
+    assert!(exports.written.is_empty());
 }

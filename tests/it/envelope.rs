@@ -83,7 +83,7 @@ fn run<const D: usize>(scene: &Scene) -> Envelope {
         target_cells: s.target_volume,
         bottom_end: s.solids.obstacles.first().map(|o| o.bottom()),
         width: s.grid.dims[0] as f64,
-        naive: scene.obstacle_mode == cellflip::sim::solids::ObstacleMode::Naive,
+        naive: scene.obstacle_mode == cellflip::stages::solids::ObstacleMode::Naive,
         carved,
     }
 }

@@ -10,8 +10,8 @@ use cellflip::methods::idp::{
 };
 use cellflip::methods::MethodKind;
 use cellflip::scene::Overrides;
-use cellflip::sim::solids::{clearing_distance, ObstacleMode};
 use cellflip::solvers::pcg::PcgSettings;
+use cellflip::stages::solids::{clearing_distance, ObstacleMode};
 use rand::rngs::StdRng;
 
 /// `k^D` particles on the regular sub-grid of cell `c` (no jitter), `copies` times over.
@@ -288,7 +288,7 @@ fn idp_pushes_particles_out_of_an_obstacle_that_ignores_them() {
     let scene = load("large-obstacle-2d", &o);
     let mut pushed = 0;
     let mut most_inside = 0;
-    let inside = |s: &cellflip::sim::State<2>| {
+    let inside = |s: &cellflip::stages::State<2>| {
         let g = &s.grid;
         s.particles
             .pos

@@ -13,10 +13,10 @@ use cellflip::methods::nbflip::{combine, NbflipReport, Resampling};
 use cellflip::methods::MethodKind;
 use cellflip::particles::Particles;
 use cellflip::scene::{Overrides, Scene};
-use cellflip::sim::markings::Markings;
-use cellflip::sim::solids::{ObstacleMode, Solids};
-use cellflip::sim::transfer::particles_to_grid;
-use cellflip::simulation::{Simulation, StepReport};
+use cellflip::stages::markings::Markings;
+use cellflip::stages::solids::{ObstacleMode, Solids};
+use cellflip::stages::transfer::particles_to_grid;
+use cellflip::step::{Simulation, StepReport};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 

@@ -9,7 +9,7 @@ use crate::common::{load, run, run_at_rest, with};
 use cellflip::methods::powerpic::PowerPicReport;
 use cellflip::methods::MethodKind;
 use cellflip::scene::{Overrides, Scene};
-use cellflip::simulation::StepReport;
+use cellflip::step::StepReport;
 
 fn powerpic<const D: usize>(rep: &StepReport<D>) -> &PowerPicReport {
     rep.method_report::<PowerPicReport>()

@@ -10,7 +10,7 @@ use cellflip::methods::ccp::correct::{self, CorrectionSettings};
 use cellflip::methods::MethodKind;
 use cellflip::runner::Limit;
 use cellflip::scene::{ErrorKind, Overrides, Scene};
-use cellflip::sim::markings::Markings;
+use cellflip::stages::markings::Markings;
 use std::path::Path;
 use std::process::Command;
 

@@ -4,7 +4,7 @@
 use crate::common::{load, run};
 use cellflip::methods::MethodKind;
 use cellflip::scene::{Overrides, Scene, BUILT_IN};
-use cellflip::simulation::Simulation;
+use cellflip::step::Simulation;
 
 /// Runs a built-in scene, checking every step: a finite volume, a positive time step, a
 /// converged pressure solve, and nothing moving more than `cfl` cells (sec. grid_move).

@@ -11,8 +11,8 @@ use cellflip::methods::MethodFlags;
 use cellflip::methods::MethodKind;
 use cellflip::runner::Limit;
 use cellflip::scene::{Overrides, Scene};
-use cellflip::sim::solids::{Obstacle, ObstacleMode, Solids};
-use cellflip::simulation::Simulation;
+use cellflip::stages::solids::{Obstacle, ObstacleMode, Solids};
+use cellflip::step::Simulation;
 
 pub(crate) struct Run {
     pub(crate) volume_min: f64,

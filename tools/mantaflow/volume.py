@@ -5,9 +5,9 @@ For each method, cellflip's flip / idp / nbflip against MantaFlow's FLIP (manta_
 min) / FLIP + IDP (--variant idp) / narrow-band FLIP (--variant nbflip), on the dam of cellflip's
 scenes/dam-2d.toml or dam-3d.toml (its emitter left out: MantaFlow's dam has none), the same cells,
 particles per cell and simulated duration. Both sides' volume is cellflip's eq. volume in % of V*
-(src/metrics.rs; MantaFlow's from its particles, and for nbflip its level set, by
-volume_measure.py); MantaFlow's nbflip also logs its level set's liquid cells (phi < 0) in % of
-those at the start.
+(cellflip's side by cellflip's own `cell_volume`; MantaFlow's from its particles, and for nbflip
+its level set, by volume_measure.py); MantaFlow's nbflip also logs its level set's liquid cells
+(phi < 0) in % of those at the start.
 
 usage (cwd: the project root; cellflip from $CELLFLIP, default ./target/release/cellflip):
   MANTA_BIN=<built manta> python3 tools/mantaflow/volume.py --dim 3 --res 64 --duration 3

@@ -1,4 +1,4 @@
-"""cellflip's volume measure (paper eq. volume; src/metrics.rs `cell_volume`, src/sim/markings.rs)
+"""cellflip's volume measure (paper eq. volume; src/stages/volume.rs `cell_volume`, src/stages/markings.rs)
 applied to MantaFlow's particles and level set, with numpy.
 
 Imported by manta_dam.py (inside MantaFlow's embedded Python, which needs numpy importable) and
@@ -115,7 +115,7 @@ def eq_volume(counts, mu, extra_fluid=None, solid=None):
 
 
 def _self_check():
-    # src/sim/markings.rs block_of_fluid_has_surface_ring_and_depth_2d: a 5x4 block in an 8x8
+    # src/stages/markings.rs block_of_fluid_has_surface_ring_and_depth_2d: a 5x4 block in an 8x8
     # tank, one particle per cell: surface only on the top and right sides
     c = np.zeros((8, 8), dtype=np.int64)
     c[:5, :4] = 1

@@ -89,7 +89,7 @@ pub fn markdown(
         "{} of {} runs, {}. Every column and formula: `docs/report.md` in cellflip's repository. Plots: {}.\n",
         results.len(),
         specs.len(),
-        crate::sim::transfer::grid_to_particles_mode(),
+        crate::stages::transfer::grid_to_particles_mode(),
         figures.iter().map(|f| format!("[{f}]({f})")).collect::<Vec<_>>().join(", ")
     );
     volume_table(&mut s, results);

@@ -8,9 +8,9 @@ use crate::frames::FrameWorker;
 use crate::interrupt::{self, Watchdog};
 use crate::methods::StepFile;
 use crate::record::{Drawing, Recorder, Sink, WebServe};
-use crate::runner::{Limit, Runner};
+use crate::runner::{Exports, Limit, Runner};
 use crate::scene::{peak_memory_mib, MemoryEstimate, Overrides, Scene};
-use crate::simulation::Simulation;
+use crate::step::Simulation;
 use anyhow::{anyhow, bail, Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::path::{Path, PathBuf};
@@ -28,8 +28,8 @@ impl RunArgs {
             cells: self.scale.res,
             ppc: self.scale.ppc,
             seed: self.scale.seed,
-            obstacle: self.obstacle,
-            pressure: self.pressure.preconditioner,
+            obstacle: self.obstacle.map(Into::into),
+            pressure: self.pressure.preconditioner.map(Into::into),
             flags: self.methods.clone(),
         }
     }
@@ -63,7 +63,11 @@ pub fn run(args: &RunArgs) -> Result<()> {
         Some(n) => Limit::Steps(n),
         None => Limit::SimSeconds(scene.duration_secs()),
     };
-    parse_slice(args.slice.as_deref(), scene.dim())?;
+    let drawing = Drawing {
+        surface: !args.no_surface,
+        moves: args.moves.into(),
+        slice: parse_slice(args.slice.as_deref(), scene.dim())?,
+    };
     let (sink, continued) = recording_of(args, &scene, resumed.as_ref())?;
     let mut method = scene.method.clone();
     let files = method.files(&files_stem(&scene, sink.as_ref().and_then(Sink::file))?);
@@ -80,9 +84,10 @@ pub fn run(args: &RunArgs) -> Result<()> {
         read,
     };
     interrupt::install()?;
+    let sink = sink.as_ref();
     match scene.dim() {
-        2 => run_dim::<2>(&scene, &estimate, limit, sink.as_ref(), args, start),
-        3 => run_dim::<3>(&scene, &estimate, limit, sink.as_ref(), args, start),
+        2 => run_dim::<2>(&scene, &estimate, limit, sink, drawing, args, start),
+        3 => run_dim::<3>(&scene, &estimate, limit, sink, drawing, args, start),
         d => unreachable!("scene checks the dimension, got {d}"),
     }
 }
@@ -92,14 +97,10 @@ fn run_dim<const D: usize>(
     estimate: &MemoryEstimate,
     limit: Limit,
     sink: Option<&Sink>,
+    drawing: Drawing,
     args: &RunArgs,
     start: Start,
 ) -> Result<()> {
-    let drawing = Drawing {
-        surface: !args.no_surface,
-        moves: args.moves,
-        slice: parse_slice(args.slice.as_deref(), D)?,
-    };
     let recorder = sink
         .map(|s| Recorder::create(s, scene, drawing, start.continued.as_ref()))
         .transpose()?;
@@ -199,7 +200,9 @@ fn simulate<const D: usize>(
     let interrupted = || interrupt::signal().is_some();
     let cadence = Cadence::of(args.record_every, D);
     let mut last_time_secs = runner.sim.state.time_secs;
+    let mut exports = Exports::default();
     let result = runner.run(limit, interrupted, |sim, rep| {
+        exports.write(sim, rep)?;
         let s = &sim.state;
         let full = cadence.records(s.steps, last_time_secs, s.time_secs);
         if let Some(r) = recorder {
@@ -221,6 +224,7 @@ fn simulate<const D: usize>(
         show_progress(&say.bar, sim, limit, visible);
         Ok(())
     });
+    runner.summary.written = exports.written;
     // A run that ended well or was stopped by a signal leaves a checkpoint of its last step
     // (a failed step may have left the state half-way).
     let last = match (&result, saver.as_mut()) {

@@ -16,9 +16,9 @@
 use crate::grid::active::Active;
 use crate::grid::{Grid, MacField, Vector};
 use crate::particles::Particles;
-use crate::sim::advect::CELL_MARGIN;
-use crate::sim::band::Band;
-use crate::sim::markings::{DepthLevel, Markings};
+use crate::stages::advect::CELL_MARGIN;
+use crate::stages::band::Band;
+use crate::stages::markings::{DepthLevel, Markings};
 use rand::seq::SliceRandom;
 use rand::Rng;
 

@@ -7,7 +7,7 @@
 //! after each correction in [`correct::guarantees`]), the deep's bookkeeping ([`deep`]), its
 //! settings (`settings.rs`) and what it records and sums up (`record.rs`). The band's geometry
 //! (levels, velocity combination, advection of the grid velocity), which narrow-band FLIP
-//! shares, is [`crate::sim::band`].
+//! shares, is [`crate::stages::band`].
 
 pub mod correct;
 pub mod deep;
@@ -25,8 +25,8 @@ use super::seam::{
     StepFile,
 };
 use crate::draw::{LayerView, Needs};
-use crate::sim::solids::ObstacleMode;
 use crate::solvers::min_cost_flow::HALVING;
+use crate::stages::solids::ObstacleMode;
 use physics::CcpSim;
 use record::{Totals, PANELS};
 

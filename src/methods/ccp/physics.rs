@@ -8,12 +8,12 @@ use super::settings::CcpSettings;
 use crate::draw::{depth_level_classes, Log};
 use crate::grid::{MacField, NearCells, Vector};
 use crate::methods::seam::{FluidMethod, MethodRecording, MethodReport};
-use crate::metrics::InvariantViolation;
-use crate::sim::band::Band;
-use crate::sim::markings::{DepthLevel, Markings};
-use crate::sim::transfer::{self, Known};
-use crate::sim::{ParticlesMut, State, StepError};
 use crate::snapshot::{check_elements, not_finite, Reader, SnapshotError, Writer};
+use crate::stages::band::Band;
+use crate::stages::invariants::InvariantViolation;
+use crate::stages::markings::{DepthLevel, Markings};
+use crate::stages::transfer::{self, Known};
+use crate::stages::{ParticlesMut, State, StepError};
 use std::path::{Path, PathBuf};
 
 /// The paper's method in a running simulation.
@@ -25,7 +25,7 @@ pub struct CcpSim<const D: usize> {
     n_deep: usize,
     /// `x_bar`: the positions before advection.
     x_bar: Vec<Vector<D>>,
-    /// Write this step's correction problem as MPS to this path.
+    /// Export this step's correction problem as MPS, to this path.
     export_lp: Option<(u64, PathBuf)>,
     /// This step's report, filled by the hooks.
     step: CcpReport<D>,
@@ -148,7 +148,7 @@ impl<const D: usize> FluidMethod<D> for CcpSim<D> {
         });
         let solid = &s.solids.solid;
         let pos = &mut s.particles.pos;
-        let mut rep = correct::correct(
+        let rep = correct::correct(
             s.grid,
             &self.x_bar,
             pos,
@@ -171,20 +171,12 @@ impl<const D: usize> FluidMethod<D> for CcpSim<D> {
             ctx.map(|b| b.r),
             s.active,
         )?;
-        if let (Some(mps), Some((step, path))) = (rep.mps.take(), export) {
-            std::fs::write(path, mps).map_err(|error| StepError::Write {
-                path: path.clone(),
-                error,
-            })?;
-            self.step.exported = Some((*step, path.clone()));
+        // The problems go out with the report; the run's observer writes them.
+        if let (Some(_), Some((step, path))) = (&rep.mps, export) {
+            self.step.export = Some((*step, path.clone()));
         }
-        if let (Some(mps), Some((_, path))) = (rep.second_mps.take(), export) {
-            let second = second_step_path(path);
-            std::fs::write(&second, mps).map_err(|error| StepError::Write {
-                path: second.clone(),
-                error,
-            })?;
-            self.step.exported_second = Some(second);
+        if let (Some(_), Some((_, path))) = (&rep.second_mps, export) {
+            self.step.export_second = Some(second_step_path(path));
         }
         self.step.correction = rep;
         Ok(())

@@ -7,11 +7,11 @@ use super::deep::DeepExchange;
 use super::settings::{CcpSettings, Solver};
 use crate::draw::{Layer, Log, Needs, Panel, Style};
 use crate::grid::Vector;
-use crate::methods::seam::{MethodReport, MethodSummary};
+use crate::methods::seam::{Export, MethodReport, MethodSummary};
 use crate::metrics::median;
-use crate::sim::band::Band;
-use crate::sim::markings::DepthLevel;
-use crate::sim::State;
+use crate::stages::band::Band;
+use crate::stages::markings::DepthLevel;
+use crate::stages::State;
 use std::any::Any;
 use std::path::PathBuf;
 use std::time::Duration;
@@ -110,10 +110,10 @@ pub struct CcpReport<const D: usize> {
     /// The band, and `n_deep` after the step.
     pub band: Option<Band>,
     pub n_deep: usize,
-    /// The correction problem written this step (`--export-lp`), and its exact-paths second
-    /// step.
-    pub exported: Option<(u64, PathBuf)>,
-    pub exported_second: Option<PathBuf>,
+    /// Where the correction problem of this step goes (`--export-lp`), and its exact-paths
+    /// second step: handed over with their text ([`MethodReport::exports`]).
+    pub export: Option<(u64, PathBuf)>,
+    pub export_second: Option<PathBuf>,
 }
 
 impl<const D: usize> MethodReport<D> for CcpReport<D> {
@@ -166,6 +166,24 @@ impl<const D: usize> MethodReport<D> for CcpReport<D> {
                     .map_or(f64::NAN, |b| b.second_time.as_secs_f64() * 1e3),
             ),
         ]
+    }
+
+    /// The correction problem asked for (`--export-lp`) and its exact-paths second step, as MPS.
+    fn exports(&self) -> Vec<Export<'_>> {
+        let c = &self.correction;
+        let first =
+            (self.export.as_ref().zip(c.mps.as_deref())).map(|((step, path), text)| Export {
+                path,
+                what: format!("the correction problem of step {step}"),
+                text,
+            });
+        let second =
+            (self.export_second.as_ref().zip(c.second_mps.as_deref())).map(|(path, text)| Export {
+                path,
+                what: "its exact-paths second step".into(),
+                text,
+            });
+        first.into_iter().chain(second).collect()
     }
 
     fn as_any(&self) -> &dyn Any {
@@ -283,8 +301,6 @@ pub(super) struct Totals {
     unplaced: u64,
     second_times: Vec<Duration>,
     band_gaps: Vec<(&'static str, Vec<f64>)>,
-    exported: Option<(u64, PathBuf)>,
-    exported_second: Option<PathBuf>,
 }
 
 impl<const D: usize> MethodSummary<D> for Totals {
@@ -309,12 +325,6 @@ impl Totals {
 
     fn add_report<const D: usize>(&mut self, rep: &CcpReport<D>, particles: usize) {
         self.n_deep = rep.n_deep;
-        if rep.exported.is_some() {
-            self.exported.clone_from(&rep.exported);
-        }
-        if rep.exported_second.is_some() {
-            self.exported_second.clone_from(&rep.exported_second);
-        }
         let c = &rep.correction;
         self.corrections += 1;
         self.moved += c.moves.len() as u64;
@@ -387,18 +397,6 @@ impl Totals {
         }
         if let Some((variant, r)) = self.band {
             out.extend(self.band_lines(variant, r, self.n_deep));
-        }
-        if let Some((step, path)) = &self.exported {
-            out.push(format!(
-                "wrote the correction problem of step {step} to {}",
-                path.display()
-            ));
-        }
-        if let Some(path) = &self.exported_second {
-            out.push(format!(
-                "wrote its exact-paths second step to {}",
-                path.display()
-            ));
         }
         out
     }

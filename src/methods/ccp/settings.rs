@@ -7,7 +7,8 @@ pub use super::correct::problem::Directions;
 pub use super::correct::Solver;
 use crate::methods::options::{Flag, FlagValue};
 use crate::methods::seam::{SettingError, StepFile};
-use crate::sim::band::{check_band_r, DEFAULT_BAND_R};
+use crate::stages::band::{check_band_r, DEFAULT_BAND_R};
+use clap::builder::PossibleValue;
 use std::path::{Path, PathBuf};
 
 /// Method ccp's settings: `[simulation.ccp]` in a scene file (or, for a file whose method is
@@ -64,6 +65,37 @@ impl CcpSettings {
         self.export_path = Some(path.clone());
         let flag = "export-lp";
         vec![StepFile { flag, step, path }]
+    }
+}
+
+/// `--solver`'s values, named as serde names them, with their help.
+impl clap::ValueEnum for Solver {
+    fn value_variants<'a>() -> &'a [Self] {
+        &Solver::ALL
+    }
+
+    fn to_possible_value(&self) -> Option<PossibleValue> {
+        let help = match self {
+            Solver::Flow => "Exact min-cost flow by successive shortest paths (solvers/min_cost_flow.rs)",
+            Solver::Simplex => "The LP relaxation by microlp's simplex (solvers/lp.rs): the reference, slow on large problems",
+        };
+        Some(PossibleValue::new(self.name()).help(help))
+    }
+}
+
+/// `--directions`' values, named as serde names them, with their help.
+impl clap::ValueEnum for Directions {
+    fn value_variants<'a>() -> &'a [Self] {
+        &[Directions::VonNeumann, Directions::Moore]
+    }
+
+    fn to_possible_value(&self) -> Option<PossibleValue> {
+        Some(match self {
+            Directions::VonNeumann => PossibleValue::new("von-neumann")
+                .help("Stay, or one cell along an axis: 5 in 2D, 7 in 3D (the paper's choice)"),
+            Directions::Moore => PossibleValue::new("moore")
+                .help("Stay, or to any cell of the Moore neighbourhood: 9 in 2D, 27 in 3D"),
+        })
     }
 }
 

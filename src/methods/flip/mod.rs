@@ -7,7 +7,7 @@ use super::cost::{Footprint, StepCost};
 use super::seam::{
     FluidMethod, MethodInfo, MethodRecording, MethodSummary, MethodType, NoSettings, NoSummary,
 };
-use crate::sim::solids::ObstacleMode;
+use crate::stages::solids::ObstacleMode;
 
 /// Plain FLIP.
 pub struct Flip;

@@ -24,12 +24,12 @@
 //! 5. **Clamp** `s` to `[-CLAMP, CLAMP]` ([`CLAMP`] = 0.5: at most half a cell of correction
 //!    per step).
 //! 6. **Second solve** `A phi = s` with the projection's matrix and solver
-//!    ([`crate::sim::pressure::Poisson`]: PCG with the scene's pressure preconditioner and
+//!    ([`crate::stages::pressure::Poisson`]: PCG with the scene's pressure preconditioner and
 //!    tolerance).
 //! 7. **Displacement**: on faces between two non-solid cells `D_f = phi_R - phi_L`, on faces
 //!    touching a solid or the walls the push-out value (or 0); each particle moves by `D`
 //!    interpolated at its position, clamped into the domain and never into a solid
-//!    ([`crate::sim::advect::displace`]).
+//!    ([`crate::stages::advect::displace`]).
 //!
 //! Over-dense cells (`s < 0`) get a local minimum of `phi`, so `D` points away from them, and
 //! `div D = -s`: the linearised correction of the density. The reference divides `s` by `dt`
@@ -60,27 +60,20 @@
 
 mod physics;
 mod record;
+mod settings;
 
 pub use physics::{
-    density_errors, project_density, push_out, ErrorClass, IdpReport, Inputs, Resample, SolidShare,
-    CLAMP, PUSH_MARGIN, RESAMPLE_BELOW,
+    density_errors, project_density, push_out, Inputs, Resample, SolidShare, CLAMP, PUSH_MARGIN,
+    RESAMPLE_BELOW,
 };
+pub use record::{ErrorClass, IdpReport};
+pub use settings::IdpSettings;
 
 use super::cost::{Footprint, StepCost};
 use super::seam::{FluidMethod, MethodInfo, MethodSummary, MethodType};
-use crate::sim::solids::ObstacleMode;
+use crate::stages::solids::ObstacleMode;
 use physics::IdpSim;
 use record::{Totals, LAYER_VIEWS, PANELS};
-
-/// Method idp's settings: `[simulation.idp]` in a scene file.
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct IdpSettings {
-    /// Resample cells over twice the rest density (`simulation.idp.resample`, or
-    /// `simulation.idp_resample` in a file whose method is idp; Kugelstadt et al.'s optional
-    /// step, off as in their 3D scene).
-    pub resample: bool,
-}
 
 /// Implicit density projection, as registered.
 pub struct Idp;

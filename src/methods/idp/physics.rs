@@ -1,14 +1,15 @@
 //! Method idp's step: the hooks it implements (see the module doc of `super`).
 
+use super::record::{ErrorClass, IdpReport};
 use crate::draw::Log;
 use crate::grid::active::{par_runs, Active};
 use crate::grid::{for_each_cell_weight, Grid, MacField, Vector};
 use crate::methods::seam::{FluidMethod, MethodRecording, MethodReport};
-use crate::sim::advect::{displace, CELL_MARGIN};
-use crate::sim::pressure::Poisson;
-use crate::sim::solids::clearing_distance;
-use crate::sim::{ParticlesMut, State, StepError};
-use crate::solvers::pcg::{PcgSettings, PcgStats};
+use crate::solvers::pcg::PcgSettings;
+use crate::stages::advect::{displace, CELL_MARGIN};
+use crate::stages::pressure::Poisson;
+use crate::stages::solids::clearing_distance;
+use crate::stages::{ParticlesMut, State, StepError};
 use rand::seq::SliceRandom;
 use rand::Rng;
 use rayon::prelude::*;
@@ -100,28 +101,6 @@ pub struct Inputs<'a, const D: usize> {
 pub struct Resample<'a, const D: usize, R: Rng> {
     pub velocity: &'a MacField<D>,
     pub rng: &'a mut R,
-}
-
-/// What one projection did.
-#[derive(Clone, Debug, Default)]
-pub struct IdpReport<const D: usize> {
-    pub pcg: PcgStats,
-    /// Each cell's [`ErrorClass`], for recordings.
-    pub class: Vec<u8>,
-    /// `(before, after)` of every k-th particle, at most [`MAX_ARROWS`].
-    pub moves: Vec<(Vector<D>, Vector<D>)>,
-    /// The largest particle displacement, cells.
-    pub max_displacement: f64,
-    /// Fluid cells more than one particle over the rest density (`s < -1/mu`).
-    pub overdense: usize,
-    /// Cells whose density error was clamped.
-    pub clamped: usize,
-    /// Under-dense surface cells that left the solve.
-    pub surface: usize,
-    /// Particles pushed out of solids.
-    pub pushed: usize,
-    /// Cells resampled.
-    pub resampled: usize,
 }
 
 /// The projection: density error, surface rule, clamp, second solve, displacement, move.
@@ -504,25 +483,7 @@ fn resample_degenerate<const D: usize, R: Rng>(
     degenerate.len()
 }
 
-/// The density error of a cell, in classes for recordings.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[repr(u8)]
-pub enum ErrorClass {
-    NotFluid = 0,
-    /// Under-dense at the surface: left the solve.
-    Surface = 1,
-    /// `s <= -0.5` (clamped, or resampled).
-    OverClamped = 2,
-    /// `-0.5 < s < -0.05`.
-    Over = 3,
-    /// `|s| <= 0.05`.
-    Rest = 4,
-    /// `0.05 < s < 0.5`.
-    Under = 5,
-    /// `s >= 0.5`.
-    UnderClamped = 6,
-}
-
+/// The class of a cell's density error (the classes, their labels and colours: `super::record`).
 impl ErrorClass {
     /// Errors within this of 0 count as at rest.
     const REST: f64 = 0.05;
@@ -538,23 +499,6 @@ impl ErrorClass {
             _ => ErrorClass::UnderClamped,
         }
     }
-
-    /// Labels and colours: over-dense red, under-dense blue, at rest faint grey.
-    fn table() -> [(u16, &'static str, [u8; 4]); 7] {
-        [
-            (0, "not fluid", [0, 0, 0, 0]),
-            (
-                1,
-                "surface, under-dense (left the solve)",
-                [60, 180, 75, 110],
-            ),
-            (2, "over-dense, clamped (s <= -0.5)", [200, 20, 20, 200]),
-            (3, "over-dense (-0.5 < s < -0.05)", [240, 120, 100, 160]),
-            (4, "at rest (|s| <= 0.05)", [128, 128, 128, 40]),
-            (5, "under-dense (0.05 < s < 0.5)", [110, 150, 240, 160]),
-            (6, "under-dense, clamped (s >= 0.5)", [30, 60, 200, 200]),
-        ]
-    }
 }
 
 #[cfg(test)]
@@ -562,8 +506,8 @@ mod tests {
     use super::*;
     use crate::methods::MethodKind;
     use crate::scene::{Overrides, Scene};
-    use crate::simulation::Simulation;
-    use crate::solvers::pcg::Preconditioner;
+    use crate::solvers::pcg::{PcgStats, Preconditioner};
+    use crate::step::Simulation;
 
     /// Particle positions and the second solve after a dam-2d step of idp, the steps before
     /// it with MIC(0) and that one with `last` (both solves of the step take it).

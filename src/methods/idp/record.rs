@@ -1,12 +1,73 @@
 //! What method idp records and sums up: its panels and density-error view, its step report's
 //! scalars and drawings, and the run's totals.
 
-use super::physics::{ErrorClass, IdpReport};
 use crate::draw::{Layer, LayerView, Log, Needs, Panel, Style};
+use crate::grid::Vector;
 use crate::methods::seam::{MethodReport, MethodSummary};
 use crate::metrics::median;
-use crate::sim::State;
+use crate::solvers::pcg::PcgStats;
+use crate::stages::State;
 use std::any::Any;
+
+/// What one projection did.
+#[derive(Clone, Debug, Default)]
+pub struct IdpReport<const D: usize> {
+    pub pcg: PcgStats,
+    /// Each cell's [`ErrorClass`], for recordings.
+    pub class: Vec<u8>,
+    /// `(before, after)` of every k-th particle, at most `MAX_ARROWS`.
+    pub moves: Vec<(Vector<D>, Vector<D>)>,
+    /// The largest particle displacement, cells.
+    pub max_displacement: f64,
+    /// Fluid cells more than one particle over the rest density (`s < -1/mu`).
+    pub overdense: usize,
+    /// Cells whose density error was clamped.
+    pub clamped: usize,
+    /// Under-dense surface cells that left the solve.
+    pub surface: usize,
+    /// Particles pushed out of solids.
+    pub pushed: usize,
+    /// Cells resampled.
+    pub resampled: usize,
+}
+
+/// The density error of a cell, in classes for recordings.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
+pub enum ErrorClass {
+    NotFluid = 0,
+    /// Under-dense at the surface: left the solve.
+    Surface = 1,
+    /// `s <= -0.5` (clamped, or resampled).
+    OverClamped = 2,
+    /// `-0.5 < s < -0.05`.
+    Over = 3,
+    /// `|s| <= 0.05`.
+    Rest = 4,
+    /// `0.05 < s < 0.5`.
+    Under = 5,
+    /// `s >= 0.5`.
+    UnderClamped = 6,
+}
+
+impl ErrorClass {
+    /// Labels and colours: over-dense red, under-dense blue, at rest faint grey.
+    pub(super) fn table() -> [(u16, &'static str, [u8; 4]); 7] {
+        [
+            (0, "not fluid", [0, 0, 0, 0]),
+            (
+                1,
+                "surface, under-dense (left the solve)",
+                [60, 180, 75, 110],
+            ),
+            (2, "over-dense, clamped (s <= -0.5)", [200, 20, 20, 200]),
+            (3, "over-dense (-0.5 < s < -0.05)", [240, 120, 100, 160]),
+            (4, "at rest (|s| <= 0.05)", [128, 128, 128, 40]),
+            (5, "under-dense (0.05 < s < 0.5)", [110, 150, 240, 160]),
+            (6, "under-dense, clamped (s >= 0.5)", [30, 60, 200, 200]),
+        ]
+    }
+}
 
 pub(super) const PANELS: &[Panel] = &[
     Panel {

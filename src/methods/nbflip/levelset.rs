@@ -9,6 +9,7 @@
 //! surface.
 
 use crate::grid::{for_each_cell_weight, AtGridPoints, Cell, Grid, MacField, Vector};
+use crate::stages::markings::DepthLevel;
 use rayon::prelude::*;
 
 /// A level set on cell centres, in cells; negative inside.
@@ -22,6 +23,26 @@ pub struct LevelSet {
 /// `calculateRadiusFactor` with radius factor 1: `sqrt(D) (1 + 0.01) / 2`).
 pub fn particle_radius(dim: usize) -> f64 {
     0.5 * (dim as f64).sqrt() * 1.01
+}
+
+/// The level set above which a particle is "at the surface": one cell diagonal plus 1 %
+/// (MantaFlow's `adjustNumber`, `SURFACE_LS`). Cells above it are not seeded, and their
+/// particles are never thinned.
+pub fn surface_layer(dim: usize) -> f64 {
+    -2.0 * particle_radius(dim)
+}
+
+/// The level of cell `c` in a band `R` deep, read from the level set at its centre: surface
+/// above [`surface_layer`], band down to the combine band `-(R - 1)`, interface down to `-R`
+/// (particles, but the grid's velocity), deep below.
+pub fn level<const D: usize>(phi: &LevelSet, solid: &[bool], r: f64, c: usize) -> DepthLevel {
+    match phi.phi[c] {
+        v if solid[c] || v >= 0.0 => DepthLevel::NotFluid,
+        v if v > surface_layer(D) => DepthLevel::Surface,
+        v if v >= -(r - 1.0) => DepthLevel::Band,
+        v if v >= -r => DepthLevel::Interface,
+        _ => DepthLevel::Deep,
+    }
 }
 
 /// Which way [`LevelSet::remarch`] marches.

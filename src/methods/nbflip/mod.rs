@@ -32,40 +32,22 @@ pub mod levelset;
 mod physics;
 mod record;
 pub mod region;
+mod settings;
 
-pub use physics::{combine, level, NbflipReport, Resampling};
+pub use levelset::level;
+pub use physics::{combine, Resampling};
+pub use record::NbflipReport;
+pub use settings::NbflipSettings;
 
 use super::cost::{Footprint, StepCost};
 use super::options::{Flag, FlagValue};
 use super::seam::{
     FluidMethod, MethodInfo, MethodSummary, MethodType, SettingContext, SettingError,
 };
-use crate::sim::band::{check_band_r, DEFAULT_BAND_R};
-use crate::sim::solids::ObstacleMode;
+use crate::stages::band::check_band_r;
+use crate::stages::solids::ObstacleMode;
 use physics::NbflipSim;
 use record::{Totals, LAYER_VIEWS, PANELS};
-
-/// Method nbflip's settings: `[simulation.nbflip]` in a scene file.
-#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct NbflipSettings {
-    /// `R`: the band's depth in cells (`simulation.nbflip.band_r`, or `simulation.band_r` in a
-    /// file whose method has a band; `--band-r`).
-    pub band_r: u32,
-    /// Work on the level set only near the surface (`simulation.nbflip.narrow`, default
-    /// true); false works on the whole grid every step, with the same results (for measuring
-    /// and for tests).
-    pub narrow: bool,
-}
-
-impl Default for NbflipSettings {
-    fn default() -> Self {
-        Self {
-            band_r: DEFAULT_BAND_R,
-            narrow: true,
-        }
-    }
-}
 
 /// Narrow-band FLIP, as registered.
 pub struct Nbflip;

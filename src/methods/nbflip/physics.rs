@@ -1,19 +1,20 @@
 //! Method nbflip's step: the hooks it implements (see the module doc of `super`).
 
-use super::levelset::{particle_radius, LevelSet, March, Side};
+use super::levelset::{level, surface_layer, LevelSet, March, Side};
+use super::record::NbflipReport;
 use super::region::{Margin, Region};
 use crate::draw::{depth_level_classes, Log};
 use crate::grid::active::Active;
 use crate::grid::{Cell, Grid, MacField, NearCells, Vector};
 use crate::methods::seam::{FluidMethod, MethodRecording, MethodReport};
-use crate::metrics::InvariantViolation;
 use crate::particles::Particles;
-use crate::sim::band::{combine_velocities, count_with_full_deep, Band};
-use crate::sim::markings::{DepthLevel, Markings};
-use crate::sim::solids::Solids;
-use crate::sim::transfer::{self, Known};
-use crate::sim::{ParticlesMut, State, StepError};
 use crate::snapshot::{check_elements, not_finite, Reader, SnapshotError, Writer};
+use crate::stages::band::{combine_velocities, count_with_full_deep, Band};
+use crate::stages::invariants::InvariantViolation;
+use crate::stages::markings::{DepthLevel, Markings};
+use crate::stages::solids::Solids;
+use crate::stages::transfer::{self, Known};
+use crate::stages::{ParticlesMut, State, StepError};
 use rand::Rng;
 use rayon::prelude::*;
 use std::sync::Arc;
@@ -219,19 +220,6 @@ impl<const D: usize> NbflipSim<D> {
     }
 }
 
-/// The level of cell `c` in a band `R` deep, read from the level set at its centre: surface
-/// above [`surface_layer`], band down to the combine band `-(R - 1)`, interface down to `-R`
-/// (particles, but the grid's velocity), deep below.
-pub fn level<const D: usize>(phi: &LevelSet, solid: &[bool], r: f64, c: usize) -> DepthLevel {
-    match phi.phi[c] {
-        v if solid[c] || v >= 0.0 => DepthLevel::NotFluid,
-        v if v > surface_layer(D) => DepthLevel::Surface,
-        v if v >= -(r - 1.0) => DepthLevel::Band,
-        v if v >= -r => DepthLevel::Interface,
-        _ => DepthLevel::Deep,
-    }
-}
-
 /// Step 1, the velocity combination: faces of the liquid (next to a fluid cell of `m`) with
 /// particle weight inside the combine band `phi >= -(R - 1)` keep the particles' velocity `u`,
 /// its other faces take the advected grid velocity `grid_u` (MantaFlow's `combineGridVel` with
@@ -261,13 +249,6 @@ fn obstacle_cells<const D: usize>(solids: &Solids<D>) -> Vec<usize> {
     cells.sort_unstable();
     cells.dedup();
     cells
-}
-
-/// The level set above which a particle is "at the surface": one cell diagonal plus 1 %
-/// (MantaFlow's `adjustNumber`, `SURFACE_LS`). Cells above it are not seeded, and their
-/// particles are never thinned.
-fn surface_layer(dim: usize) -> f64 {
-    -2.0 * particle_radius(dim)
 }
 
 impl<const D: usize> FluidMethod<D> for NbflipSim<D> {
@@ -501,44 +482,5 @@ impl<const D: usize> Resampling<'_, D> {
             }
         }
         rep
-    }
-}
-
-/// What nbflip did in one step: its resampling, the particles it holds, and the band levels
-/// of every cell by the level set.
-#[derive(Clone, Debug, Default)]
-pub struct NbflipReport {
-    pub seeded: usize,
-    /// Particles deleted inside a solid (an `ignore` obstacle moved over them).
-    pub covered: usize,
-    /// Particles deleted outside the liquid (`phi > 0`).
-    pub outside: usize,
-    /// Particles deleted below the band (`phi < -R`).
-    pub below: usize,
-    /// Particles deleted beyond `2 mu` in a cell away from the surface.
-    pub crowded: usize,
-    /// Particles held after the step.
-    pub particles: usize,
-    /// Cells of liquid the obstacles newly covered in the step (`ignore`: liquid lost).
-    pub carved: usize,
-    /// Cells the level set was last rebuilt on (all cells with the dense level set).
-    pub cells_worked: usize,
-    /// `R` and the level set after the step.
-    pub band_r: u32,
-    pub phi: Arc<LevelSet>,
-}
-
-impl NbflipReport {
-    pub fn deleted(&self) -> usize {
-        self.covered + self.outside + self.below + self.crowded
-    }
-
-    /// Adds another resampling of the same step (after emission and at the end).
-    pub(super) fn add(&mut self, other: &NbflipReport) {
-        self.seeded += other.seeded;
-        self.covered += other.covered;
-        self.outside += other.outside;
-        self.below += other.below;
-        self.crowded += other.crowded;
     }
 }

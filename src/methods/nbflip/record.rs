@@ -1,13 +1,53 @@
 //! What method nbflip records and sums up: its panels and band-level view, its step report's
 //! scalars and the band levels by the level set, and the run's totals.
 
-use super::physics::{level, NbflipReport};
+use super::levelset::{level, LevelSet};
 use crate::draw::{Image, Layer, LayerView, Log, Needs, Panel};
 use crate::methods::seam::{MethodReport, MethodSummary};
 use crate::metrics::median;
-use crate::sim::markings::DepthLevel;
-use crate::sim::State;
+use crate::stages::markings::DepthLevel;
+use crate::stages::State;
 use std::any::Any;
+use std::sync::Arc;
+
+/// What nbflip did in one step: its resampling, the particles it holds, and the band levels
+/// of every cell by the level set.
+#[derive(Clone, Debug, Default)]
+pub struct NbflipReport {
+    pub seeded: usize,
+    /// Particles deleted inside a solid (an `ignore` obstacle moved over them).
+    pub covered: usize,
+    /// Particles deleted outside the liquid (`phi > 0`).
+    pub outside: usize,
+    /// Particles deleted below the band (`phi < -R`).
+    pub below: usize,
+    /// Particles deleted beyond `2 mu` in a cell away from the surface.
+    pub crowded: usize,
+    /// Particles held after the step.
+    pub particles: usize,
+    /// Cells of liquid the obstacles newly covered in the step (`ignore`: liquid lost).
+    pub carved: usize,
+    /// Cells the level set was last rebuilt on (all cells with the dense level set).
+    pub cells_worked: usize,
+    /// `R` and the level set after the step.
+    pub band_r: u32,
+    pub phi: Arc<LevelSet>,
+}
+
+impl NbflipReport {
+    pub fn deleted(&self) -> usize {
+        self.covered + self.outside + self.below + self.crowded
+    }
+
+    /// Adds another resampling of the same step (after emission and at the end).
+    pub(super) fn add(&mut self, other: &NbflipReport) {
+        self.seeded += other.seeded;
+        self.covered += other.covered;
+        self.outside += other.outside;
+        self.below += other.below;
+        self.crowded += other.crowded;
+    }
+}
 
 pub(super) const PANELS: &[Panel] = &[
     Panel {

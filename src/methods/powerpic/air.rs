@@ -8,8 +8,8 @@
 //! even where the particles have drifted apart, which pulls them back together; a sparse
 //! surface cell is expected to be partly air.
 
-use crate::metrics::cell_volume;
-use crate::sim::markings::Markings;
+use crate::stages::markings::Markings;
+use crate::stages::volume::cell_volume;
 
 /// `b_j` of a free transport cell of volume `v_j` in simulation cell `c`, from the markings of
 /// the simulation grid at `mu` particles per cell.

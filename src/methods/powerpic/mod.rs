@@ -68,7 +68,7 @@ mod physics;
 mod record;
 mod settings;
 
-pub use physics::PowerPicReport;
+pub use record::PowerPicReport;
 pub use settings::{AirForm, PowerPicSettings};
 
 use super::cost::{Footprint, StepCost};
@@ -76,7 +76,7 @@ use super::options::{Flag, FlagValue};
 use super::seam::{
     FluidMethod, MethodInfo, MethodSummary, MethodType, SettingContext, SettingError,
 };
-use crate::sim::solids::ObstacleMode;
+use crate::stages::solids::ObstacleMode;
 use physics::PowerPicSim;
 use record::{Totals, LAYER_VIEWS, PANELS};
 

@@ -1,16 +1,17 @@
 //! Method powerpic's step: the hooks it implements (see the module doc of `super`).
 
 use super::air::air_baseline;
+use super::record::PowerPicReport;
 use super::settings::{AirForm, PowerPicSettings};
 use crate::draw::Image;
 use crate::grid::{Grid, MacField, Vector};
 use crate::methods::seam::{FluidMethod, MethodRecording, MethodReport};
-use crate::metrics::InvariantViolation;
-use crate::sim::advect::displace;
-use crate::sim::transfer::{self, Known};
-use crate::sim::{ParticlesMut, State, StepError};
 use crate::snapshot::{check_elements, check_indices, Reader, SnapshotError, Writer};
 use crate::solvers::sinkhorn::{Air, SinkhornError, Transport, TransportGrid};
+use crate::stages::advect::displace;
+use crate::stages::invariants::InvariantViolation;
+use crate::stages::transfer::{self, Known};
+use crate::stages::{ParticlesMut, State, StepError};
 use rayon::prelude::*;
 
 /// Power PIC in a running simulation.
@@ -316,23 +317,6 @@ fn fraction_image<const D: usize>(
     })
 }
 
-/// What Power PIC did in one step.
-#[derive(Clone, Debug, Default)]
-pub struct PowerPicReport {
-    /// Whether a transport was solved this step (the other fields are zero otherwise).
-    pub solved: bool,
-    /// Sinkhorn's row updates.
-    pub iterations: u32,
-    /// The largest relative column error when it stopped.
-    pub marginal_error: f64,
-    /// Whether it met `delta` (otherwise it stopped at its cap).
-    pub converged: bool,
-    /// Empty volume of the transport cells in the liquid's cells, cells.
-    pub air_volume: f64,
-    /// The transport grid's fluid fraction (2D; the mid slice in 3D).
-    pub fraction: Image,
-}
-
 impl<const D: usize> MethodRecording<D> for PowerPicSim<D> {}
 
 /// [`check_elements`]' reason for a Sinkhorn scaling that is not a finite positive number
@@ -364,7 +348,7 @@ mod tests {
     use super::*;
     use crate::methods::MethodKind;
     use crate::scene::{Overrides, Scene};
-    use crate::simulation::Simulation;
+    use crate::step::Simulation;
 
     #[test]
     fn the_blocked_transport_cells_follow_a_falling_obstacle_as_a_fresh_set_up_finds_them() {

@@ -1,11 +1,27 @@
 //! What method powerpic records and sums up: its panels and fluid-fraction view, its step
 //! report's scalars and image, and the run's Sinkhorn totals.
 
-use super::physics::PowerPicReport;
-use crate::draw::{LayerView, Log, Needs, Panel};
+use crate::draw::{Image, LayerView, Log, Needs, Panel};
 use crate::methods::seam::{MethodReport, MethodSummary};
-use crate::sim::State;
+use crate::stages::State;
 use std::any::Any;
+
+/// What Power PIC did in one step.
+#[derive(Clone, Debug, Default)]
+pub struct PowerPicReport {
+    /// Whether a transport was solved this step (the other fields are zero otherwise).
+    pub solved: bool,
+    /// Sinkhorn's row updates.
+    pub iterations: u32,
+    /// The largest relative column error when it stopped.
+    pub marginal_error: f64,
+    /// Whether it met `delta` (otherwise it stopped at its cap).
+    pub converged: bool,
+    /// Empty volume of the transport cells in the liquid's cells, cells.
+    pub air_volume: f64,
+    /// The transport grid's fluid fraction (2D; the mid slice in 3D).
+    pub fraction: Image,
+}
 
 pub(super) const PANELS: &[Panel] = &[
     Panel {

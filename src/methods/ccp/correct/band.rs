@@ -18,9 +18,9 @@
 //!   solve greedily to optimality, as a min-cost flow ([`super::exact_paths`]).
 
 use crate::grid::{Grid, Vector};
-use crate::sim::markings::{DepthLevel, Markings};
 use crate::solvers::lp::{self, SideConstraint};
 use crate::solvers::min_cost_flow::FlowStats;
+use crate::stages::markings::{DepthLevel, Markings};
 use rayon::prelude::*;
 use std::time::{Duration, Instant};
 

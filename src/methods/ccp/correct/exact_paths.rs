@@ -35,8 +35,8 @@ use super::paths::{BandPath, PathDirection};
 use super::problem::CorrectionProblem;
 use super::SolveError;
 use crate::grid::Grid;
-use crate::sim::markings::Markings;
 use crate::solvers::min_cost_flow::{self, BoundedAssignment, FlowStats, Solution};
+use crate::stages::markings::Markings;
 use std::collections::BTreeMap;
 
 /// The second step as a bounded assignment: the particles (items `0..particles`) with their

@@ -4,8 +4,8 @@
 use super::problem::cell_bounds;
 use crate::grid::active::Active;
 use crate::grid::{Grid, Vector};
-use crate::metrics::InvariantViolation;
-use crate::sim::markings::Markings;
+use crate::stages::invariants::InvariantViolation;
+use crate::stages::markings::Markings;
 
 /// The guarantees of the correction step (paper eq. problem3, or eq. band_con_update with the
 /// band parameter `band_r`), checked from the final positions alone: every cell's count lies

@@ -14,34 +14,23 @@ pub mod paths;
 pub mod problem;
 
 use crate::grid::{Grid, Vector};
-use crate::sim::markings::Markings;
 use crate::solvers::min_cost_flow::{self, FlowStats};
 use crate::solvers::{lp, mps};
+use crate::stages::markings::Markings;
 use band::{BandContext, BandCorrection, BandVariant, VariantFailure, ILP_CROSS_CHECK_CANDIDATES};
 use paths::BandScene;
 use problem::{BuildError, CorrectionProblem, Directions};
 use rayon::prelude::*;
 use std::time::{Duration, Instant};
 
-/// Which solver corrects the positions.
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    serde::Serialize,
-    serde::Deserialize,
-    clap::ValueEnum,
-)]
+/// Which solver corrects the positions (the flag `--solver` names them: `super::settings`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Solver {
-    /// Exact min-cost flow by successive shortest paths (solvers/min_cost_flow.rs).
+    /// [`min_cost_flow`]: successive shortest paths, exact.
     #[default]
     Flow,
-    /// The LP relaxation by microlp's simplex (solvers/lp.rs): the reference, slow on large
-    /// problems.
+    /// [`crate::solvers::lp`]: microlp's simplex on the LP relaxation, the reference.
     Simplex,
 }
 

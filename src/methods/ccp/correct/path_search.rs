@@ -6,9 +6,9 @@
 use super::paths::{BandPath, BandScene, PathDirection};
 use crate::grid::active::{Active, CellNumbers};
 use crate::grid::{Cell, Grid, Vector};
-use crate::sim::advect::CELL_MARGIN;
 use crate::solvers::cheapest::Cheapest;
 use crate::solvers::NONE;
+use crate::stages::advect::CELL_MARGIN;
 use rayon::prelude::*;
 use std::collections::BinaryHeap;
 
@@ -333,7 +333,7 @@ impl<'a, const D: usize> PathSearch<'a, D> {
 mod tests {
     use super::*;
     use crate::grid::Grid;
-    use crate::sim::markings::{CellKind, Markings, DEPTH_NOT_FLUID};
+    use crate::stages::markings::{CellKind, Markings, DEPTH_NOT_FLUID};
 
     /// A hand-made 2D scene of `mu = 1` from rows of characters, top row first: `#` solid, `.`
     /// empty, `i`/`I`/`J` a band interface cell (depth -R) with 0/1/2 particles, `b` a band

@@ -3,7 +3,7 @@
 //! paths run, where they may start and end, and what one applied path was.
 
 use crate::grid::{Grid, Vector};
-use crate::sim::markings::{CellKind, DepthLevel, Markings};
+use crate::stages::markings::{CellKind, DepthLevel, Markings};
 
 /// The direction of the paths (sec. push_part).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -17,22 +17,21 @@
 
 use crate::grid::active::{Active, CellNumbers};
 use crate::grid::{closest_along, Cell, Grid, Vector};
-use crate::sim::advect::CELL_MARGIN;
-use crate::sim::markings::{CellKind, DepthLevel, Markings};
 use crate::solvers::min_cost_flow::BoundedAssignment;
+use crate::stages::advect::CELL_MARGIN;
+use crate::stages::markings::{CellKind, DepthLevel, Markings};
 use crate::PAR_GRAIN_PARTICLES;
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-/// The candidate moves of a particle (sec. grid_move).
-#[derive(
-    Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum,
-)]
+/// The candidate moves of a particle (sec. grid_move; the flag `--directions` names them:
+/// `super::super::settings`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Directions {
-    /// Stay, or one cell along an axis: 5 in 2D, 7 in 3D (the paper's choice).
+    /// The paper's: the cell itself and its 2 D face neighbours.
     VonNeumann,
-    /// Stay, or to any cell of the Moore neighbourhood: 9 in 2D, 27 in 3D.
+    /// The cell itself and its 3^D - 1 neighbours.
     Moore,
 }
 

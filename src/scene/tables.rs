@@ -3,8 +3,8 @@
 //! its `Settings` as serde reads them), made from the registry (`crate::methods::registry`).
 
 use crate::methods::{MethodKind, MethodSettings, MethodType};
-use crate::sim::solids::ObstacleMode;
 use crate::solvers::pcg::Preconditioner;
+use crate::stages::solids::ObstacleMode;
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 

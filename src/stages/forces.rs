@@ -4,7 +4,7 @@
 
 use crate::grid::active::par_runs;
 use crate::grid::{MacField, Vector};
-use crate::sim::{pressure, SimConfig, State};
+use crate::stages::{pressure, SimConfig, State};
 use rayon::prelude::*;
 
 /// Adds `g dt` to the grid velocity on the active faces and applies the solid boundary

@@ -19,7 +19,7 @@
 use crate::grid::active::{hull, line_hulls};
 use crate::grid::{Grid, Vector};
 use crate::particles::Region;
-use crate::sim::markings::{Markings, SolidCells};
+use crate::stages::markings::{Markings, SolidCells};
 use std::collections::VecDeque;
 
 /// `lambda_penalty` of eq. solid_penalty (the paper's 1000), in squared cells.
@@ -30,17 +30,16 @@ pub const PENALTY: f64 = 1000.0;
 /// probe.
 const WALL_SLACK: f64 = 1e-9;
 
-/// How obstacles treat particles in their way.
-#[derive(
-    Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum,
-)]
+/// How obstacles treat particles in their way (scene key `simulation.obstacle`; the command
+/// line's `--obstacle` takes the same names, `crate::cmd::cli`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum ObstacleMode {
-    /// Method ccp: through the correction (sec. 7).
+    /// The correction clears the cells an obstacle wants (sec. 7): method ccp's.
     Couple,
-    /// Move regardless; the particles covered count as lost volume.
+    /// An obstacle moves whatever holds its cells; the particles it covers are lost volume.
     Ignore,
-    /// Wait until the cells it would enter hold no liquid.
+    /// An obstacle stays while a cell it would enter holds liquid.
     Naive,
 }
 

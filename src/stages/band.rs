@@ -8,9 +8,9 @@
 
 use crate::grid::active::Active;
 use crate::grid::{Cell, Grid, MacField, NearCells, Vector};
-use crate::sim::advect;
-use crate::sim::markings::{DepthLevel, Markings};
-use crate::sim::transfer::Known;
+use crate::stages::advect;
+use crate::stages::markings::{DepthLevel, Markings};
+use crate::stages::transfer::Known;
 
 /// `R` when a scene file does not say (the paper: 3, and 6 for the dam scenes).
 pub const DEFAULT_BAND_R: u32 = 3;
@@ -150,7 +150,7 @@ pub fn combine_velocities<const D: usize>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sim::transfer::particles_to_grid;
+    use crate::stages::transfer::particles_to_grid;
 
     #[test]
     fn band_faces_take_particles_and_faces_at_the_interface_take_the_grid_3d() {

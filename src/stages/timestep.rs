@@ -3,9 +3,9 @@
 
 use crate::grid::active::Active;
 use crate::grid::{nan_max, Grid, MacField, Vector};
-use crate::metrics::InvariantViolation;
-use crate::sim::State;
 use crate::solvers::pcg::PcgStats;
+use crate::stages::invariants::InvariantViolation;
+use crate::stages::State;
 
 /// The time step for the coming step: at most `max_dt`, and small enough that the current
 /// particle speed plus one step of gravity moves nothing more than `cfl` cells:
@@ -40,7 +40,7 @@ pub fn planned<const D: usize>(s: &State<D>) -> f64 {
 
 /// The largest face velocity component after the projection, cells per second: over the
 /// `active` faces, and `air` (the velocity of the faces off the active set,
-/// [`crate::sim::forces::air_velocity`]) in each component that has such faces; an error if
+/// [`crate::stages::forces::air_velocity`]) in each component that has such faces; an error if
 /// the field is not finite.
 pub fn finite_speed<const D: usize>(
     grid: &Grid<D>,

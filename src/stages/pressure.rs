@@ -8,11 +8,11 @@
 
 use crate::grid::active::{par_runs, Active};
 use crate::grid::{Grid, MacField, Vector};
-use crate::sim::markings::CellKind;
-use crate::sim::{transfer, State};
 use crate::solvers::multigrid::{CellClass, Finest, Multigrid};
 use crate::solvers::pcg::{self, PcgSettings, PcgStats, Preconditioner, StencilMatrix};
 use crate::solvers::NONE;
+use crate::stages::markings::CellKind;
+use crate::stages::{transfer, State};
 use crate::PAR_GRAIN;
 use rayon::prelude::*;
 
@@ -577,7 +577,7 @@ mod tests {
             ..Default::default()
         };
         let scene = Scene::load(scene, &o).unwrap();
-        let mut sim = crate::simulation::Simulation::<D>::new(scene.config(), &scene.method);
+        let mut sim = crate::step::Simulation::<D>::new(scene.config(), &scene.method);
         for _ in 0..before {
             sim.step().unwrap();
         }

@@ -1,7 +1,7 @@
 //! Velocity transfer between particles and the MAC grid (paper alg. flip, lines 1 and 4):
 //! particle-to-grid with tent weights on faces, extrapolation of face velocities into cells
 //! without fluid, and grid-to-particle with a FLIP/PIC blend. The band method's velocity
-//! combination is in [`crate::sim::band`].
+//! combination is in [`crate::stages::band`].
 
 use crate::grid::active::{par_runs, Active};
 use crate::grid::{Cell, FacePoint, FaceStencil, Grid, MacField, Vector};

@@ -2,22 +2,23 @@
 //! alg. band, one file per step, and the [`State`] they read and write.
 //!
 //! It knows no method: the step that calls these stages in order, and the methods' hooks
-//! between them, sit above it (`crate::simulation`).
+//! between them, sit above it (`crate::step`).
 
 pub mod advect;
 pub mod band;
 pub mod emit;
 pub mod forces;
+pub mod invariants;
 pub mod markings;
 pub mod pressure;
 pub mod saved;
 pub mod solids;
 pub mod timestep;
 pub mod transfer;
+pub mod volume;
 
 use crate::grid::active::Active;
 use crate::grid::{Grid, MacField, NearCells, Vector};
-use crate::metrics;
 use crate::particles::{self, Particles, Region};
 use crate::solvers::pcg::Preconditioner;
 use emit::Emitter;
@@ -108,14 +109,7 @@ pub(crate) fn active_cells<const D: usize>(
 pub enum StepError {
     /// A guarantee broke: a bug, or a state the method cannot go on from.
     #[error(transparent)]
-    Invariant(#[from] metrics::InvariantViolation),
-    /// A file the run was asked to write (ccp's `--export-lp`).
-    #[error("cannot write '{}'", .path.display())]
-    Write {
-        path: std::path::PathBuf,
-        #[source]
-        error: std::io::Error,
-    },
+    Invariant(#[from] invariants::InvariantViolation),
     /// A method's solver failed: the setting that causes it (e.g.
     /// `simulation.powerpic.epsilon`), the solver, and why.
     #[error("{setting}: {solver} failed")]
@@ -204,7 +198,7 @@ impl<const D: usize> State<D> {
             return 100.0;
         }
         let mu = self.config.mu();
-        100.0 * metrics::volume_cells(&self.markings, mu, &self.active) / self.target_volume
+        100.0 * volume::volume_cells(&self.markings, mu, &self.active) / self.target_volume
     }
 
     /// New markings from the particles and the obstacles where they are now, with their

@@ -17,38 +17,6 @@ pub enum CellKind {
     Solid = 2,
 }
 
-/// Class ids used in recordings (one byte per cell).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[repr(u8)]
-pub enum MarkingClass {
-    Empty = 0,
-    Surface = 1,
-    Inner = 2,
-    /// An inner cell holding fewer than `mu` particles (def. bubble).
-    Bubble = 3,
-    Solid = 4,
-}
-
-impl MarkingClass {
-    pub const ALL: [MarkingClass; 5] = [
-        MarkingClass::Empty,
-        MarkingClass::Surface,
-        MarkingClass::Inner,
-        MarkingClass::Bubble,
-        MarkingClass::Solid,
-    ];
-
-    pub fn label(self) -> &'static str {
-        match self {
-            MarkingClass::Empty => "empty",
-            MarkingClass::Surface => "surface",
-            MarkingClass::Inner => "inner",
-            MarkingClass::Bubble => "bubble",
-            MarkingClass::Solid => "solid",
-        }
-    }
-}
-
 /// The band levels of sec. band_method for a band of thickness `R + 1` (fig. band), as class
 /// ids for recordings.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -227,16 +195,6 @@ impl Markings {
         match self.is_fluid(c) {
             true => self.depth[c],
             false => DEPTH_NOT_FLUID,
-        }
-    }
-
-    pub fn class(&self, c: usize, mu: u32) -> MarkingClass {
-        match self.kind[c] {
-            CellKind::Empty => MarkingClass::Empty,
-            CellKind::Solid => MarkingClass::Solid,
-            CellKind::Fluid if self.surface[c] => MarkingClass::Surface,
-            CellKind::Fluid if self.count[c] < mu => MarkingClass::Bubble,
-            CellKind::Fluid => MarkingClass::Inner,
         }
     }
 
@@ -471,8 +429,6 @@ mod tests {
         assert!(m.surface[g.cell_index([1, 1, 1])]);
         assert!(!m.surface[g.cell_index([0, 0, 0])]);
         assert_eq!(m.depth(g.cell_index([0, 0, 0])), -3);
-        assert_eq!(m.class(g.cell_index([0, 0, 0]), 2), MarkingClass::Bubble);
-        assert_eq!(m.class(g.cell_index([0, 0, 0]), 1), MarkingClass::Inner);
     }
 
     /// Markings found without a pass over the box are those of every cell, by brute force: the

@@ -3,7 +3,7 @@
 
 use crate::grid::{Grid, Vector};
 use crate::particles::{stratified_samples, Particles, Region};
-use crate::sim::State;
+use crate::stages::State;
 use rand::Rng;
 
 /// The emission stage: every emitter that emits now tops up its cells to `mu` (by `count`, the

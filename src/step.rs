@@ -1,17 +1,20 @@
 //! A running simulation: the state, the method that steps it, and one time step as a list of
 //! named stages (paper alg. flip; alg. band for the band methods).
 //!
-//! This module sits above the methods: [`Simulation::step`] calls the stages of [`crate::sim`]
+//! This module sits above the methods: [`Simulation::step`] calls the stages of [`crate::stages`]
 //! (the library of the paper's steps, which knows no method) and, where methods differ, the
 //! hooks of [`FluidMethod`]. After every step it checks the invariants every method keeps,
 //! then the method's own.
 
 use crate::grid::Vector;
 use crate::methods::{FluidMethod, MethodReport, MethodSettings, MethodSummary, NoReport};
-use crate::metrics::{self, InvariantViolation, Stage, StageTimes};
-use crate::sim::{advect, emit, forces, pressure, timestep, transfer, SimConfig, State, StepError};
+use crate::metrics::{self, Stage, StageTimes};
 use crate::snapshot::{Reader, SnapshotError, Writer};
 use crate::solvers::pcg::PcgStats;
+use crate::stages::invariants::{self, InvariantViolation};
+use crate::stages::{
+    advect, emit, forces, pressure, timestep, transfer, SimConfig, State, StepError,
+};
 
 /// What one step did.
 #[derive(Debug)]
@@ -170,7 +173,7 @@ impl<const D: usize> Simulation<D> {
         let have_at = rep.times.time(Stage::GridToParticles, || {
             m.grid_to_particles(s.particles_mut(), &u, &u_old, u_at_particles)
         });
-        metrics::check_speed_bound(&s.particles.vel, s.config.max_speed)?;
+        invariants::check_speed_bound(&s.particles.vel, s.config.max_speed)?;
         // Line 5: advection (and, with the band, of the grid velocity).
         m.before_advection(s);
         rep.times.time(Stage::Advect, || {
@@ -221,7 +224,7 @@ impl<const D: usize> Simulation<D> {
             ))
         })?;
         let p = &s.particles;
-        metrics::check_particles(&s.grid, &p.pos, &p.vel, s.solids.particle_free(), expected)?;
+        invariants::check_particles(&s.grid, &p.pos, &p.vel, s.solids.particle_free(), expected)?;
         self.method.check_invariants(s)
     }
 }
