@@ -332,7 +332,8 @@ struct MassMomentum<const D: usize>(f64, Vector<D>);
 
 impl<const D: usize> std::ops::AddAssign for MassMomentum<D> {
     fn add_assign(&mut self, o: Self) {
-        (self.0 += o.0, self.1 += o.1);
+        self.0 += o.0;
+        self.1 += o.1;
     }
 }
 

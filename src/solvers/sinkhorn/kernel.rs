@@ -277,18 +277,6 @@ impl<const D: usize> Kernel<D> {
         sum
     }
 
-    /// `sum_j K_pj v_j` of every point, by point; the points are visited in sorted order
-    /// (neighbours read the same `v_j`).
-    #[cfg(test)]
-    pub(super) fn row_sums(&self, v: &[f64]) -> Vec<f64> {
-        let sorted: Vec<f64> = (0..self.order.len())
-            .into_par_iter()
-            .with_min_len(ROW_GRAIN)
-            .map(|i| self.row_sum_at(i, v))
-            .collect();
-        self.rank.par_iter().map(|&i| sorted[i as usize]).collect()
-    }
-
     /// `sum_p K_pj w(p)` for every slot: each chunk of sorted points scatters into its
     /// window, and the windows are added in chunk order (the same sums whatever the thread
     /// count).
@@ -311,7 +299,7 @@ impl<const D: usize> Kernel<D> {
     /// A Sinkhorn row update and the column sums of its result in one pass over the rows
     /// (each row is read once, not twice): every point's exact row scaling `u*_p = volume /
     /// sum_j K_pj v_j`, by point, and every slot's `C*_j = sum_p K_pj u*_p`; the numbers of
-    /// [`Self::row_sums`] then [`Self::columns`] with `w = u*`, bit for bit. With `relax`, each
+    /// [`Self::row_sum`] then [`Self::columns`] with `w = u*`, bit for bit. With `relax`, each
     /// point also takes the scaling `relax(p, u*_p)`, and the column sums of those come too.
     pub(super) fn rows_then_columns(
         &self,
@@ -329,12 +317,11 @@ impl<const D: usize> Kernel<D> {
         };
         let pair = |p, u| Vector::<2>::new(relax(p, u), u);
         let (u, sums) = self.rows_and_sums(v, volume, Vector::<2>::zeros(), pair);
-        let split = |x: Vec<Vector<2>>, k: usize| x.par_iter().map(|x| x[k]).collect();
-        let (relaxed, relaxed_sums) = (split(u.clone(), 0), split(sums.clone(), 0));
+        let split = |x: &[Vector<2>], k: usize| x.par_iter().map(|x| x[k]).collect();
         RowUpdate {
-            exact: split(u, 1),
-            relaxed: Some((relaxed, relaxed_sums)),
-            sums: split(sums, 1),
+            exact: split(&u, 1),
+            relaxed: Some((split(&u, 0), split(&sums, 0))),
+            sums: split(&sums, 1),
         }
     }
 
@@ -454,7 +441,8 @@ impl<'a, const D: usize> Ball<'a, D> {
         r: &mut Runs,
         reached: &[AtomicBool],
     ) {
-        (r.first.clear(), r.run.clear());
+        r.first.clear();
+        r.run.clear();
         r.first.push(0);
         for (x, f) in x.iter().zip(factor.chunks_mut(D * self.side())) {
             let (lo, len) = self.bounds(x);
@@ -464,33 +452,39 @@ impl<'a, const D: usize> Ball<'a, D> {
                 }
             }
             for l in self.lines(lo, len, f) {
-                let at = std::array::from_fn(|k| l.at.get(k + 1).map_or(0, |&a| a as u8));
-                let mut open: Option<Run> = None;
-                for a in l.cells.clone() {
-                    if !self.tg.is_free(l.cell + a) {
-                        r.run.extend(open.take());
-                        continue;
-                    }
-                    let near = l.near + a - l.cells.start;
-                    reached[near].store(true, Ordering::Relaxed);
-                    match open.as_mut() {
-                        Some(run) => run.len += 1,
-                        None => {
-                            let (slot, start, len) = (near as u32, a as u8, 1);
-                            open = Some(Run {
-                                slot,
-                                start,
-                                len,
-                                at,
-                            })
-                        }
-                    }
-                }
-                r.run.extend(open);
+                self.line_runs(&l, reached, &mut r.run);
             }
             f.iter_mut().for_each(|f| *f = (-*f / epsilon).exp());
             r.first.push(r.run.len() as u32);
         }
+    }
+
+    /// Lists the runs of the line `l` of a ball into `runs`: its free cells, cut at the
+    /// blocked ones, a run's first cell named by its near number; marks the cells reached.
+    fn line_runs(&self, l: &Line<D>, reached: &[AtomicBool], runs: &mut Vec<Run>) {
+        let at = std::array::from_fn(|k| l.at.get(k + 1).map_or(0, |&a| a as u8));
+        let mut open: Option<Run> = None;
+        for a in l.cells.clone() {
+            if !self.tg.is_free(l.cell + a) {
+                runs.extend(open.take());
+                continue;
+            }
+            let near = l.near + a - l.cells.start;
+            reached[near].store(true, Ordering::Relaxed);
+            match open.as_mut() {
+                Some(run) => run.len += 1,
+                None => {
+                    let (slot, start, len) = (near as u32, a as u8, 1);
+                    open = Some(Run {
+                        slot,
+                        start,
+                        len,
+                        at,
+                    })
+                }
+            }
+        }
+        runs.extend(open);
     }
 
     /// The lines of the kernel's ball in the box `lo`, `len`, in grid order, from the squared
@@ -654,7 +648,7 @@ mod tests {
             }
         }
         let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * b.abs();
-        let sums = kernel.row_sums(&v);
+        let sums: Vec<f64> = (0..points.len()).map(|p| kernel.row_sum(p, &v)).collect();
         assert!(sums.iter().zip(&rows).all(|(&a, &b)| close(a, b)));
         let cols = kernel.columns(0.0, |p| w[p]);
         assert!(cols.iter().zip(&columns).all(|(&a, &b)| close(a, b)));

@@ -326,14 +326,14 @@ impl<const D: usize> Transport<D> {
         loop {
             // A cold start's `u` is 0: its first row update is exact.
             let rows = t.update_rows(relax && t.iterations > 0)?;
-            let c = rows.relaxed.as_ref().map_or(&rows.sums, |r| &r.1);
-            let (last, normal, error);
-            (last, (error, normal)) = (t.error, t.column_update(c, &mut next, relax));
-            // The stopping test is on the plan whose rows are exact.
-            t.error = match rows.relaxed {
-                Some(_) => t.max_error(&rows.sums),
-                None => error,
-            };
+            // The columns follow the row scalings taken; the stopping test is on the plan
+            // whose rows are exact.
+            let taken = rows.relaxed.as_ref().map_or(&rows.sums, |r| &r.1);
+            let (last, normal);
+            (last, (t.error, normal)) = (
+                t.error,
+                t.column_update(taken, &rows.sums, &mut next, relax),
+            );
             t.converged = t.error <= s.delta;
             if t.converged || t.iterations >= s.max_iterations {
                 t.u = rows.exact;
@@ -374,7 +374,7 @@ impl<const D: usize> Transport<D> {
             .collect();
         let c = self.kernel.columns(0.0, |p| self.u[p]);
         let mut next = vec![];
-        let (_, normal) = self.column_update(&c, &mut next, false);
+        let (_, normal) = self.column_update(&c, &c, &mut next, false);
         self.adopt(&mut next, normal)
     }
 
@@ -425,30 +425,33 @@ impl<const D: usize> Transport<D> {
         }
     }
 
-    /// The largest relative column error of the current scalings with the column sums `c`.
-    fn max_error(&self, c: &[f64]) -> f64 {
-        (c.par_iter().zip(&self.v).enumerate())
-            .with_min_len(SLOTS_PER_TASK)
-            .map(|(k, (&c, &v))| self.column_error(k, v * c, v))
-            .reduce(|| 0.0, f64::max)
-    }
-
     /// The column update, every cell's marginal met, from `C_j` (per slot in `c`), into
-    /// `next`; returns the largest relative column error of the current scalings and whether
-    /// the new ones are all finite and positive (one pass for both).
-    fn column_update(&self, c: &[f64], next: &mut Vec<f64>, relax: bool) -> (f64, bool) {
+    /// `next`; returns the largest relative column error of the current scalings with the
+    /// column sums `tested` (those of exact rows) and whether the new scalings are all finite
+    /// and positive (one pass for both).
+    fn column_update(
+        &self,
+        c: &[f64],
+        tested: &[f64],
+        next: &mut Vec<f64>,
+        relax: bool,
+    ) -> (f64, bool) {
         next.resize(self.v.len(), 0.0);
-        (next.par_iter_mut().zip(&self.v).zip(c).enumerate())
-            .with_min_len(SLOTS_PER_TASK)
-            .map(|(k, ((next, &v), &c))| {
-                let exact = self.column_scaling(k, c, v);
-                *next = match relax {
-                    true => self.overrelaxed(v, exact),
-                    false => exact,
-                };
-                (self.column_error(k, v * c, v), next.is_normal())
-            })
-            .reduce(|| (0.0, true), |(a, p), (b, q)| (a.max(b), p && q))
+        (next
+            .par_iter_mut()
+            .zip(&self.v)
+            .zip(c.par_iter().zip(tested))
+            .enumerate())
+        .with_min_len(SLOTS_PER_TASK)
+        .map(|(k, ((next, &v), (&c, &tested)))| {
+            let exact = self.column_scaling(k, c, v);
+            *next = match relax {
+                true => self.overrelaxed(v, exact),
+                false => exact,
+            };
+            (self.column_error(k, v * tested, v), next.is_normal())
+        })
+        .reduce(|| (0.0, true), |(a, p), (b, q)| (a.max(b), p && q))
     }
 
     /// The over-relaxed column scaling `v (v* / v)^omega` from the current `v` and the exact
