@@ -1,11 +1,11 @@
 #!/usr/bin/env python3
 """Refit the cost model of `cellflip report --plan` (docs/cluster.md, "The cost model").
 
-Each method's wall time per step is `a x particles + b x cells` nanoseconds, one pair (a, b) per
+Each method's wall time per step is `a x units + b x cells` nanoseconds, one pair (a, b) per
 method and dimension (`MethodType::step_cost` in the method's folder). This script reads the
 measured runs of one or more report.csv files (each made by `cellflip report --docs`, or by
 `--merge` of a sweep's jobs), pairs every run with its job of `cellflip report --plan` for the
-same matrix (the particles the plan counts, its cells and steps), and for each method and
+same matrix (the units of the liquid the plan counts, its cells and steps), and for each method and
 dimension finds the (a, b) >= 0 that keeps every job of the default matrix within `--cap` (1.9x,
 inside the 2x of tests/it/sweep.rs) either way and, within that, makes the largest ratio either
 way of the other matrices' jobs (the paper's, whose target is 1.5x) as small as it can; the
