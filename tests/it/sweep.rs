@@ -295,6 +295,35 @@ fn the_cost_model_is_within_bounds_of_the_paper_matrix_as_measured() {
     });
 }
 
+/// The plan's count and steps for FLIP's dam-2d at 50^2, whose emitter pours from 2.5 s until
+/// the tank is half full: within 10% of what its run held on average and the steps it took
+/// (3,469 particles, 1,150 steps; docs/results/report.csv, 2026-11-29, 480cee2), where the
+/// memory estimate's bound counts 6,800 particles and a fall through the whole tank 1,253 steps.
+#[test]
+fn the_plan_counts_the_particles_a_run_holds_on_average() {
+    use clap::Parser;
+    let args = [
+        "cellflip",
+        "report",
+        "--scenes",
+        "dam-2d",
+        "--methods",
+        "flip",
+        "--res",
+        "50",
+    ];
+    let cli = cellflip::cmd::cli::Cli::parse_from(args);
+    let cellflip::cmd::cli::Command::Report(args) = cli.command else {
+        unreachable!("a report command")
+    };
+    let specs = cellflip::cmd::report::matrix(&args).unwrap();
+    let jobs = cellflip::cmd::report::sweep::plan(&specs).unwrap();
+    assert_eq!(jobs.len(), 1);
+    let near = |x: f64, measured: f64| (x / measured - 1.0).abs() < 0.1;
+    assert!(near(jobs[0].particles, 3469.0), "{}", jobs[0].particles);
+    assert!(near(jobs[0].steps, 1150.0), "{}", jobs[0].steps);
+}
+
 /// Each job's estimated wall seconds over its measured ones, with its id and method, for the
 /// jobs of the matrix `args` names that have a row in `csv` (from the repository's root). The
 /// rows are in the plan's order; a job without a row has not run.
