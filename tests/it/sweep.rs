@@ -287,11 +287,11 @@ fn the_cost_model_is_within_bounds_of_the_paper_matrix_as_measured() {
     );
     assert!(ratios.len() >= 40, "{} jobs measured", ratios.len());
     within(&ratios, |method| match method {
-        "flip" => 2.0,
-        "ccp" => 2.6,
-        "idp" => 1.6,
-        "nbflip" => 1.7,
-        _ => 2.5,
+        "flip" => 1.3,
+        "ccp" => 2.3,
+        "idp" => 1.75,
+        "nbflip" => 1.5,
+        _ => 3.0,
     });
 }
 
