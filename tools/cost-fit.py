@@ -1,12 +1,16 @@
 #!/usr/bin/env python3
 """Refit the cost model of `cellflip report --plan` (docs/cluster.md, "The cost model").
 
-Each method's wall time per step is `a x particles + b x cells` nanoseconds, one pair (a, b) per
+Each method's wall time per step is `a x units + b x cells` nanoseconds, one pair (a, b) per
 method and dimension (`MethodType::step_cost` in the method's folder). This script reads the
 measured runs of one or more report.csv files (each made by `cellflip report --docs`, or by
 `--merge` of a sweep's jobs), pairs every run with its job of `cellflip report --plan` for the
-same matrix (the plan's particles held, cells and steps), and for each method and dimension
-finds the (a, b) >= 0 whose largest ratio of estimate to measurement, either way, is smallest.
+same matrix (the units of the liquid the plan counts, its cells and steps), and for each method and
+dimension finds the (a, b) >= 0 that keeps every job of the default matrix within `--cap` (1.9x,
+inside the 2x of tests/it/sweep.rs) either way and, within that, makes the largest ratio either
+way of the other matrices' jobs (the paper's, whose target is 1.5x) as small as it can; the
+default matrix's jobs alone are centred when no other matrix is given or none can be kept within
+the cap.
 
     python3 tools/cost-fit.py default=docs/results/report.csv paper=docs/results-paper/report.csv
 
@@ -76,63 +80,94 @@ def pair(jobs, rows, path):
             sys.exit(f"{path}: {key[0]} {key[1]}: {len(rs)} runs but {len(js)} jobs in the plan")
         for j, r in zip(js, rs):
             measured = float(r["ms_per_sim_s"]) / 1e3 * j["sim_s"]
-            pairs.append(dict(j, dim=int(r["dim"]), measured=measured, source=path))
+            pairs.append(
+                dict(
+                    j,
+                    dim=int(r["dim"]),
+                    measured=measured,
+                    source=path,
+                    res=r["res"],
+                    run_steps=float(r["steps"]),
+                    status=r["status"],
+                )
+            )
     return pairs
 
 
-def fit(points):
-    """(a, b) >= 0 in ns minimising max |log(estimate / measured)| over `points`, by a search
-    over the direction of (a, b) (for each, the best scale is the geometric middle of the
-    ratios' extremes), refined around the best direction."""
+def fit(points, cap):
+    """(a, b) >= 0 in ns for `points`: every ratio of estimate to measurement of the default
+    matrix within `cap` either way where some (a, b) allows it, and within that the largest
+    ratio either way of the other matrices' points as small as can be (all points alike when
+    only the default matrix is given). A search over the direction of (a, b); for each, the
+    best scale is the geometric middle of the other matrices' extreme ratios, clamped to the
+    scales that keep the default's within `cap`. Gives a, b and the worst ratio per matrix."""
 
-    def spread(theta):
+    def at(theta):
         ca, cb = math.cos(theta), math.sin(theta)
-        ratios = [p["steps"] * (ca * p["particles"] + cb * p["cells"]) / p["measured"] for p in points]
-        lo, hi = min(ratios), max(ratios)
-        return hi / lo, 1.0 / math.sqrt(lo * hi), ca, cb
+        logs = [math.log(p["steps"] * (ca * p["particles"] + cb * p["cells"]) / p["measured"]) for p in points]
+        default = [x for x, p in zip(logs, points) if p["matrix"] == "default"]
+        others = [x for x, p in zip(logs, points) if p["matrix"] != "default"] or default
+        lo, hi = -math.log(cap) - min(default or [0.0]), math.log(cap) - max(default or [0.0])
+        s = min(max(-(min(others) + max(others)) / 2, lo), hi) if lo <= hi else -(min(default) + max(default)) / 2
+        worst = max(abs(x + s) for x in others)
+        spread = max(abs(x + s) for x in default or [0.0])
+        return (lo > hi, spread if lo > hi else worst), s, ca, cb
 
     lo, hi = 0.0, math.pi / 2
-    best = None
+    best = 0.0
     for _ in range(6):
         grid = [lo + (hi - lo) * i / 400 for i in range(401)]
-        scored = sorted((spread(t)[0], t) for t in grid)
-        best = scored[0][1]
+        best = min(grid, key=lambda t: at(t)[0])
         step = (hi - lo) / 400
         lo, hi = max(0.0, best - 2 * step), min(math.pi / 2, best + 2 * step)
-    worst, scale, ca, cb = spread(best)
-    a, b = scale * ca * 1e9, scale * cb * 1e9
-    return a, b, math.sqrt(worst)
+    _, s, ca, cb = at(best)
+    a, b = round(math.exp(s) * ca * 1e9), round(math.exp(s) * cb * 1e9)
+    return a, b, worst_ratios(points, a, b)
+
+
+def estimate(p, a, b):
+    return p["steps"] * (a * p["particles"] + b * p["cells"]) * 1e-9
+
+
+def worst_ratios(points, a, b):
+    worst = defaultdict(lambda: 1.0)
+    for p in points:
+        r = estimate(p, a, b) / p["measured"]
+        worst[p["matrix"]] = max(worst[p["matrix"]], r, 1 / r)
+    return dict(worst)
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("csvs", nargs="+", metavar="MATRIX=REPORT.CSV")
     ap.add_argument("--bin", default="target/release/cellflip")
+    ap.add_argument("--cap", type=float, default=1.9, help="the default matrix's bound either way (1.9)")
     a = ap.parse_args()
     points = []
     for arg in a.csvs:
         matrix, _, path = arg.partition("=")
-        points += pair(plan(a.bin, matrix), runs(path), path)
+        points += [dict(p, matrix=matrix) for p in pair(plan(a.bin, matrix), runs(path), path)]
     groups = defaultdict(list)
     for p in points:
         groups[(p["method"], p["dim"])].append(p)
-    fitted = {}
-    for (method, dim), ps in sorted(groups.items()):
-        fitted[(method, dim)] = fit(ps)
+    fitted = {key: fit(ps, a.cap) for key, ps in sorted(groups.items())}
     for method in sorted({m for m, _ in fitted}):
         pairs = [fitted.get((method, d)) for d in (2, 3)]
-        text = ", ".join(f"({f[0]:.0f}.0, {f[1]:.0f}.0)" if f else "none" for f in pairs)
-        worst = ", ".join(f"{f[2]:.2f}x" if f else "-" for f in pairs)
-        print(f"{method}: StepCost::of(dim, [{text}])  worst ratio either way 2D, 3D: {worst}")
+        text = ", ".join(f"({f[0]}.0, {f[1]}.0)" if f else "none" for f in pairs)
+        worst = "; ".join(
+            f"{d}D " + ", ".join(f"{m} {w:.2f}x" for m, w in f[2].items()) for d, f in zip((2, 3), pairs) if f
+        )
+        print(f"{method}: StepCost::of(dim, [{text}])  worst ratio either way: {worst}")
     print()
-    print("| scene | method | cells | steps | wall s est. | wall s measured | est. / measured |")
-    print("|---|---|---|---|---|---|---|")
+    print("| matrix | scene | method | res | steps est. / run | wall s est. | wall s measured | est. / measured |")
+    print("|---|---|---|---|---|---|---|---|")
     for p in points:
         fa, fb, _ = fitted[(p["method"], p["dim"])]
-        est = p["steps"] * (fa * p["particles"] + fb * p["cells"]) * 1e-9
+        est = estimate(p, fa, fb)
+        stopped = " (stopped)" if p["status"].startswith("over budget") else ""
         print(
-            f"| {p['scene']} | {p['method']} | {p['cells']:.0f} | {p['steps']:.0f} | {est:.2f} | "
-            f"{p['measured']:.2f} | {est / p['measured']:.2f} |"
+            f"| {p['matrix']} | {p['scene']} | {p['method']} | {p['res']} | {p['steps']:.0f} / {p['run_steps']:.0f}{stopped} | "
+            f"{est:.2f} | {p['measured']:.2f} | {est / p['measured']:.2f} |"
         )
 
 

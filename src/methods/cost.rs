@@ -170,28 +170,59 @@ impl Footprint {
 }
 
 /// A method's wall time per step on the machine its fit was measured on (2 cores), the cost
-/// model of `cellflip report --plan` (docs/cluster.md, "The cost model"): nanoseconds per
-/// particle held and per grid cell, fitted to the whole runs of the report's default matrix.
+/// model of `cellflip report --plan` (docs/cluster.md, "The cost model"): nanoseconds per unit
+/// of the liquid it counts and per grid cell, fitted to the whole runs of the report's default
+/// and paper matrices (tools/cost-fit.py).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StepCost {
-    pub ns_per_particle: f64,
+    pub ns_per_unit: f64,
     pub ns_per_cell: f64,
+    pub unit: Unit,
+    /// Whether the driven share of the liquid (an emitter's jet, a liquid under a moving lid)
+    /// counts twice: the methods whose per-step solve iterates on the liquid (ccp's correction,
+    /// Power PIC's Sinkhorn, narrow-band FLIP's level set) do more where it is thrown about.
+    pub driven_twice: bool,
+}
+
+/// What a method's cost counts of the liquid, on average over the run
+/// ([`crate::scene::MemoryEstimate`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Unit {
+    /// The particles it holds: the particle stages' work (FLIP, IDP, Power PIC's transport).
+    Particle,
+    /// The liquid's cells, whatever it holds: for a method whose step works on the liquid's
+    /// cells more than on its particles (narrow-band FLIP's level set and pressure over all of
+    /// the liquid while it holds particles only in the band; ccp's correction, dearer per
+    /// particle at one particle a cell: dam-1ppc-2d 1.6-2.1 us a particle a step, dam-2d 0.7-0.9;
+    /// docs/results/report.csv, 480cee2).
+    LiquidCell,
 }
 
 impl StepCost {
     /// The cost in `dim` dimensions from the fitted `[2D, 3D]` pairs of nanoseconds per
-    /// particle and per cell.
+    /// particle held and per cell.
     pub fn of(dim: usize, fitted: [(f64, f64); 2]) -> Self {
-        let (ns_per_particle, ns_per_cell) = in_dim(dim, fitted);
+        let (ns_per_unit, ns_per_cell) = in_dim(dim, fitted);
         Self {
-            ns_per_particle,
+            ns_per_unit,
             ns_per_cell,
+            unit: Unit::Particle,
+            driven_twice: false,
         }
     }
 
-    /// Seconds per step with `particles` held on `cells` cells.
-    pub fn step_secs(&self, particles: f64, cells: f64) -> f64 {
-        (self.ns_per_particle * particles + self.ns_per_cell * cells) * 1e-9
+    /// This cost per `unit` of the liquid instead, the driven share counting twice.
+    pub fn per_driven(self, unit: Unit) -> Self {
+        Self {
+            unit,
+            driven_twice: true,
+            ..self
+        }
+    }
+
+    /// Seconds per step with `units` of the liquid counted on `cells` cells.
+    pub fn step_secs(&self, units: f64, cells: f64) -> f64 {
+        (self.ns_per_unit * units + self.ns_per_cell * cells) * 1e-9
     }
 }
 

@@ -20,8 +20,9 @@ use super::Scene;
 use super::{ErrorKind, SceneError};
 use crate::grid::{Grid, NearCells};
 use crate::methods::Holds;
+use crate::particles::Region;
 use crate::stages::markings::Markings;
-use crate::stages::solids::Solids;
+use crate::stages::solids::{Motion, Solids};
 use crate::stages::SimConfig;
 
 /// The process before any simulation: code, the thread pool, the scene.
@@ -54,6 +55,22 @@ pub struct MemoryEstimate {
     /// The most it is taken to hold during the run: with a band, the larger of `held` and the
     /// band of the liquid at rest ([`SeededLiquid::new`]).
     pub held_most: f64,
+    /// The particles it holds on average over the run, which is what a step's cost follows
+    /// (`held_most` is the memory's bound, for a dam with an emitter twice as many): those of
+    /// `held_most` before the emitters, plus the emitters' particles averaged over the run
+    /// ([`emitted_mean`]), of which a band holds its share of the seeded liquid.
+    pub held_mean: f64,
+    /// The liquid's cells on average over the run, band or not: the seeded liquid's plus the
+    /// emitters' average over `mu`.
+    pub liquid_cells_mean: f64,
+    /// The share of the liquid that is driven on average, 0 to 1: the emitters' average
+    /// (a jet that falls and splashes), or all of it where a lid (an obstacle of constant,
+    /// nonzero velocity) keeps pushing into it.
+    pub driven_share: f64,
+    /// How far the seeded liquid's top, or a falling obstacle's bottom, falls to the liquid's
+    /// level at rest over the tank's floor, metres ([`fall_cells`]): the cost model's speed of
+    /// the liquid (`cellflip report --plan`, docs/cluster.md).
+    pub fall_m: f64,
     /// The simulation's share once it runs: the cells' and the particles' bytes.
     pub cell_bytes: f64,
     pub particle_bytes: f64,
@@ -123,6 +140,19 @@ impl Scene {
         let held = mu * seeded.held_cells as f64 + emitted;
         let held_most = mu * seeded.held_cells.max(seeded.rest_cells) as f64 + emitted;
         let start_bytes = footprint.start_bytes(mu * seeded.cells as f64, cells as f64);
+        let emitted_mean = emitted_mean(
+            &config,
+            mu * seeded.cells as f64,
+            mu * cells as f64,
+            self.duration_secs(),
+        );
+        let band = mu * seeded.held_cells.max(seeded.rest_cells) as f64;
+        // The band's share of the emitted liquid is its share of the seeded one (all of it
+        // for a method without a band, or for a scene that seeds no liquid).
+        let share = match seeded.cells {
+            0 => 1.0,
+            n => (band / (mu * n as f64)).min(1.0),
+        };
         MemoryEstimate {
             cells,
             fluid_cells: seeded.cells,
@@ -130,6 +160,10 @@ impl Scene {
             particles,
             held,
             held_most,
+            held_mean: band + share * emitted_mean,
+            liquid_cells_mean: seeded.cells as f64 + emitted_mean / mu,
+            driven_share: driven_share(&config, emitted_mean, mu * seeded.cells as f64),
+            fall_m: seeded.fall_cells * config.cell_size_m,
             cell_bytes: footprint.cell_bytes(
                 cells as f64,
                 seeded.cells as f64,
@@ -259,6 +293,8 @@ struct SeededLiquid {
     rest_cells: usize,
     /// With a band, the active cells of the first markings.
     active_cells: Option<usize>,
+    /// Cells the liquid (or an obstacle dropped into it) falls ([`fall_cells`]).
+    fall_cells: f64,
 }
 
 impl SeededLiquid {
@@ -281,6 +317,7 @@ impl SeededLiquid {
                 .for_each(|c| liquid[c] |= !solids.solid[c]);
         }
         let cells = liquid.iter().filter(|&&l| l).count();
+        let fall = fall_cells(config, grid, &liquid);
         let (held_cells, active_cells) = match holds {
             Holds::All => (cells, None),
             Holds::Band { layers, .. } => {
@@ -302,8 +339,92 @@ impl SeededLiquid {
             held_cells,
             rest_cells,
             active_cells,
+            fall_cells: fall,
         }
     }
+}
+
+/// The particles the emitters of `config` add, averaged over a run of `duration` seconds that
+/// seeds `seeded` particles, `full` in a full tank (0 without emitters).
+///
+/// An emitter tops its cells up to `mu` particles each step ([`crate::stages::emit`]), so it
+/// adds them as fast as its velocity carries the liquid out of its box: `mu` per cell of the
+/// box's section across each axis times the speed along that axis, in cells per second (dam-2d at
+/// 50^2: 3 cells x 75 cells/s x 4 = 900 particles/s). It does so from its start until it has
+/// added what its fill leaves room for (`until_fill` of a full tank less the seeded particles; a
+/// full tank without a fill), or it stops, or the run ends; the particles it adds over `[start,
+/// filled]` count for `T - (start + filled) / 2` seconds of the run's `T` on average. Each
+/// emitter is counted on its own. On the default matrix's emitter scenes this is within 7% of
+/// the particles the runs held on average (docs/results/report.csv, 480cee2, `n_mean`: dam-2d
+/// at 32^2 to 100^2 1,364 / 3,289 / 13,156 against 1,465 / 3,469 / 13,430; its 20 s run 4,316
+/// against 4,251; the emitter at the speed limit 4,526 against 4,536).
+fn emitted_mean<const D: usize>(
+    config: &SimConfig<D>,
+    seeded: f64,
+    full: f64,
+    duration: f64,
+) -> f64 {
+    let mu = config.mu() as f64;
+    let mean = |e: &crate::stages::emit::Emitter<D>| {
+        let Region::Box { min, max } = &e.region else {
+            unreachable!("an emitter's region is a box (Scene::config)")
+        };
+        let size = max - min;
+        let section = |k: usize| (0..D).filter(|&j| j != k).map(|j| size[j]).product::<f64>();
+        let rate = mu
+            * (0..D)
+                .map(|k| e.velocity[k].abs() * section(k))
+                .sum::<f64>();
+        let room = e.until_particles.map_or(full, |u| u as f64) - seeded;
+        let open = e.stop_secs.min(duration) - e.start_secs;
+        if rate <= 0.0 || room <= 0.0 || open <= 0.0 || duration <= 0.0 {
+            return 0.0;
+        }
+        let added = room.min(rate * open);
+        let filled = e.start_secs + added / rate;
+        added * (duration - (e.start_secs + filled) / 2.0) / duration
+    };
+    config.emitters.iter().map(mean).sum()
+}
+
+/// The share of the liquid, `seeded` particles and the emitters' `emitted` on average, that a
+/// run drives: all of it under a lid that keeps moving, else the emitted share.
+fn driven_share<const D: usize>(config: &SimConfig<D>, emitted: f64, seeded: f64) -> f64 {
+    let lid = (config.obstacles.iter())
+        .any(|o| matches!(o.motion, Motion::Constant) && o.velocity.norm() > 0.0);
+    match (lid, seeded + emitted) {
+        (true, _) => 1.0,
+        (false, all) if all > 0.0 => emitted / all,
+        _ => 0.0,
+    }
+}
+
+/// How many cells the liquid falls, or a falling obstacle before it enters it: the larger of
+/// the top of the seeded `liquid` (its highest cell's top above the floor, along gravity's
+/// largest component) and a falling obstacle's bottom, above the level the liquid's cells make
+/// spread over the floor, the whole tank's section (0 without gravity, or for a liquid already
+/// flat with nothing dropped into it). An obstacle enters the liquid at the speed of its fall
+/// and throws it about as fast; solids are not counted (a liquid on a shelf is taken to fall to
+/// the floor).
+fn fall_cells<const D: usize>(config: &SimConfig<D>, grid: &Grid<D>, liquid: &[bool]) -> f64 {
+    let (axis, g) = config.gravity.map(f64::abs).argmax();
+    if g <= 0.0 {
+        return 0.0;
+    }
+    let n = grid.dims[axis];
+    let height = |c: usize| match config.gravity[axis] < 0.0 {
+        true => grid.cell_coords(c)[axis] + 1,
+        false => n - grid.cell_coords(c)[axis],
+    };
+    let top = (0..liquid.len()).filter(|&c| liquid[c]).map(height).max();
+    let level = liquid.iter().filter(|&&l| l).count() as f64 / floor_cells(config, grid) as f64;
+    // Obstacles fall along axis 1, up (`Obstacle::bottom`).
+    let dropped = (config.obstacles.iter())
+        .filter(|o| matches!(o.motion, Motion::Falling { .. }))
+        .map(|o| o.bottom());
+    (top.map(|t| t as f64).into_iter().chain(dropped))
+        .map(|t| t - level)
+        .fold(0.0, f64::max)
 }
 
 /// The cells of one layer of the grid across gravity's largest component (0 without gravity):

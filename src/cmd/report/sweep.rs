@@ -10,7 +10,8 @@ use super::options::{shell_word, MatrixOptions};
 use super::saved::{self, RunFiles};
 use super::{scene_of, RunSpec};
 use crate::cmd::cli::ReportArgs;
-use crate::scene::Scene;
+use crate::methods::Unit;
+use crate::scene::{MemoryEstimate, Scene};
 use anyhow::{bail, Context, Result};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -25,7 +26,8 @@ pub struct Job<'a> {
     pub id: String,
     pub spec: &'a RunSpec,
     pub cells: usize,
-    /// Particles the method holds (the band's, for a band method).
+    /// What the cost model counts of the liquid on average over the run ([`cost`]): the
+    /// particles the method holds, or the liquid's cells, its driven share twice for some.
     pub particles: f64,
     pub seed: u64,
     /// The up-front memory estimate the run is admitted on, MiB.
@@ -44,12 +46,12 @@ pub fn plan(specs: &[RunSpec]) -> Result<Vec<Job<'_>>> {
         .map(|spec| {
             let scene = scene_of(spec)?;
             let estimate = scene.memory_estimate(false);
-            let (steps, step_secs) = cost(&scene, estimate.held_most, estimate.cells as f64);
+            let (particles, steps, step_secs) = cost(&scene, &estimate);
             Ok(Job {
                 id: saved::id(spec),
                 spec,
                 cells: estimate.cells,
-                particles: estimate.held_most,
+                particles,
                 seed: scene.file.simulation.seed,
                 mib: estimate.mib(),
                 sim_secs: scene.duration_secs(),
@@ -60,33 +62,51 @@ pub fn plan(specs: &[RunSpec]) -> Result<Vec<Job<'_>>> {
         .collect()
 }
 
-/// The cost model (docs/cluster.md, "The cost model"): the steps the run takes and the wall
-/// seconds of one, with `particles` held on `cells` cells.
+/// The cost model (docs/cluster.md, "The cost model"): the units of the liquid it counts, the
+/// steps the run takes ([`steps`]) and the wall seconds of one, for the run of `scene` that
+/// `estimate` sizes: the method's [`crate::methods::StepCost`] for the units it counts on
+/// average over the run (the particles it holds or the liquid's cells, [`Unit`]; the average,
+/// not the memory estimate's most, `held_most`, which counts an emitter's particles from the
+/// start), its driven share twice where the method says so, and the grid's cells.
+pub fn cost(scene: &Scene, estimate: &MemoryEstimate) -> (f64, f64, f64) {
+    let step = scene.method.step_cost(scene.dim());
+    let units = match step.unit {
+        Unit::Particle => estimate.held_mean,
+        Unit::LiquidCell => estimate.liquid_cells_mean,
+    };
+    let units = units
+        * if step.driven_twice {
+            1.0 + estimate.driven_share
+        } else {
+            1.0
+        };
+    let cells = estimate.cells as f64;
+    (units, steps(scene, estimate), step.step_secs(units, cells))
+}
+
+/// The steps a run of `scene` takes: each as long as the smaller of `max_dt` and the time to
+/// cross `cfl` cells at the liquid's speed, the fastest of an emitter's, an obstacle's and that
+/// of a fall from the seeded liquid's top (or a falling obstacle's bottom) to the liquid's level
+/// at rest, `sqrt(2 g fall)` (`estimate.fall_m`; a dam's front runs at about that, a pool at
+/// rest not at all).
 ///
-/// A step is as long as the smaller of `max_dt` and the time to cross `cfl` cells at the
-/// faster of an emitter's speed and that of a fall through half the tank's height, `sqrt(g H)`
-/// (the dam's front runs at about that); its wall time is the method's
-/// [`crate::methods::StepCost`].
-pub fn cost(scene: &Scene, particles: f64, cells: f64) -> (f64, f64) {
+/// On the default matrix (2026-11-29, 480cee2) this is 0.8x (martin-moyce-2d, compress-2d) to
+/// 1.4x (deep-pool-2d, whose ball falls once; dam-3d at 48^3) the steps FLIP took; the height
+/// of the whole tank (`sqrt(g H)`, before) over-counted every scene whose liquid falls less than
+/// the tank's height, up to 1.9x (deep-pool-2d; the falling obstacles and drop-2d 1.6x).
+fn steps(scene: &Scene, estimate: &MemoryEstimate) -> f64 {
     let f = &scene.file;
     let longest = f.domain.size.iter().copied().fold(0.0, f64::max);
     let h = longest / f.domain.cells as f64;
     let norm = |v: &[f64]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
     let g = (f.simulation.gravity.as_deref()).map_or(9.81, norm);
-    let height = f.domain.size.get(1).copied().unwrap_or(longest);
-    let poured = f
-        .emitter
-        .iter()
-        .map(|e| norm(&e.velocity))
+    let poured = (f.emitter.iter().map(|e| &e.velocity))
+        .chain(f.obstacle.iter().map(|o| &o.velocity))
+        .map(|v| norm(v))
         .fold(0.0, f64::max);
-    let speed = (g * height).sqrt().max(poured);
-    let dt = f
-        .simulation
-        .max_dt
-        .min(f.simulation.cfl * h / speed.max(1e-9));
-    let steps = (scene.duration_secs() / dt).ceil();
-    let step = scene.method.step_cost(scene.dim());
-    (steps, step.step_secs(particles, cells))
+    let speed = (2.0 * g * estimate.fall_m).sqrt().max(poured);
+    let dt = (f.simulation.max_dt).min(f.simulation.cfl * h / speed.max(1e-9));
+    (scene.duration_secs() / dt).ceil()
 }
 
 /// Prints the plan: a line per job, then the totals, every line but the jobs' starting with

@@ -18,7 +18,7 @@ mod settings;
 pub use record::CcpReport;
 pub use settings::{BandMode, CcpSettings, Directions, Solver};
 
-use super::cost::{Footprint, StepCost};
+use super::cost::{Footprint, StepCost, Unit};
 use super::options::Flag;
 use super::seam::{
     BandChoice, FluidMethod, MethodInfo, MethodSummary, MethodType, SettingContext, SettingError,
@@ -119,8 +119,9 @@ impl MethodType for Ccp {
     }
 
     fn step_cost(_settings: &CcpSettings, dim: usize) -> StepCost {
-        // ns per particle held and per cell, [2D, 3D], fitted to the default matrix's whole
-        // runs (2026-11-26, `2271d263a7`, docs/results/report.csv; docs/cluster.md).
-        StepCost::of(dim, [(692.0, 331.0), (457.0, 692.0)])
+        // ns per unit and per cell, [2D, 3D], fitted by tools/cost-fit.py to the whole runs of
+        // the default and paper matrices (2026-11-29, 480cee2, docs/results/report.csv and
+        // docs/results-paper/report.csv; docs/cluster.md).
+        StepCost::of(dim, [(3358.0, 0.0), (1211.0, 555.0)]).per_driven(Unit::LiquidCell)
     }
 }

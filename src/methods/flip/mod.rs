@@ -39,9 +39,10 @@ impl MethodType for Flip {
     }
 
     fn step_cost(_settings: &NoSettings, dim: usize) -> StepCost {
-        // ns per particle held and per cell, [2D, 3D], fitted to the default matrix's whole
-        // runs (2026-11-26, `2271d263a7`, docs/results/report.csv; docs/cluster.md).
-        StepCost::of(dim, [(138.0, 158.0), (302.0, 115.0)])
+        // ns per unit and per cell, [2D, 3D], fitted by tools/cost-fit.py to the whole runs of
+        // the default and paper matrices (2026-11-29, 480cee2, docs/results/report.csv and
+        // docs/results-paper/report.csv; docs/cluster.md).
+        StepCost::of(dim, [(209.0, 0.0), (136.0, 24.0)])
     }
 }
 

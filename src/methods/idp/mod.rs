@@ -104,8 +104,9 @@ impl MethodType for Idp {
     }
 
     fn step_cost(_settings: &IdpSettings, dim: usize) -> StepCost {
-        // ns per particle held and per cell, [2D, 3D], fitted to the default matrix's whole
-        // runs (2026-11-26, `2271d263a7`, docs/results/report.csv; docs/cluster.md).
-        StepCost::of(dim, [(550.0, 105.0), (457.0, 126.0)])
+        // ns per unit and per cell, [2D, 3D], fitted by tools/cost-fit.py to the whole runs of
+        // the default and paper matrices (2026-11-29, 480cee2, docs/results/report.csv and
+        // docs/results-paper/report.csv; docs/cluster.md).
+        StepCost::of(dim, [(514.0, 0.0), (241.0, 54.0)])
     }
 }

@@ -39,7 +39,7 @@ pub use physics::{combine, Resampling};
 pub use record::NbflipReport;
 pub use settings::NbflipSettings;
 
-use super::cost::{Footprint, StepCost};
+use super::cost::{Footprint, StepCost, Unit};
 use super::options::{Flag, FlagValue};
 use super::seam::{
     FluidMethod, MethodInfo, MethodSummary, MethodType, SettingContext, SettingError,
@@ -104,8 +104,9 @@ impl MethodType for Nbflip {
     }
 
     fn step_cost(_settings: &NbflipSettings, dim: usize) -> StepCost {
-        // ns per particle held and per cell, [2D, 3D], fitted to the default matrix's whole
-        // runs (2026-11-26, `2271d263a7`, docs/results/report.csv; docs/cluster.md).
-        StepCost::of(dim, [(158.0, 501.0), (1380.0, 25.0)])
+        // ns per unit and per cell, [2D, 3D], fitted by tools/cost-fit.py to the whole runs of
+        // the default and paper matrices (2026-11-29, 480cee2, docs/results/report.csv and
+        // docs/results-paper/report.csv; docs/cluster.md).
+        StepCost::of(dim, [(818.0, 32.0), (816.0, 149.0)]).per_driven(Unit::LiquidCell)
     }
 }

@@ -71,7 +71,7 @@ mod settings;
 pub use record::PowerPicReport;
 pub use settings::{AirForm, PowerPicSettings};
 
-use super::cost::{Footprint, StepCost};
+use super::cost::{Footprint, StepCost, Unit};
 use super::options::{Flag, FlagValue};
 use super::seam::{
     FluidMethod, MethodInfo, MethodSummary, MethodType, SettingContext, SettingError,
@@ -128,8 +128,9 @@ impl MethodType for Powerpic {
     }
 
     fn step_cost(_settings: &PowerPicSettings, dim: usize) -> StepCost {
-        // ns per particle held and per cell, [2D, 3D], fitted to the default matrix's whole
-        // runs (2026-11-26, `2271d263a7`, docs/results/report.csv; docs/cluster.md).
-        StepCost::of(dim, [(1096.0, 871.0), (3311.0, 2188.0)])
+        // ns per unit and per cell, [2D, 3D], fitted by tools/cost-fit.py to the whole runs of
+        // the default and paper matrices (2026-11-29, 480cee2, docs/results/report.csv and
+        // docs/results-paper/report.csv; docs/cluster.md).
+        StepCost::of(dim, [(1496.0, 99.0), (3146.0, 325.0)]).per_driven(Unit::Particle)
     }
 }
