@@ -277,8 +277,8 @@ fn the_cost_model_is_within_2x_of_the_default_matrix_as_measured() {
 
 /// The same for the jobs of the paper's matrix that have run (docs/results-paper/report.csv,
 /// whole runs at the paper's sizes), each within the bound its method's fit meets, rounded up
-/// to a tenth (2026-11-29, 480cee2): issues 73 and 76 ask 1.5x, which the measurements of that
-/// sitting do not allow (docs/cluster.md, "The cost model", says why).
+/// to a tenth (2026-11-29, 480cee2, every job run alone): issues 73 and 76 ask 1.5x, which
+/// ccp's and Power PIC's 2D jobs do not meet (docs/cluster.md, "The cost model", says why).
 #[test]
 fn the_cost_model_is_within_bounds_of_the_paper_matrix_as_measured() {
     let ratios = cost_ratios(
@@ -288,10 +288,10 @@ fn the_cost_model_is_within_bounds_of_the_paper_matrix_as_measured() {
     assert!(ratios.len() >= 40, "{} jobs measured", ratios.len());
     within(&ratios, |method| match method {
         "flip" => 1.3,
-        "ccp" => 2.3,
-        "idp" => 1.75,
-        "nbflip" => 1.5,
-        _ => 3.0,
+        "ccp" => 1.7,
+        "idp" => 1.4,
+        "nbflip" => 1.3,
+        _ => 1.8,
     });
 }
 

@@ -122,6 +122,6 @@ impl MethodType for Ccp {
         // ns per unit and per cell, [2D, 3D], fitted by tools/cost-fit.py to the whole runs of
         // the default and paper matrices (2026-11-29, 480cee2, docs/results/report.csv and
         // docs/results-paper/report.csv; docs/cluster.md).
-        StepCost::of(dim, [(3358.0, 0.0), (1211.0, 555.0)]).per_driven(Unit::LiquidCell)
+        StepCost::of(dim, [(2519.0, 0.0), (1561.0, 715.0)]).per_driven(Unit::LiquidCell)
     }
 }

@@ -42,7 +42,7 @@ impl MethodType for Flip {
         // ns per unit and per cell, [2D, 3D], fitted by tools/cost-fit.py to the whole runs of
         // the default and paper matrices (2026-11-29, 480cee2, docs/results/report.csv and
         // docs/results-paper/report.csv; docs/cluster.md).
-        StepCost::of(dim, [(209.0, 0.0), (136.0, 24.0)])
+        StepCost::of(dim, [(209.0, 0.0), (96.0, 51.0)])
     }
 }
 

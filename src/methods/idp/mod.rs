@@ -107,6 +107,6 @@ impl MethodType for Idp {
         // ns per unit and per cell, [2D, 3D], fitted by tools/cost-fit.py to the whole runs of
         // the default and paper matrices (2026-11-29, 480cee2, docs/results/report.csv and
         // docs/results-paper/report.csv; docs/cluster.md).
-        StepCost::of(dim, [(514.0, 0.0), (241.0, 54.0)])
+        StepCost::of(dim, [(413.0, 0.0), (241.0, 54.0)])
     }
 }

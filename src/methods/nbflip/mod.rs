@@ -107,6 +107,6 @@ impl MethodType for Nbflip {
         // ns per unit and per cell, [2D, 3D], fitted by tools/cost-fit.py to the whole runs of
         // the default and paper matrices (2026-11-29, 480cee2, docs/results/report.csv and
         // docs/results-paper/report.csv; docs/cluster.md).
-        StepCost::of(dim, [(818.0, 32.0), (816.0, 149.0)]).per_driven(Unit::LiquidCell)
+        StepCost::of(dim, [(714.0, 35.0), (495.0, 178.0)]).per_driven(Unit::LiquidCell)
     }
 }

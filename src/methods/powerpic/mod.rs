@@ -131,6 +131,6 @@ impl MethodType for Powerpic {
         // ns per unit and per cell, [2D, 3D], fitted by tools/cost-fit.py to the whole runs of
         // the default and paper matrices (2026-11-29, 480cee2, docs/results/report.csv and
         // docs/results-paper/report.csv; docs/cluster.md).
-        StepCost::of(dim, [(1496.0, 99.0), (3146.0, 325.0)]).per_driven(Unit::Particle)
+        StepCost::of(dim, [(706.0, 260.0), (746.0, 1700.0)]).per_driven(Unit::Particle)
     }
 }
