@@ -87,7 +87,7 @@
 //! for singular (closed) systems, and CG stays valid.
 
 use crate::grid::active::{dilate, line_spans, par_runs};
-use crate::solvers::pcg::{Precondition, StencilMatrix};
+use crate::solvers::pcg::{self, PcgSettings, PcgStats, Preconditioned, StencilMatrix};
 use crate::solvers::NONE;
 use crate::PAR_GRAIN;
 use rayon::prelude::*;
@@ -462,6 +462,14 @@ impl<const D: usize> Operator<D> {
             r[i as usize] = b[i as usize];
         }
     }
+
+    /// `out = A x` ([`pcg::apply_dot`]: returns `x . out`).
+    fn apply_dot(&self, x: &[f64], out: &mut [f64]) -> f64 {
+        pcg::apply_dot(x, out, |i| {
+            let diag = self.scale * self.stencil[i].count as f64;
+            diag * x[i] - self.coupling(i, x, 0)
+        })
+    }
 }
 
 /// A coarse cell's class from two of its children's (or of two groups of them): Dirichlet if
@@ -711,6 +719,8 @@ struct Level<const D: usize> {
     /// something extra; where none does, restriction is the plain full-weighting sum (empty on
     /// the coarsest level; a fresh zeroed array, touched only around the loose rows).
     loose: Vec<bool>,
+    /// The level's solution and right-hand side in the V-cycle; empty on the finest level,
+    /// which works on CG's vectors ([`v_cycle`]).
     x: Vec<f64>,
     b: Vec<f64>,
     r: Vec<f64>,
@@ -722,15 +732,16 @@ struct Level<const D: usize> {
 }
 
 impl<const D: usize> Level<D> {
-    fn new(op: Operator<D>) -> Self {
-        let n = op.len();
+    /// The level of `op`, with its own `x` and `b` unless it is the `finest`.
+    fn new(op: Operator<D>, finest: bool) -> Self {
+        let (n, own) = (op.len(), if finest { 0 } else { op.len() });
         Level {
             op,
             movable: vec![],
             to_parent: vec![],
             loose: vec![],
-            x: vec![0.0; n],
-            b: vec![0.0; n],
+            x: vec![0.0; own],
+            b: vec![0.0; own],
             r: vec![0.0; n],
             dense: vec![],
         }
@@ -793,18 +804,18 @@ impl<const D: usize> Level<D> {
 
     /// Pre-smoothing from `x = 0`: `SWEEPS` times red then black, the first sweep
     /// [`Operator::half_sweep`]'s `fresh` one (so `x` need not be cleared first).
-    fn pre_smooth(&mut self) {
+    fn pre_smooth(&self, b: &[f64], x: &mut [f64]) {
         for sweep in 0..SWEEPS {
-            self.op.half_sweep(true, sweep == 0, &self.b, &mut self.x);
-            self.op.half_sweep(false, sweep == 0, &self.b, &mut self.x);
+            self.op.half_sweep(true, sweep == 0, b, x);
+            self.op.half_sweep(false, sweep == 0, b, x);
         }
     }
 
     /// Post-smoothing, the transpose of [`Level::pre_smooth`]: black then red.
-    fn post_smooth(&mut self) {
+    fn post_smooth(&self, b: &[f64], x: &mut [f64]) {
         for _ in 0..SWEEPS {
-            self.op.half_sweep(false, false, &self.b, &mut self.x);
-            self.op.half_sweep(true, false, &self.b, &mut self.x);
+            self.op.half_sweep(false, false, b, x);
+            self.op.half_sweep(true, false, b, x);
         }
     }
 
@@ -854,7 +865,7 @@ impl<const D: usize> Level<D> {
     /// values from the coarse level's [`Level::dense`] (zero at Dirichlet and Neumann cells).
     /// Only on the red rows and [`Operator::lonely`]: post-smoothing starts with the black
     /// rows, and overwrites every other black row's `x` without reading it.
-    fn prolong_add(&mut self, coarse: &mut Level<D>) {
+    fn prolong_add(&self, coarse: &mut Level<D>, x: &mut [f64]) {
         coarse.spread(false);
         let (cop, xc) = (&coarse.op, &coarse.dense);
         let (op, to_parent, movable) = (&self.op, &self.to_parent, &self.movable);
@@ -875,11 +886,11 @@ impl<const D: usize> Level<D> {
             }
             sum
         };
-        (self.x[..op.red].par_iter_mut().with_min_len(ROW_GRAIN))
+        (x[..op.red].par_iter_mut().with_min_len(ROW_GRAIN))
             .enumerate()
             .for_each(|(i, x)| *x += correction(i));
         for &i in &op.lonely {
-            self.x[i as usize] += correction(i as usize);
+            x[i as usize] += correction(i as usize);
         }
     }
 }
@@ -971,29 +982,32 @@ fn closed_parts<const D: usize>(op: &Operator<D>) -> Vec<Vec<usize>> {
     parts
 }
 
-/// The V-cycle of `levels[0]` on its `b`, into its `x`.
-fn v_cycle<const D: usize>(levels: &mut [Level<D>], coarsest: &Dense) {
+/// The V-cycle of `levels[0]` on `b`, into `x` (each coarser level on its own vectors).
+fn v_cycle<const D: usize>(levels: &mut [Level<D>], coarsest: &Dense, b: &[f64], x: &mut [f64]) {
     let (fine, rest) = levels.split_first_mut().expect("at least one level");
     let Some(coarse) = rest.first_mut() else {
-        coarsest.solve(&fine.b, &mut fine.x);
+        coarsest.solve(b, x);
         return;
     };
-    fine.pre_smooth();
-    fine.op.residual_after_black(&fine.b, &fine.x, &mut fine.r);
+    fine.pre_smooth(b, x);
+    fine.op.residual_after_black(b, x, &mut fine.r);
     fine.restrict(coarse);
-    v_cycle(rest, coarsest);
-    fine.prolong_add(&mut rest[0]);
-    fine.post_smooth();
+    let (coarse_b, mut coarse_x) = (std::mem::take(&mut coarse.b), std::mem::take(&mut coarse.x));
+    v_cycle(rest, coarsest, &coarse_b, &mut coarse_x);
+    let coarse = &mut rest[0];
+    (coarse.b, coarse.x) = (coarse_b, coarse_x);
+    fine.prolong_add(coarse, x);
+    fine.post_smooth(b, x);
 }
 
 /// The multigrid preconditioner of one system: the level hierarchy, built once per solve.
+/// CG runs in the finest level's row order, with its operator as the matrix
+/// ([`Preconditioned`]), so that a V-cycle reads CG's residual and writes its `z` in place.
 pub struct Multigrid<const D: usize> {
     levels: Vec<Level<D>>,
     coarsest: Dense,
     /// The finest level's row of each system row (unknown cells in ascending order).
     level_row: Vec<u32>,
-    /// The system row of each finest-level row.
-    system_row: Vec<u32>,
 }
 
 impl<const D: usize> Multigrid<D> {
@@ -1005,7 +1019,7 @@ impl<const D: usize> Multigrid<D> {
         );
         let mut cells = Cells::finest(finest);
         let (op, level_row) = Operator::finest(finest);
-        let mut levels = vec![Level::new(op)];
+        let mut levels = vec![Level::new(op, true)];
         let coarser = 2f64.powi(D as i32 - 2);
         loop {
             let fine = levels.last_mut().expect("the finest level");
@@ -1015,35 +1029,54 @@ impl<const D: usize> Multigrid<D> {
             cells = cells.coarsen(&fine.op.at);
             fine.link(&cells);
             let scale = fine.op.scale * coarser;
-            levels.push(Level::new(Operator::new(&cells, scale)));
+            levels.push(Level::new(Operator::new(&cells, scale), false));
         }
         let coarsest = Dense::new(&levels.last().expect("the coarsest level").op);
-        let mut system_row = vec![0; level_row.len()];
-        for (i, &r) in level_row.iter().enumerate() {
-            system_row[r as usize] = i as u32;
-        }
         Multigrid {
             levels,
             coarsest,
             level_row,
-            system_row,
         }
     }
 }
 
-impl<const D: usize> Precondition for Multigrid<D> {
+impl<const D: usize> Preconditioned for Multigrid<D> {
+    /// The finest level's operator: the system's matrix, in that level's row order.
+    fn apply_dot(&self, x: &[f64], out: &mut [f64]) -> f64 {
+        self.levels[0].op.apply_dot(x, out)
+    }
+
     /// `z = B r`, `B` one V-cycle from zero.
     fn precondition(&mut self, r: &[f64], z: &mut [f64]) {
-        let fine = &mut self.levels[0];
-        (fine.b.par_iter_mut().with_min_len(PAR_GRAIN))
-            .zip(&self.system_row)
-            .for_each(|(b, &i)| *b = r[i as usize]);
-        v_cycle(&mut self.levels, &self.coarsest);
-        let x = &self.levels[0].x;
-        (z.par_iter_mut().with_min_len(PAR_GRAIN))
-            .zip(&self.level_row)
-            .for_each(|(z, &j)| *z = x[j as usize]);
+        v_cycle(&mut self.levels, &self.coarsest, r, z);
     }
+}
+
+/// Solves the system of `finest` (`b` and `x` in its row order) by CG preconditioned with
+/// the V-cycle (MGPCG, McAdams sec. 3), from `x = 0`; the hierarchy is built only if CG has to
+/// iterate ([`pcg::settled`]). CG runs in the finest level's row order: `b` is taken into it
+/// and `x` out of it once per solve, not once per iteration.
+pub fn solve<const D: usize>(
+    finest: &Finest<D>,
+    b: &[f64],
+    x: &mut [f64],
+    settings: &PcgSettings,
+) -> PcgStats {
+    if let Some(stats) = pcg::settled(b, settings) {
+        x.fill(0.0);
+        return stats;
+    }
+    let mut mg = Multigrid::new(finest);
+    let mut level_b = vec![0.0; b.len()];
+    for (&j, &v) in mg.level_row.iter().zip(b) {
+        level_b[j as usize] = v;
+    }
+    let mut level_x = vec![0.0; b.len()];
+    let stats = pcg::solve_with(&mut mg, &level_b, &mut level_x, settings);
+    (x.par_iter_mut().with_min_len(PAR_GRAIN))
+        .zip(&mg.level_row)
+        .for_each(|(x, &j)| *x = level_x[j as usize]);
+    stats
 }
 
 #[cfg(test)]
@@ -1136,7 +1169,16 @@ mod tests {
             tolerance,
             ..Default::default()
         };
-        let stats = pcg::solve_with(&a, b, &mut x, &settings, || multigrid(dims, class));
+        let unknowns: Vec<usize> = (0..class.len())
+            .filter(|&c| class[c] == CellClass::Unknown)
+            .collect();
+        let finest = Finest {
+            dims,
+            class: &|c| class[c],
+            unknowns: &unknowns,
+            matrix: &a,
+        };
+        let stats = super::solve(&finest, b, &mut x, &settings);
         assert!(stats.converged, "{stats:?}");
         let mut ax = vec![0.0; a.len()];
         a.apply(&x, &mut ax);
@@ -1159,13 +1201,20 @@ mod tests {
             let x = random_vector(a.len(), &mut rng);
             let mut ax = vec![0.0; a.len()];
             a.apply(&x, &mut ax);
-            // The level's residual of b = 0 is -A x, in the level's row order.
-            let xl: Vec<f64> = mg.system_row.iter().map(|&i| x[i as usize]).collect();
-            let mut r = vec![0.0; a.len()];
+            // CG's matrix is A, and the level's residual of b = 0 is -A x, in the level's
+            // row order.
+            let mut xl = vec![0.0; a.len()];
+            for (i, &j) in mg.level_row.iter().enumerate() {
+                xl[j as usize] = x[i];
+            }
+            let (mut r, mut out) = (vec![0.0; a.len()], vec![0.0; a.len()]);
             fine.residual(&vec![0.0; a.len()], &xl, &mut r, 0..a.len());
+            let x_ax = mg.apply_dot(&xl, &mut out);
             for (i, &j) in mg.level_row.iter().enumerate() {
                 assert!((r[j as usize] + ax[i]).abs() <= 1e-12, "row {i}");
+                assert!((out[j as usize] - ax[i]).abs() <= 1e-12, "row {i}");
             }
+            assert!((x_ax - dot(&x, &ax)).abs() <= 1e-9 * x_ax.abs(), "{x_ax}");
         }
         check([23, 17], 1);
         check([9, 8, 7], 2);
@@ -1294,9 +1343,9 @@ mod tests {
                 }
                 coarse.x = random_vector(coarse.x.len(), &mut rng);
                 fine.restrict(coarse);
-                fine.x.fill(0.0);
-                fine.prolong_add(coarse);
-                let (rt, pt) = (dot(&coarse.x, &coarse.b), dot(&fine.x, &fine.r));
+                let mut fine_x = vec![0.0; fine.op.len()];
+                fine.prolong_add(coarse, &mut fine_x);
+                let (rt, pt) = (dot(&coarse.x, &coarse.b), dot(&fine_x, &fine.r));
                 assert!((rt - pt).abs() <= 1e-12 * rt.abs().max(1.0), "{rt} {pt}");
             }
             // Both ways of restricting are taken.
@@ -1322,15 +1371,12 @@ mod tests {
             assert!(!mg.levels[0].op.lonely.is_empty(), "no lonely black row");
             for level in &mut mg.levels {
                 let n = level.op.len();
-                level.b = random_vector(n, &mut rng);
-                level.x = random_vector(n, &mut rng);
-                level.pre_smooth();
+                let (b, mut x) = (random_vector(n, &mut rng), random_vector(n, &mut rng));
+                level.pre_smooth(&b, &mut x);
                 let mut full = vec![0.0; n];
-                level.op.residual(&level.b, &level.x, &mut full, 0..n);
-                level
-                    .op
-                    .residual_after_black(&level.b, &level.x, &mut level.r);
-                let size = max_abs(&level.b);
+                level.op.residual(&b, &x, &mut full, 0..n);
+                level.op.residual_after_black(&b, &x, &mut level.r);
+                let size = max_abs(&b);
                 for i in 0..n {
                     assert!((full[i] - level.r[i]).abs() <= 1e-12 * size, "row {i}");
                 }

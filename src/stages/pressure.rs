@@ -8,7 +8,7 @@
 
 use crate::grid::active::{par_runs, Active};
 use crate::grid::{Grid, MacField, Vector};
-use crate::solvers::multigrid::{CellClass, Finest, Multigrid};
+use crate::solvers::multigrid::{self, CellClass, Finest};
 use crate::solvers::pcg::{self, PcgSettings, PcgStats, Preconditioner, StencilMatrix};
 use crate::solvers::NONE;
 use crate::stages::markings::CellKind;
@@ -254,14 +254,15 @@ impl<'a, const D: usize> Poisson<'a, D> {
             Preconditioner::Auto | Preconditioner::Mic0 => {
                 pcg::solve(&self.a, &rhs, &mut x, settings)
             }
-            Preconditioner::Multigrid => pcg::solve_with(&self.a, &rhs, &mut x, settings, || {
-                Multigrid::new(&Finest {
+            Preconditioner::Multigrid => {
+                let finest = Finest {
                     dims: self.dims,
                     class: &|c| self.class(c),
                     unknowns: &self.cells,
                     matrix: &self.a,
-                })
-            }),
+                };
+                multigrid::solve(&finest, &rhs, &mut x, settings)
+            }
         };
         let mut per_cell = vec![0.0; self.row.len()];
         for (&c, x) in self.cells.iter().zip(x) {
