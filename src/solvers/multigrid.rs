@@ -64,6 +64,21 @@
 //! drop the coarse correction there on the way up but not on the way down, and break the
 //! symmetry.
 //!
+//! **Work skipped** (exact in exact arithmetic, so the operator and the argument below are
+//! unchanged): after pre-smoothing ends with a black half-sweep, each coupled black row's
+//! residual is zero, so the residual is computed on the red rows only; post-smoothing begins
+//! by overwriting each coupled black row's `x` without reading it, so prolongation adds the
+//! coarse correction on the red rows only; and the first red half-sweep from `x = 0` reads
+//! no neighbour. Tried and not kept (2026-11-29, docs/benchmarks/pressure.md): McAdams'
+//! boundary smoothing (extra sweeps on the rows within two steps of a Dirichlet or Neumann
+//! neighbour) and one sweep each way instead of two, alone or with that band: none moved
+//! fewer bytes per solve by more than a few percent.
+//!
+//! **CG in the finest level's order**: [`solve`] takes the right-hand side into the finest
+//! level's row order once per solve and runs CG there, with that level's operator (the
+//! system's matrix) as CG's matrix ([`Preconditioned`]), so that a V-cycle reads CG's residual
+//! and writes its `z` in place: no permutation per iteration.
+//!
 //! **Coarsest level**: an exact solve by a dense Cholesky factor. A connected part of it
 //! with no Dirichlet neighbour (a closed region: its block is singular, with the constants
 //! as null space) gets `(s / |K|) 1_K 1_K^T` added, `s` the level's scale: the factor then

@@ -150,8 +150,8 @@ impl Default for PcgSettings {
 /// A system as CG sees it, in one row order: its symmetric matrix `A` and a symmetric
 /// positive definite preconditioner `M^-1`.
 pub trait Preconditioned {
-    /// `out = A x`; returns `x . out`, summed as [`dot`] sums (CG's `s . A s`, in the same
-    /// pass).
+    /// `out = A x`; returns `x . out` (CG's `s . A s`, in the same pass), summed in the
+    /// fixed blocks of CG's other dot products ([`apply_dot`]).
     fn apply_dot(&self, x: &[f64], out: &mut [f64]) -> f64;
 
     /// `z = M^-1 r`.
@@ -258,8 +258,8 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
     partial.iter().sum()
 }
 
-/// `out[i] = row(i)` for every row, returning `x . out` summed as [`dot`] sums it: one pass
-/// for a matrix product and CG's dot product with it.
+/// `out[i] = row(i)` for every row, returning `x . out` summed in the same fixed blocks as
+/// `dot`: one pass for a matrix product and CG's dot product with it.
 pub fn apply_dot(x: &[f64], out: &mut [f64], row: impl Fn(usize) -> f64 + Sync) -> f64 {
     let partial: Vec<f64> = (out.par_chunks_mut(BLOCK).enumerate())
         .with_min_len(PAR_GRAIN / BLOCK)
