@@ -64,6 +64,21 @@
 //! drop the coarse correction there on the way up but not on the way down, and break the
 //! symmetry.
 //!
+//! **Work skipped** (exact in exact arithmetic, so the operator and the argument below are
+//! unchanged): after pre-smoothing ends with a black half-sweep, each coupled black row's
+//! residual is zero, so the residual is computed on the red rows only; post-smoothing begins
+//! by overwriting each coupled black row's `x` without reading it, so prolongation adds the
+//! coarse correction on the red rows only; and the first red half-sweep from `x = 0` reads
+//! no neighbour. Tried and not kept (2026-11-29, docs/benchmarks/pressure.md): McAdams'
+//! boundary smoothing (extra sweeps on the rows within two steps of a Dirichlet or Neumann
+//! neighbour) and one sweep each way instead of two, alone or with that band: none moved
+//! fewer bytes per solve by more than a few percent.
+//!
+//! **CG in the finest level's order**: [`solve`] takes the right-hand side into the finest
+//! level's row order once per solve and runs CG there, with that level's operator (the
+//! system's matrix) as CG's matrix ([`Preconditioned`]), so that a V-cycle reads CG's residual
+//! and writes its `z` in place: no permutation per iteration.
+//!
 //! **Coarsest level**: an exact solve by a dense Cholesky factor. A connected part of it
 //! with no Dirichlet neighbour (a closed region: its block is singular, with the constants
 //! as null space) gets `(s / |K|) 1_K 1_K^T` added, `s` the level's scale: the factor then
@@ -87,7 +102,7 @@
 //! for singular (closed) systems, and CG stays valid.
 
 use crate::grid::active::{dilate, line_spans, par_runs};
-use crate::solvers::pcg::{Precondition, StencilMatrix};
+use crate::solvers::pcg::{self, PcgSettings, PcgStats, Preconditioned, StencilMatrix};
 use crate::solvers::NONE;
 use crate::PAR_GRAIN;
 use rayon::prelude::*;
@@ -262,6 +277,9 @@ struct Operator<const D: usize> {
     /// How many rows are red.
     red: usize,
     stencil: Vec<Stencil<D>>,
+    /// The black rows with no coupling at all (zero diagonal), ascending: rare, and the only
+    /// black rows whose `x` a half-sweep adds to rather than overwrites.
+    lonely: Vec<u32>,
     scale: f64,
     /// `1 / D'` by neighbour count: `1 / (scale * count)`, and `1 / scale` for none.
     inverse: [f64; 7],
@@ -340,8 +358,12 @@ impl<const D: usize> Operator<D> {
         for (r, &c) in at.iter().enumerate() {
             row[shape.index(widen(c))] = r as u32 + 1;
         }
-        let stencil = (order.par_iter().with_min_len(ROW_GRAIN))
+        let stencil: Vec<Stencil<D>> = (order.par_iter().with_min_len(ROW_GRAIN))
             .map(|&k| stencil(k as usize, &row, &level_row))
+            .collect();
+        let lonely = (red..stencil.len())
+            .filter(|&i| stencil[i].count == 0)
+            .map(|i| i as u32)
             .collect();
         let op = Operator {
             shape,
@@ -349,6 +371,7 @@ impl<const D: usize> Operator<D> {
             at,
             red,
             stencil,
+            lonely,
             scale,
             inverse: std::array::from_fn(|n| 1.0 / (scale * n.max(1) as f64)),
         };
@@ -406,8 +429,11 @@ impl<const D: usize> Operator<D> {
 
     /// Gauss-Seidel on the rows of one colour, all at once (they read only the other
     /// colour): `x_i += (b - A x)_i / D'_i`, which is `x_i = (b_i + coupling) / diagonal` on
-    /// a coupled row; on a row with a zero diagonal `D'_i` is the level's scale.
-    fn half_sweep(&self, red: bool, b: &[f64], x: &mut [f64]) {
+    /// a coupled row; on a row with a zero diagonal `D'_i` is the level's scale. With `fresh`,
+    /// the colour's `x` is taken as zero, whatever it holds (the first sweep from `x = 0`,
+    /// which need not clear it), and so is the black one's for the red rows: they are
+    /// `b_i / D'_i`, with no neighbour read.
+    fn half_sweep(&self, red: bool, fresh: bool, b: &[f64], x: &mut [f64]) {
         let (xr, xb) = x.split_at_mut(self.red);
         let (mine, other, first, other_first) = match red {
             true => (xr, &*xb, 0, self.red),
@@ -418,7 +444,9 @@ impl<const D: usize> Operator<D> {
             .for_each(|(k, xi)| {
                 let i = first + k;
                 match self.stencil[i].count {
+                    0 if fresh => *xi = b[i] * self.inverse[0],
                     0 => *xi += b[i] * self.inverse[0],
+                    n if fresh && red => *xi = b[i] * self.inverse[n as usize],
                     n => {
                         let coupling = self.coupling(i, other, other_first);
                         *xi = (b[i] + coupling) * self.inverse[n as usize]
@@ -427,14 +455,35 @@ impl<const D: usize> Operator<D> {
             });
     }
 
-    /// `r = b - A x`.
-    fn residual(&self, b: &[f64], x: &[f64], r: &mut [f64]) {
-        (r.par_iter_mut().with_min_len(ROW_GRAIN))
+    /// `r = b - A x` on the rows `rows`.
+    fn residual(&self, b: &[f64], x: &[f64], r: &mut [f64], rows: Range<usize>) {
+        (r[rows.clone()].par_iter_mut().with_min_len(ROW_GRAIN))
             .enumerate()
-            .for_each(|(i, ri)| {
+            .for_each(|(k, ri)| {
+                let i = rows.start + k;
                 let diag = self.scale * self.stencil[i].count as f64;
                 *ri = b[i] - diag * x[i] + self.coupling(i, x, 0);
             });
+    }
+
+    /// `r = b - A x` right after a half-sweep of the black rows, which solved each coupled
+    /// black row exactly: computed on the red rows only; on the black ones it is zero, and
+    /// `b` on an uncoupled one ([`Operator::lonely`]: its diagonal and so its `A x` are zero).
+    /// In exact arithmetic this is the full residual; it saves half of its pass.
+    fn residual_after_black(&self, b: &[f64], x: &[f64], r: &mut [f64]) {
+        self.residual(b, x, r, 0..self.red);
+        (r[self.red..].par_iter_mut().with_min_len(PAR_GRAIN)).for_each(|ri| *ri = 0.0);
+        for &i in &self.lonely {
+            r[i as usize] = b[i as usize];
+        }
+    }
+
+    /// `out = A x` ([`pcg::apply_dot`]: returns `x . out`).
+    fn apply_dot(&self, x: &[f64], out: &mut [f64]) -> f64 {
+        pcg::apply_dot(x, out, |i| {
+            let diag = self.scale * self.stencil[i].count as f64;
+            diag * x[i] - self.coupling(i, x, 0)
+        })
     }
 }
 
@@ -685,6 +734,8 @@ struct Level<const D: usize> {
     /// something extra; where none does, restriction is the plain full-weighting sum (empty on
     /// the coarsest level; a fresh zeroed array, touched only around the loose rows).
     loose: Vec<bool>,
+    /// The level's solution and right-hand side in the V-cycle; empty on the finest level,
+    /// which works on CG's vectors ([`v_cycle`]).
     x: Vec<f64>,
     b: Vec<f64>,
     r: Vec<f64>,
@@ -696,15 +747,16 @@ struct Level<const D: usize> {
 }
 
 impl<const D: usize> Level<D> {
-    fn new(op: Operator<D>) -> Self {
-        let n = op.len();
+    /// The level of `op`, with its own `x` and `b` unless it is the `finest`.
+    fn new(op: Operator<D>, finest: bool) -> Self {
+        let (n, own) = (op.len(), if finest { 0 } else { op.len() });
         Level {
             op,
             movable: vec![],
             to_parent: vec![],
             loose: vec![],
-            x: vec![0.0; n],
-            b: vec![0.0; n],
+            x: vec![0.0; own],
+            b: vec![0.0; own],
             r: vec![0.0; n],
             dense: vec![],
         }
@@ -765,20 +817,20 @@ impl<const D: usize> Level<D> {
         }
     }
 
-    /// Pre-smoothing from `x = 0`: `SWEEPS` times red then black.
-    fn pre_smooth(&mut self) {
-        self.x.fill(0.0);
-        for _ in 0..SWEEPS {
-            self.op.half_sweep(true, &self.b, &mut self.x);
-            self.op.half_sweep(false, &self.b, &mut self.x);
+    /// Pre-smoothing from `x = 0`: `SWEEPS` times red then black, the first sweep
+    /// [`Operator::half_sweep`]'s `fresh` one (so `x` need not be cleared first).
+    fn pre_smooth(&self, b: &[f64], x: &mut [f64]) {
+        for sweep in 0..SWEEPS {
+            self.op.half_sweep(true, sweep == 0, b, x);
+            self.op.half_sweep(false, sweep == 0, b, x);
         }
     }
 
     /// Post-smoothing, the transpose of [`Level::pre_smooth`]: black then red.
-    fn post_smooth(&mut self) {
+    fn post_smooth(&self, b: &[f64], x: &mut [f64]) {
         for _ in 0..SWEEPS {
-            self.op.half_sweep(false, &self.b, &mut self.x);
-            self.op.half_sweep(true, &self.b, &mut self.x);
+            self.op.half_sweep(false, false, b, x);
+            self.op.half_sweep(true, false, b, x);
         }
     }
 
@@ -826,29 +878,35 @@ impl<const D: usize> Level<D> {
 
     /// `x += P coarse.x` (prolongation of the coarse correction), reading the corners'
     /// values from the coarse level's [`Level::dense`] (zero at Dirichlet and Neumann cells).
-    fn prolong_add(&mut self, coarse: &mut Level<D>) {
+    /// Only on the red rows and [`Operator::lonely`]: post-smoothing starts with the black
+    /// rows, and overwrites every other black row's `x` without reading it.
+    fn prolong_add(&self, coarse: &mut Level<D>, x: &mut [f64]) {
         coarse.spread(false);
         let (cop, xc) = (&coarse.op, &coarse.dense);
         let (op, to_parent, movable) = (&self.op, &self.to_parent, &self.movable);
         let weight: Vec<f64> = (0..1 << D).map(corner_weight::<D>).collect();
-        (self.x.par_iter_mut().with_min_len(ROW_GRAIN))
+        let correction = |i: usize| {
+            let (parent, step) = corners(widen(op.at[i]), &cop.shape);
+            let inside = movable[i] as usize;
+            let mut sum = to_parent[i] as f64 * xc[parent];
+            let mut cell = [parent; 8];
+            for m in 1usize..1 << D {
+                let low = m.trailing_zeros() as usize;
+                cell[m] = cell[m & (m - 1)].wrapping_add_signed(step[low]);
+            }
+            for m in 0..1 << D {
+                if m & !inside == 0 {
+                    sum += weight[m] * xc[cell[m]];
+                }
+            }
+            sum
+        };
+        (x[..op.red].par_iter_mut().with_min_len(ROW_GRAIN))
             .enumerate()
-            .for_each(|(i, x)| {
-                let (parent, step) = corners(widen(op.at[i]), &cop.shape);
-                let inside = movable[i] as usize;
-                let mut sum = to_parent[i] as f64 * xc[parent];
-                let mut cell = [parent; 8];
-                for m in 1usize..1 << D {
-                    let low = m.trailing_zeros() as usize;
-                    cell[m] = cell[m & (m - 1)].wrapping_add_signed(step[low]);
-                }
-                for m in 0..1 << D {
-                    if m & !inside == 0 {
-                        sum += weight[m] * xc[cell[m]];
-                    }
-                }
-                *x += sum;
-            });
+            .for_each(|(i, x)| *x += correction(i));
+        for &i in &op.lonely {
+            x[i as usize] += correction(i as usize);
+        }
     }
 }
 
@@ -939,29 +997,32 @@ fn closed_parts<const D: usize>(op: &Operator<D>) -> Vec<Vec<usize>> {
     parts
 }
 
-/// The V-cycle of `levels[0]` on its `b`, into its `x`.
-fn v_cycle<const D: usize>(levels: &mut [Level<D>], coarsest: &Dense) {
+/// The V-cycle of `levels[0]` on `b`, into `x` (each coarser level on its own vectors).
+fn v_cycle<const D: usize>(levels: &mut [Level<D>], coarsest: &Dense, b: &[f64], x: &mut [f64]) {
     let (fine, rest) = levels.split_first_mut().expect("at least one level");
     let Some(coarse) = rest.first_mut() else {
-        coarsest.solve(&fine.b, &mut fine.x);
+        coarsest.solve(b, x);
         return;
     };
-    fine.pre_smooth();
-    fine.op.residual(&fine.b, &fine.x, &mut fine.r);
+    fine.pre_smooth(b, x);
+    fine.op.residual_after_black(b, x, &mut fine.r);
     fine.restrict(coarse);
-    v_cycle(rest, coarsest);
-    fine.prolong_add(&mut rest[0]);
-    fine.post_smooth();
+    let (coarse_b, mut coarse_x) = (std::mem::take(&mut coarse.b), std::mem::take(&mut coarse.x));
+    v_cycle(rest, coarsest, &coarse_b, &mut coarse_x);
+    let coarse = &mut rest[0];
+    (coarse.b, coarse.x) = (coarse_b, coarse_x);
+    fine.prolong_add(coarse, x);
+    fine.post_smooth(b, x);
 }
 
 /// The multigrid preconditioner of one system: the level hierarchy, built once per solve.
+/// CG runs in the finest level's row order, with its operator as the matrix
+/// ([`Preconditioned`]), so that a V-cycle reads CG's residual and writes its `z` in place.
 pub struct Multigrid<const D: usize> {
     levels: Vec<Level<D>>,
     coarsest: Dense,
     /// The finest level's row of each system row (unknown cells in ascending order).
     level_row: Vec<u32>,
-    /// The system row of each finest-level row.
-    system_row: Vec<u32>,
 }
 
 impl<const D: usize> Multigrid<D> {
@@ -973,7 +1034,7 @@ impl<const D: usize> Multigrid<D> {
         );
         let mut cells = Cells::finest(finest);
         let (op, level_row) = Operator::finest(finest);
-        let mut levels = vec![Level::new(op)];
+        let mut levels = vec![Level::new(op, true)];
         let coarser = 2f64.powi(D as i32 - 2);
         loop {
             let fine = levels.last_mut().expect("the finest level");
@@ -983,35 +1044,54 @@ impl<const D: usize> Multigrid<D> {
             cells = cells.coarsen(&fine.op.at);
             fine.link(&cells);
             let scale = fine.op.scale * coarser;
-            levels.push(Level::new(Operator::new(&cells, scale)));
+            levels.push(Level::new(Operator::new(&cells, scale), false));
         }
         let coarsest = Dense::new(&levels.last().expect("the coarsest level").op);
-        let mut system_row = vec![0; level_row.len()];
-        for (i, &r) in level_row.iter().enumerate() {
-            system_row[r as usize] = i as u32;
-        }
         Multigrid {
             levels,
             coarsest,
             level_row,
-            system_row,
         }
     }
 }
 
-impl<const D: usize> Precondition for Multigrid<D> {
+impl<const D: usize> Preconditioned for Multigrid<D> {
+    /// The finest level's operator: the system's matrix, in that level's row order.
+    fn apply_dot(&self, x: &[f64], out: &mut [f64]) -> f64 {
+        self.levels[0].op.apply_dot(x, out)
+    }
+
     /// `z = B r`, `B` one V-cycle from zero.
     fn precondition(&mut self, r: &[f64], z: &mut [f64]) {
-        let fine = &mut self.levels[0];
-        (fine.b.par_iter_mut().with_min_len(PAR_GRAIN))
-            .zip(&self.system_row)
-            .for_each(|(b, &i)| *b = r[i as usize]);
-        v_cycle(&mut self.levels, &self.coarsest);
-        let x = &self.levels[0].x;
-        (z.par_iter_mut().with_min_len(PAR_GRAIN))
-            .zip(&self.level_row)
-            .for_each(|(z, &j)| *z = x[j as usize]);
+        v_cycle(&mut self.levels, &self.coarsest, r, z);
     }
+}
+
+/// Solves the system of `finest` (`b` and `x` in its row order) by CG preconditioned with
+/// the V-cycle (MGPCG, McAdams sec. 3), from `x = 0`; the hierarchy is built only if CG has to
+/// iterate ([`pcg::settled`]). CG runs in the finest level's row order: `b` is taken into it
+/// and `x` out of it once per solve, not once per iteration.
+pub fn solve<const D: usize>(
+    finest: &Finest<D>,
+    b: &[f64],
+    x: &mut [f64],
+    settings: &PcgSettings,
+) -> PcgStats {
+    if let Some(stats) = pcg::settled(b, settings) {
+        x.fill(0.0);
+        return stats;
+    }
+    let mut mg = Multigrid::new(finest);
+    let mut level_b = vec![0.0; b.len()];
+    for (&j, &v) in mg.level_row.iter().zip(b) {
+        level_b[j as usize] = v;
+    }
+    let mut level_x = vec![0.0; b.len()];
+    let stats = pcg::solve_with(&mut mg, &level_b, &mut level_x, settings);
+    (x.par_iter_mut().with_min_len(PAR_GRAIN))
+        .zip(&mg.level_row)
+        .for_each(|(x, &j)| *x = level_x[j as usize]);
+    stats
 }
 
 #[cfg(test)]
@@ -1104,7 +1184,16 @@ mod tests {
             tolerance,
             ..Default::default()
         };
-        let stats = pcg::solve_with(&a, b, &mut x, &settings, || multigrid(dims, class));
+        let unknowns: Vec<usize> = (0..class.len())
+            .filter(|&c| class[c] == CellClass::Unknown)
+            .collect();
+        let finest = Finest {
+            dims,
+            class: &|c| class[c],
+            unknowns: &unknowns,
+            matrix: &a,
+        };
+        let stats = super::solve(&finest, b, &mut x, &settings);
         assert!(stats.converged, "{stats:?}");
         let mut ax = vec![0.0; a.len()];
         a.apply(&x, &mut ax);
@@ -1127,13 +1216,20 @@ mod tests {
             let x = random_vector(a.len(), &mut rng);
             let mut ax = vec![0.0; a.len()];
             a.apply(&x, &mut ax);
-            // The level's residual of b = 0 is -A x, in the level's row order.
-            let xl: Vec<f64> = mg.system_row.iter().map(|&i| x[i as usize]).collect();
-            let mut r = vec![0.0; a.len()];
-            fine.residual(&vec![0.0; a.len()], &xl, &mut r);
+            // CG's matrix is A, and the level's residual of b = 0 is -A x, in the level's
+            // row order.
+            let mut xl = vec![0.0; a.len()];
+            for (i, &j) in mg.level_row.iter().enumerate() {
+                xl[j as usize] = x[i];
+            }
+            let (mut r, mut out) = (vec![0.0; a.len()], vec![0.0; a.len()]);
+            fine.residual(&vec![0.0; a.len()], &xl, &mut r, 0..a.len());
+            let x_ax = mg.apply_dot(&xl, &mut out);
             for (i, &j) in mg.level_row.iter().enumerate() {
                 assert!((r[j as usize] + ax[i]).abs() <= 1e-12, "row {i}");
+                assert!((out[j as usize] - ax[i]).abs() <= 1e-12, "row {i}");
             }
+            assert!((x_ax - dot(&x, &ax)).abs() <= 1e-9 * x_ax.abs(), "{x_ax}");
         }
         check([23, 17], 1);
         check([9, 8, 7], 2);
@@ -1252,12 +1348,19 @@ mod tests {
                     .filter(|&&k| fine.loose[cop.shape.index(widen(k))])
                     .count();
                 rows += cop.len();
+                // As the V-cycle's residuals: zero on the coupled black rows, where
+                // prolongation skips (`residual_after_black`, `prolong_add`).
                 fine.r = random_vector(fine.r.len(), &mut rng);
+                for i in fine.op.red..fine.r.len() {
+                    if fine.op.lonely.binary_search(&(i as u32)).is_err() {
+                        fine.r[i] = 0.0;
+                    }
+                }
                 coarse.x = random_vector(coarse.x.len(), &mut rng);
                 fine.restrict(coarse);
-                fine.x.fill(0.0);
-                fine.prolong_add(coarse);
-                let (rt, pt) = (dot(&coarse.x, &coarse.b), dot(&fine.x, &fine.r));
+                let mut fine_x = vec![0.0; fine.op.len()];
+                fine.prolong_add(coarse, &mut fine_x);
+                let (rt, pt) = (dot(&coarse.x, &coarse.b), dot(&fine_x, &fine.r));
                 assert!((rt - pt).abs() <= 1e-12 * rt.abs().max(1.0), "{rt} {pt}");
             }
             // Both ways of restricting are taken.
@@ -1268,6 +1371,34 @@ mod tests {
         }
         check([70, 61], 3);
         check([21, 18, 23], 4);
+    }
+
+    /// After pre-smoothing, the residual the V-cycle takes (`residual_after_black`) is the
+    /// full one to rounding, on every level, lonely rows included (solid cells sprinkled
+    /// densely enough to isolate some fluid cells).
+    #[test]
+    fn the_residual_after_pre_smoothing_is_the_full_one_2d_and_3d() {
+        fn check<const D: usize>(dims: [usize; D], seed: u64) {
+            let mut rng = StdRng::seed_from_u64(seed);
+            let class = random_classes(dims.iter().product(), 0.4, 0.1, &mut rng);
+            let mut mg = multigrid(dims, &class);
+            assert!(mg.levels.len() >= 2, "{} levels", mg.levels.len());
+            assert!(!mg.levels[0].op.lonely.is_empty(), "no lonely black row");
+            for level in &mut mg.levels {
+                let n = level.op.len();
+                let (b, mut x) = (random_vector(n, &mut rng), random_vector(n, &mut rng));
+                level.pre_smooth(&b, &mut x);
+                let mut full = vec![0.0; n];
+                level.op.residual(&b, &x, &mut full, 0..n);
+                level.op.residual_after_black(&b, &x, &mut level.r);
+                let size = max_abs(&b);
+                for i in 0..n {
+                    assert!((full[i] - level.r[i]).abs() <= 1e-12 * size, "row {i}");
+                }
+            }
+        }
+        check([60, 50], 21);
+        check([20, 18, 16], 22);
     }
 
     /// `x^T B y = y^T B x` to rounding and `x^T B x > 0` on random masks (with closed

@@ -7,7 +7,7 @@
 //! sec. 5.3, Fig. 5.7), written once for any dimension: the factor of row `r` needs only the
 //! rows that precede it along each axis.
 
-use crate::grid::max_abs;
+use crate::grid::{max_abs, nan_max};
 use crate::PAR_GRAIN;
 use rayon::prelude::*;
 
@@ -47,25 +47,29 @@ impl<const D: usize> StencilMatrix<D> {
         }
     }
 
+    /// `(A x)_r`.
+    #[inline]
+    fn row(&self, r: usize, x: &[f64]) -> f64 {
+        let mut s = self.diag[r] * x[r];
+        for a in 0..D {
+            let p = self.plus[r][a];
+            if p != NONE {
+                s += self.off_plus[r][a] * x[p as usize];
+            }
+            let m = self.minus[r][a];
+            if m != NONE {
+                s += self.off_minus(r, a) * x[m as usize];
+            }
+        }
+        s
+    }
+
     /// `out = A x`.
     pub fn apply(&self, x: &[f64], out: &mut [f64]) {
         out.par_iter_mut()
             .with_min_len(PAR_GRAIN)
             .enumerate()
-            .for_each(|(r, o)| {
-                let mut s = self.diag[r] * x[r];
-                for a in 0..D {
-                    let p = self.plus[r][a];
-                    if p != NONE {
-                        s += self.off_plus[r][a] * x[p as usize];
-                    }
-                    let m = self.minus[r][a];
-                    if m != NONE {
-                        s += self.off_minus(r, a) * x[m as usize];
-                    }
-                }
-                *o = s;
-            });
+            .for_each(|(r, o)| *o = self.row(r, x));
     }
 }
 
@@ -143,8 +147,14 @@ impl Default for PcgSettings {
     }
 }
 
-/// A symmetric positive definite preconditioner `M^-1` for CG: `z = M^-1 r`.
-pub trait Precondition {
+/// A system as CG sees it, in one row order: its symmetric matrix `A` and a symmetric
+/// positive definite preconditioner `M^-1`.
+pub trait Preconditioned {
+    /// `out = A x`; returns `x . out` (CG's `s . A s`, in the same pass), summed in the
+    /// fixed blocks of CG's other dot products ([`apply_dot`]).
+    fn apply_dot(&self, x: &[f64], out: &mut [f64]) -> f64;
+
+    /// `z = M^-1 r`.
     fn precondition(&mut self, r: &[f64], z: &mut [f64]);
 }
 
@@ -161,7 +171,11 @@ impl<'a, const D: usize> Mic0<'a, D> {
     }
 }
 
-impl<const D: usize> Precondition for Mic0<'_, D> {
+impl<const D: usize> Preconditioned for Mic0<'_, D> {
+    fn apply_dot(&self, x: &[f64], out: &mut [f64]) -> f64 {
+        apply_dot(x, out, |r| self.a.row(r, x))
+    }
+
     fn precondition(&mut self, r: &[f64], z: &mut [f64]) {
         mic0_apply(self.a, &self.factor, r, z);
     }
@@ -229,10 +243,12 @@ fn mic0_apply<const D: usize>(a: &StencilMatrix<D>, precon: &[f64], r: &[f64], z
     }
 }
 
+/// The block of [`dot`]'s fixed partial sums.
+const BLOCK: usize = 4096;
+
 /// Dot product summed in fixed blocks, so the result is bit-identical whatever the thread
 /// count or scheduling (determinism, DESIGN "Units and spaces").
 fn dot(a: &[f64], b: &[f64]) -> f64 {
-    const BLOCK: usize = 4096;
     let partial: Vec<f64> = a
         .par_chunks(BLOCK)
         .zip(b.par_chunks(BLOCK))
@@ -242,57 +258,96 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
     partial.iter().sum()
 }
 
-/// Solves `A x = b` by MIC(0)-PCG starting from `x = 0`; `x` receives the solution.
+/// `out[i] = row(i)` for every row, returning `x . out` summed in the same fixed blocks as
+/// `dot`: one pass for a matrix product and CG's dot product with it.
+pub fn apply_dot(x: &[f64], out: &mut [f64], row: impl Fn(usize) -> f64 + Sync) -> f64 {
+    let partial: Vec<f64> = (out.par_chunks_mut(BLOCK).enumerate())
+        .with_min_len(PAR_GRAIN / BLOCK)
+        .map(|(k, o)| {
+            let first = k * BLOCK;
+            let mut sum = 0.0;
+            for (j, o) in o.iter_mut().enumerate() {
+                *o = row(first + j);
+                sum += x[first + j] * *o;
+            }
+            sum
+        })
+        .collect();
+    partial.iter().sum()
+}
+
+/// `x += alpha s` and `r -= alpha a_s` in one pass; returns the new `max|r|` (NaN if any
+/// entry is).
+fn step(alpha: f64, s: &[f64], a_s: &[f64], x: &mut [f64], r: &mut [f64]) -> f64 {
+    (x.par_chunks_mut(BLOCK).zip(r.par_chunks_mut(BLOCK)))
+        .zip(s.par_chunks(BLOCK).zip(a_s.par_chunks(BLOCK)))
+        .with_min_len(PAR_GRAIN / BLOCK)
+        .map(|((x, r), (s, a_s))| {
+            let mut res = 0.0;
+            for j in 0..x.len() {
+                x[j] += alpha * s[j];
+                r[j] -= alpha * a_s[j];
+                res = nan_max(res, r[j].abs());
+            }
+            res
+        })
+        .reduce(|| 0.0, nan_max)
+}
+
+/// What a solve from `x = 0` reports when it needs no iteration: the right-hand side is
+/// within the tolerance already or empty (converged), or not finite (not converged, with the
+/// non-finite residual). `None` when CG has to iterate.
+pub fn settled(b: &[f64], settings: &PcgSettings) -> Option<PcgStats> {
+    let res = max_abs(b);
+    let converged = res <= settings.tolerance * res || b.is_empty();
+    (converged || !res.is_finite()).then_some(PcgStats {
+        iterations: 0,
+        residual: res,
+        converged: converged && res.is_finite(),
+    })
+}
+
+/// Solves `A x = b` by MIC(0)-PCG starting from `x = 0`; `x` receives the solution. The
+/// factor is built only if CG has to iterate ([`settled`]).
 pub fn solve<const D: usize>(
     a: &StencilMatrix<D>,
     b: &[f64],
     x: &mut [f64],
     settings: &PcgSettings,
 ) -> PcgStats {
-    solve_with(a, b, x, settings, || Mic0::new(a, settings))
+    assert_eq!(a.len(), b.len());
+    if let Some(stats) = settled(b, settings) {
+        x.fill(0.0);
+        return stats;
+    }
+    solve_with(&mut Mic0::new(a, settings), b, x, settings)
 }
 
-/// Solves `A x = b` by PCG starting from `x = 0` with the preconditioner `precondition`
-/// builds (only if the zero start does not already meet the tolerance); `x` receives the
-/// solution. CG needs `M^-1` symmetric positive definite.
-pub fn solve_with<const D: usize, P: Precondition>(
-    a: &StencilMatrix<D>,
+/// Solves `A x = b` by PCG on `system` starting from `x = 0`; `x` receives the solution.
+/// It stops when `max|b - A x| <= tolerance max|b|` (the recursively updated residual).
+/// CG needs `M^-1` symmetric positive definite.
+pub fn solve_with<P: Preconditioned>(
+    system: &mut P,
     b: &[f64],
     x: &mut [f64],
     settings: &PcgSettings,
-    precondition: impl FnOnce() -> P,
 ) -> PcgStats {
-    let n = a.len();
-    assert_eq!(b.len(), n);
+    let n = b.len();
     assert_eq!(x.len(), n);
     x.fill(0.0);
+    if let Some(stats) = settled(b, settings) {
+        return stats;
+    }
     let target = settings.tolerance * max_abs(b);
     let mut r = b.to_vec();
     let mut res = max_abs(&r);
-    if !res.is_finite() {
-        // Nothing to iterate on: report the non-finite residual, unconverged.
-        return PcgStats {
-            iterations: 0,
-            residual: res,
-            converged: false,
-        };
-    }
-    if res <= target || n == 0 {
-        return PcgStats {
-            iterations: 0,
-            residual: res,
-            converged: true,
-        };
-    }
-    let mut m = precondition();
     let mut z = vec![0.0; n];
-    m.precondition(&r, &mut z);
+    system.precondition(&r, &mut z);
     let mut s = z.clone();
     let mut sigma = dot(&z, &r);
     let mut az = vec![0.0; n];
     for it in 1..=settings.max_iterations {
-        a.apply(&s, &mut az);
-        let denom = dot(&s, &az);
+        let denom = system.apply_dot(&s, &mut az);
         // Not positive, or NaN: the system is not positive definite (or not finite).
         if denom <= 0.0 || denom.is_nan() {
             return PcgStats {
@@ -302,15 +357,7 @@ pub fn solve_with<const D: usize, P: Precondition>(
             };
         }
         let alpha = sigma / denom;
-        x.par_iter_mut()
-            .with_min_len(PAR_GRAIN)
-            .zip(&s)
-            .for_each(|(xi, si)| *xi += alpha * si);
-        r.par_iter_mut()
-            .with_min_len(PAR_GRAIN)
-            .zip(&az)
-            .for_each(|(ri, ai)| *ri -= alpha * ai);
-        res = max_abs(&r);
+        res = step(alpha, &s, &az, x, &mut r);
         if res <= target {
             return PcgStats {
                 iterations: it,
@@ -318,7 +365,7 @@ pub fn solve_with<const D: usize, P: Precondition>(
                 converged: true,
             };
         }
-        m.precondition(&r, &mut z);
+        system.precondition(&r, &mut z);
         let sigma_new = dot(&z, &r);
         let beta = sigma_new / sigma;
         sigma = sigma_new;
