@@ -425,19 +425,23 @@ fn the_paper_matrix_has_the_papers_scenes_at_the_papers_sizes() {
     );
 }
 
-/// A CSV line's fields, commas inside double quotes kept.
+/// A CSV line's fields, commas inside double quotes kept and a quoted field's quotes taken off
+/// (a scene label such as `dam-2d, 20 s` is written quoted).
 fn split_quoted(line: &str) -> Vec<&str> {
+    fn field(f: &str) -> &str {
+        (f.strip_prefix('"').and_then(|f| f.strip_suffix('"'))).unwrap_or(f)
+    }
     let (mut out, mut start, mut quoted) = (vec![], 0, false);
     for (i, c) in line.char_indices() {
         match c {
             '"' => quoted = !quoted,
             ',' if !quoted => {
-                out.push(&line[start..i]);
+                out.push(field(&line[start..i]));
                 start = i + 1;
             }
             _ => {}
         }
     }
-    out.push(&line[start..]);
+    out.push(field(&line[start..]));
     out
 }
