@@ -138,7 +138,9 @@ impl Scene {
         let emitted = mu * emitted * cells as f64;
         let particles = mu * seeded.cells as f64 + emitted;
         let held = mu * seeded.held_cells as f64 + emitted;
-        let held_most = mu * seeded.held_cells.max(seeded.rest_cells) as f64 + emitted;
+        // What a band holds of the seeded liquid at the most (all of it without a band).
+        let band = mu * seeded.held_cells.max(seeded.rest_cells) as f64;
+        let held_most = band + emitted;
         let start_bytes = footprint.start_bytes(mu * seeded.cells as f64, cells as f64);
         let emitted_mean = emitted_mean(
             &config,
@@ -146,7 +148,6 @@ impl Scene {
             mu * cells as f64,
             self.duration_secs(),
         );
-        let band = mu * seeded.held_cells.max(seeded.rest_cells) as f64;
         // The band's share of the emitted liquid is its share of the seeded one (all of it
         // for a method without a band, or for a scene that seeds no liquid).
         let share = match seeded.cells {

@@ -338,9 +338,9 @@ pub fn solve_with<P: Preconditioned>(
     if let Some(stats) = settled(b, settings) {
         return stats;
     }
-    let target = settings.tolerance * max_abs(b);
+    let mut res = max_abs(b);
+    let target = settings.tolerance * res;
     let mut r = b.to_vec();
-    let mut res = max_abs(&r);
     let mut z = vec![0.0; n];
     system.precondition(&r, &mut z);
     let mut s = z.clone();

@@ -4,6 +4,8 @@
 //! bad input.
 
 use crate::common::{ok, scratch_dir};
+use cellflip::cmd::report::sweep::Job;
+use cellflip::cmd::report::RunSpec;
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::process::{Command, Output};
@@ -270,7 +272,7 @@ fn the_plan_lists_jobs_larger_than_this_machine_and_only_those_are_refused() {
 /// took in the committed results (docs/results/report.csv): within 2x either way.
 #[test]
 fn the_cost_model_is_within_2x_of_the_default_matrix_as_measured() {
-    let ratios = cost_ratios(&["report", "--budget", "90"], "docs/results/report.csv");
+    let ratios = cost_ratios(&["--budget", "90"], "docs/results/report.csv");
     assert_eq!(ratios.len(), 95);
     within(&ratios, |_| 2.0);
 }
@@ -281,10 +283,7 @@ fn the_cost_model_is_within_2x_of_the_default_matrix_as_measured() {
 /// ccp's and Power PIC's 2D jobs do not meet (docs/cluster.md, "The cost model", says why).
 #[test]
 fn the_cost_model_is_within_bounds_of_the_paper_matrix_as_measured() {
-    let ratios = cost_ratios(
-        &["report", "--matrix", "paper"],
-        "docs/results-paper/report.csv",
-    );
+    let ratios = cost_ratios(&["--matrix", "paper"], "docs/results-paper/report.csv");
     assert!(ratios.len() >= 40, "{} jobs measured", ratios.len());
     within(&ratios, |method| match method {
         "flip" => 1.3,
@@ -301,27 +300,25 @@ fn the_cost_model_is_within_bounds_of_the_paper_matrix_as_measured() {
 /// memory estimate's bound counts 6,800 particles and a fall through the whole tank 1,253 steps.
 #[test]
 fn the_plan_counts_the_particles_a_run_holds_on_average() {
+    let args = ["--scenes", "dam-2d", "--methods", "flip", "--res", "50"];
+    let (particles, steps) = with_plan(&args, |_, jobs| {
+        assert_eq!(jobs.len(), 1);
+        (jobs[0].particles, jobs[0].steps)
+    });
+    let near = |x: f64, measured: f64| (x / measured - 1.0).abs() < 0.1;
+    assert!(near(particles, 3469.0), "{particles}");
+    assert!(near(steps, 1150.0), "{steps}");
+}
+
+/// Calls `f` with the matrix of `cellflip report ARGS` and its plan's jobs (which borrow it).
+fn with_plan<T>(args: &[&str], f: impl FnOnce(&[RunSpec], Vec<Job<'_>>) -> T) -> T {
     use clap::Parser;
-    let args = [
-        "cellflip",
-        "report",
-        "--scenes",
-        "dam-2d",
-        "--methods",
-        "flip",
-        "--res",
-        "50",
-    ];
-    let cli = cellflip::cmd::cli::Cli::parse_from(args);
+    let cli = cellflip::cmd::cli::Cli::parse_from([&["cellflip", "report"][..], args].concat());
     let cellflip::cmd::cli::Command::Report(args) = cli.command else {
         unreachable!("a report command")
     };
     let specs = cellflip::cmd::report::matrix(&args).unwrap();
-    let jobs = cellflip::cmd::report::sweep::plan(&specs).unwrap();
-    assert_eq!(jobs.len(), 1);
-    let near = |x: f64, measured: f64| (x / measured - 1.0).abs() < 0.1;
-    assert!(near(jobs[0].particles, 3469.0), "{}", jobs[0].particles);
-    assert!(near(jobs[0].steps, 1150.0), "{}", jobs[0].steps);
+    f(&specs, cellflip::cmd::report::sweep::plan(&specs).unwrap())
 }
 
 /// Each job's estimated wall seconds over its measured ones, with its id and method, for the
@@ -334,26 +331,20 @@ fn cost_ratios(args: &[&str], csv: &str) -> Vec<(String, String, f64)> {
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();
     let col = |name: &str| header.iter().position(|c| *c == name).unwrap();
     let (per_s, scene, method) = (col("ms_per_sim_s"), col("scene"), col("method"));
-    use clap::Parser;
-    let cli = cellflip::cmd::cli::Cli::parse_from([&["cellflip"][..], args].concat());
-    let cellflip::cmd::cli::Command::Report(args) = cli.command else {
-        unreachable!("a report command")
-    };
-    let specs = cellflip::cmd::report::matrix(&args).unwrap();
-    let mut jobs = cellflip::cmd::report::sweep::plan(&specs)
-        .unwrap()
-        .into_iter();
     let rows: Vec<Vec<&str>> = lines.map(|l| split_quoted(l)).collect();
-    rows.iter()
-        .map(|row| {
-            let job = (jobs.by_ref())
-                .find(|j| j.spec.label == row[scene] && j.spec.method.name() == row[method])
-                .unwrap_or_else(|| panic!("{} {}: no such job left", row[scene], row[method]));
-            let measured = row[per_s].parse::<f64>().unwrap() / 1e3 * job.sim_secs;
-            let estimated = job.cpu_secs / cellflip::cmd::report::sweep::FITTED_THREADS;
-            (job.id, row[method].to_string(), estimated / measured)
-        })
-        .collect()
+    with_plan(args, |_, jobs| {
+        let mut jobs = jobs.into_iter();
+        rows.iter()
+            .map(|row| {
+                let job = (jobs.by_ref())
+                    .find(|j| j.spec.label == row[scene] && j.spec.method.name() == row[method])
+                    .unwrap_or_else(|| panic!("{} {}: no such job left", row[scene], row[method]));
+                let measured = row[per_s].parse::<f64>().unwrap() / 1e3 * job.sim_secs;
+                let estimated = job.cpu_secs / cellflip::cmd::report::sweep::FITTED_THREADS;
+                (job.id, row[method].to_string(), estimated / measured)
+            })
+            .collect()
+    })
 }
 
 /// Fails naming every job whose ratio is beyond its method's bound either way.
@@ -369,46 +360,42 @@ fn within(ratios: &[(String, String, f64)], bound: impl Fn(&str) -> f64) {
 /// methods each, and a plan that says what to ask a cluster for.
 #[test]
 fn the_paper_matrix_has_the_papers_scenes_at_the_papers_sizes() {
-    use clap::Parser;
-    let cli = cellflip::cmd::cli::Cli::parse_from(["cellflip", "report", "--matrix", "paper"]);
-    let cellflip::cmd::cli::Command::Report(args) = cli.command else {
-        unreachable!("a report command")
-    };
-    let specs = cellflip::cmd::report::matrix(&args).unwrap();
-    let jobs = cellflip::cmd::report::sweep::plan(&specs).unwrap();
-    let methods = cellflip::methods::MethodKind::ALL.len();
-    let mut scenes: Vec<(&str, usize)> = jobs.iter().map(|j| (&*j.spec.label, j.cells)).collect();
-    scenes.dedup();
-    let cells_2d = |n: usize| n * n;
-    assert_eq!(
-        scenes,
-        [
-            ("dam-2d", cells_2d(50)),
-            ("dam-1ppc-2d", cells_2d(100)),
-            ("drop-2d", cells_2d(50)),
-            ("compress-2d", cells_2d(50)),
-            ("spiral-2d", cells_2d(64)),
-            ("falling-obstacle-2d", cells_2d(50)),
-            ("falling-obstacle-zero-bc-2d", cells_2d(50)),
-            ("large-obstacle-2d", cells_2d(50)),
-            ("dam-3d", 100 * 100 * 100),
-            ("drop-3d", 300 * 300 * 300),
-            ("falling-obstacle-200x300x200", 200 * 300 * 200),
-            ("large-obstacle-3d", 50 * 75 * 50),
-        ]
-    );
-    assert_eq!(jobs.len(), scenes.len() * methods);
-    // Whole runs, and the particle count the paper gives for its largest falling obstacle.
-    assert!(specs
-        .iter()
-        .all(|s| s.duration.is_none() && s.budget.is_none()));
-    let flip = |label: &str| {
-        let j = jobs
+    with_plan(&["--matrix", "paper"], |specs, jobs| {
+        let methods = cellflip::methods::MethodKind::ALL.len();
+        let mut scenes: Vec<(&str, usize)> =
+            jobs.iter().map(|j| (&*j.spec.label, j.cells)).collect();
+        scenes.dedup();
+        let cells_2d = |n: usize| n * n;
+        assert_eq!(
+            scenes,
+            [
+                ("dam-2d", cells_2d(50)),
+                ("dam-1ppc-2d", cells_2d(100)),
+                ("drop-2d", cells_2d(50)),
+                ("compress-2d", cells_2d(50)),
+                ("spiral-2d", cells_2d(64)),
+                ("falling-obstacle-2d", cells_2d(50)),
+                ("falling-obstacle-zero-bc-2d", cells_2d(50)),
+                ("large-obstacle-2d", cells_2d(50)),
+                ("dam-3d", 100 * 100 * 100),
+                ("drop-3d", 300 * 300 * 300),
+                ("falling-obstacle-200x300x200", 200 * 300 * 200),
+                ("large-obstacle-3d", 50 * 75 * 50),
+            ]
+        );
+        assert_eq!(jobs.len(), scenes.len() * methods);
+        // Whole runs, and the particle count the paper gives for its largest falling obstacle.
+        assert!(specs
             .iter()
-            .find(|j| j.spec.label == label && j.spec.method.name() == "flip");
-        j.unwrap().particles
-    };
-    assert!((flip("falling-obstacle-200x300x200") / 46.7e6 - 1.0).abs() < 0.01);
+            .all(|s| s.duration.is_none() && s.budget.is_none()));
+        let flip = |label: &str| {
+            let j = jobs
+                .iter()
+                .find(|j| j.spec.label == label && j.spec.method.name() == "flip");
+            j.unwrap().particles
+        };
+        assert!((flip("falling-obstacle-200x300x200") / 46.7e6 - 1.0).abs() < 0.01);
+    });
     let plan = Command::new(env!("CARGO_BIN_EXE_cellflip"))
         .args(["report", "--matrix", "paper", "--plan"])
         .output()
