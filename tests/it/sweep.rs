@@ -357,7 +357,7 @@ fn within(ratios: &[(String, String, f64)], bound: impl Fn(&str) -> f64) {
 }
 
 /// The paper's matrix: every scene of sec. 8 at the size the paper names (docs/cluster.md), five
-/// methods each, and a plan that says what to ask a cluster for.
+/// methods each, ccp at half the two largest, and a plan that says what to ask a cluster for.
 #[test]
 fn the_paper_matrix_has_the_papers_scenes_at_the_papers_sizes() {
     with_plan(&["--matrix", "paper"], |specs, jobs| {
@@ -380,10 +380,18 @@ fn the_paper_matrix_has_the_papers_scenes_at_the_papers_sizes() {
                 ("dam-3d", 100 * 100 * 100),
                 ("drop-3d", 300 * 300 * 300),
                 ("falling-obstacle-200x300x200", 200 * 300 * 200),
+                ("drop-3d", 150 * 150 * 150),
+                ("falling-obstacle-200x300x200", 100 * 150 * 100),
                 ("large-obstacle-3d", 50 * 75 * 50),
             ]
         );
-        assert_eq!(jobs.len(), scenes.len() * methods);
+        // Every method at the paper's sizes; the half sizes with ccp alone (issue 76).
+        let half: Vec<&str> = (jobs.iter())
+            .filter(|j| j.cells == 150 * 150 * 150 || j.cells == 100 * 150 * 100)
+            .map(|j| j.spec.method.name())
+            .collect();
+        assert_eq!(half, ["ccp", "ccp"]);
+        assert_eq!(jobs.len(), (scenes.len() - 2) * methods + 2);
         // Whole runs, and the particle count the paper gives for its largest falling obstacle.
         assert!(specs
             .iter()
@@ -404,7 +412,7 @@ fn the_paper_matrix_has_the_papers_scenes_at_the_papers_sizes() {
     let said = String::from_utf8_lossy(&plan.stdout);
     let total = said
         .lines()
-        .find(|l| l.starts_with("# 60 jobs, about "))
+        .find(|l| l.starts_with("# 62 jobs, about "))
         .unwrap_or_default();
     assert!(
         total.contains("CPU-hours in all; the largest memory estimate"),

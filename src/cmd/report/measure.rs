@@ -31,6 +31,7 @@ pub const COLUMNS: &[(&str, &str)] = &[
     ("status", "ok, interrupted, failed: step N: why, or not run: why"),
     ("dim", "2 or 3"),
     ("particles", "particles held at the end"),
+    ("grid_cells", "cells of the grid, every axis's count multiplied"),
     ("steps", "steps run"),
     ("n_mean", "particles in the scene, a band method's imaginary ones included, mean over the steps (the paper's n)"),
     ("held_mean", "particles the method holds, mean over the steps (the paper's band, for a band method)"),
@@ -295,6 +296,7 @@ fn finish<const D: usize>(runner: &Runner<D>, g: &Gathered, lowest: f64, m: &mut
     };
     let steps = sum.steps.max(1) as f64;
     put("particles", s.particles.len() as f64);
+    put("grid_cells", s.grid.dims.iter().product::<usize>() as f64);
     put("steps", sum.steps as f64);
     put("n_mean", g.particles_all / steps);
     put("held_mean", g.particles_held / steps);

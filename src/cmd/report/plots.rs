@@ -32,6 +32,8 @@ pub struct Chart {
     pub y: String,
     /// The x values are `log10` of the quantity, labelled with the quantity itself.
     pub log_x: bool,
+    /// The same for the y values.
+    pub log_y: bool,
     pub series: Vec<Series>,
     /// Where the legend goes (away from the data).
     pub legend: SeriesLabelPosition,
@@ -49,6 +51,7 @@ pub fn all(dir: &Path, results: &[Measured], svg: bool) -> Result<Vec<String>> {
     charts.extend(pareto(results));
     charts.extend(volumes(results));
     charts.extend(martin_moyce(results)?);
+    charts.extend(time_per_step_3d(results));
     let mut names = vec![];
     for (stem, chart) in &charts {
         write(dir, stem, chart, svg)?;
@@ -132,7 +135,8 @@ fn plot_series<'a, DB: DrawingBackend + 'a>(
         .x_desc(&c.x)
         .y_desc(&c.y)
         .x_labels(8)
-        .x_label_formatter(&|x: &f64| label(if c.log_x { 10f64.powf(*x) } else { *x }))
+        .x_label_formatter(&|x: &f64| if c.log_x { log_label(*x) } else { label(*x) })
+        .y_label_formatter(&|y: &f64| if c.log_y { log_label(*y) } else { label(*y) })
         .light_line_style(RGBColor(238, 238, 238))
         .label_style(("sans-serif", 13))
         .draw()?;
@@ -177,6 +181,14 @@ fn label(x: f64) -> String {
     }
     let s = format!("{x:.3}");
     s.trim_end_matches('0').trim_end_matches('.').to_string()
+}
+
+/// A tick label on a log axis at `log10` value `x`: the quantity to two significant digits
+/// (ticks fall between powers of ten).
+fn log_label(x: f64) -> String {
+    let v = 10f64.powf(x);
+    let unit = 10f64.powf(x.floor() - 1.0);
+    label((v / unit).round() * unit)
 }
 
 /// The labels of the accuracy runs, in matrix order.
@@ -248,6 +260,7 @@ fn pareto(results: &[Measured]) -> Vec<(String, Chart)> {
                 x: "wall time per simulated second (ms, log)".into(),
                 y: what.into(),
                 log_x: true,
+                log_y: false,
                 series,
                 legend: SeriesLabelPosition::UpperRight,
             };
@@ -294,12 +307,50 @@ fn volumes(results: &[Measured]) -> Vec<(String, Chart)> {
                 x: "simulated time (s)".into(),
                 y: "V / V* (%)".into(),
                 log_x: false,
+                log_y: false,
                 series,
                 legend: SeriesLabelPosition::LowerLeft,
             };
             (format!("volume-{}", slug(&label)), chart)
         })
         .collect()
+}
+
+/// Every 3D run's time per step against its grid's cells, log-log, a marker per run and a
+/// colour per method: how a step's cost grows with the grid across the scenes and sizes run
+/// (the paper's tab. time at its sizes and at half of them, issue 76). None with fewer than
+/// two grid sizes.
+fn time_per_step_3d(results: &[Measured]) -> Option<(String, Chart)> {
+    let runs: Vec<&Measured> = (results.iter())
+        .filter(|m| m.ok() && m.dim == 3 && m.get("grid_cells") > 0.0)
+        .collect();
+    let mut sizes: Vec<u64> = runs.iter().map(|m| m.get("grid_cells") as u64).collect();
+    sizes.sort();
+    sizes.dedup();
+    if sizes.len() < 2 {
+        return None;
+    }
+    let series = (MethodKind::ALL.iter())
+        .map(|&k| Series {
+            name: k.name().to_string(),
+            color: color(k),
+            points: (runs.iter().filter(|m| m.spec.method == k))
+                .map(|m| (m.get("grid_cells").log10(), m.get("ms_per_step").log10()))
+                .collect(),
+            markers: true,
+        })
+        .filter(|s| !s.points.is_empty())
+        .collect();
+    let chart = Chart {
+        title: "3D: time per step against the grid's cells".into(),
+        x: "grid cells (log)".into(),
+        y: "wall time per step (ms, log)".into(),
+        log_x: true,
+        log_y: true,
+        series,
+        legend: SeriesLabelPosition::UpperLeft,
+    };
+    Some(("time-per-step-3d".into(), chart))
 }
 
 /// The surge front against Martin & Moyce (1952), per method at the middle resolution.
@@ -332,8 +383,24 @@ fn martin_moyce(results: &[Measured]) -> Result<Vec<(String, Chart)>> {
         x: "T = t sqrt(2g/a)".into(),
         y: "Z = front / a".into(),
         log_x: false,
+        log_y: false,
         series,
         legend: SeriesLabelPosition::UpperLeft,
     };
     Ok(vec![("martin-moyce-front".into(), chart)])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_log_axis_labels_its_ticks_with_two_significant_digits() {
+        let at = |v: f64| log_label(v.log10());
+        assert_eq!(at(63.0957), "63");
+        assert_eq!(at(39.8107), "40");
+        assert_eq!(at(6309.57), "6300");
+        assert_eq!(at(0.0398107), "0.04");
+        assert_eq!(at(1.0e7), "10000000");
+    }
 }
