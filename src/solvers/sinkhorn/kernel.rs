@@ -19,6 +19,15 @@
 //! per-axis squares, and the cells are visited in grid order: every row sum and every column
 //! sum is computed with the same operations in the same order as from a list of the row.
 //!
+//! **Factors in single precision (ours).** The factors are stored as `f32` and multiplied in
+//! `f64`: each is within `2^-24` of its value relative to it, so a `K_pj` within about
+//! `d 2^-24` (`2e-7` in 3D), far inside the marginal tolerance `delta = 0.1` the solve stops
+//! at; half the factors' bytes (a point's row 108 bytes lighter in 3D at the defaults), which
+//! the iterations stream and the step holds. The scalings, sums and the plan stay `f64`, and a
+//! row update still makes every row sum exactly its volume for the kernel as stored. Every
+//! factor a `K_pj` uses is at least `e^-KERNEL_CUTOFF` (`1e-12`), a normal `f32` (the box's
+//! corners outside the ball may round to zero or a subnormal; no `K_pj` reads them).
+//!
 //! **Slots.** The cells some point's ball reaches are the *slots*, numbered in grid order, so
 //! the free cells of a run have consecutive slots. To find them, the cells near the points
 //! ([`Active::around_spans`], the cubes of side `2 ceil(r / h) + 1` around their cells) are
@@ -55,9 +64,10 @@ pub(super) struct Kernel<const D: usize> {
     /// The points sorted by the cell holding them (stably), and each point's place there.
     order: Vec<u32>,
     rank: Vec<u32>,
-    /// The points' factors in sorted order: point `order[i]`'s factor along axis `k` at the
-    /// `a`-th cell of its box is `factor[(i D + k) side + a]`.
-    factor: Vec<f64>,
+    /// The points' factors in sorted order, in single precision (see the module doc): point
+    /// `order[i]`'s factor along axis `k` at the `a`-th cell of its box is
+    /// `factor[(i D + k) side + a]`.
+    factor: Vec<f32>,
     /// The points' runs in sorted order, [`ROW_GRAIN`] points to a piece.
     runs: Vec<Runs>,
     /// Each slot's cell, in grid order.
@@ -176,7 +186,7 @@ impl<const D: usize> Kernel<D> {
 
     /// The factors of the point at sorted place `i`.
     #[inline]
-    fn factors_at(&self, i: usize) -> &[f64] {
+    fn factors_at(&self, i: usize) -> &[f32] {
         &self.factor[i * D * self.side..(i + 1) * D * self.side]
     }
 
@@ -226,7 +236,7 @@ impl<const D: usize> Kernel<D> {
 
     /// The runs of the point at sorted place `i`, with its factors.
     #[inline]
-    fn runs_at(&self, i: usize) -> (&[Run], &[f64]) {
+    fn runs_at(&self, i: usize) -> (&[Run], &[f32]) {
         let r = &self.runs[i / ROW_GRAIN];
         let (a, b) = (r.first[i % ROW_GRAIN], r.first[i % ROW_GRAIN + 1]);
         (&r.run[a as usize..b as usize], self.factors_at(i))
@@ -235,10 +245,10 @@ impl<const D: usize> Kernel<D> {
     /// A run's `K_pj` but for the factor along axis 0: the product of the outer axes' factors,
     /// the last axis first.
     #[inline]
-    fn outer(&self, run: &Run, factor: &[f64]) -> f64 {
+    fn outer(&self, run: &Run, factor: &[f32]) -> f64 {
         let mut kernel = 1.0;
         for k in (1..D).rev() {
-            kernel *= factor[k * self.side + run.at[k - 1] as usize];
+            kernel *= factor[k * self.side + run.at[k - 1] as usize] as f64;
         }
         kernel
     }
@@ -250,8 +260,8 @@ impl<const D: usize> Kernel<D> {
         for run in runs {
             let kernel = self.outer(run, factor);
             let fx = &factor[run.start as usize..][..run.len as usize];
-            for (k, fx) in (run.slot as usize..).zip(fx) {
-                f(k, kernel * fx);
+            for (k, &fx) in (run.slot as usize..).zip(fx) {
+                f(k, kernel * fx as f64);
             }
         }
     }
@@ -270,8 +280,8 @@ impl<const D: usize> Kernel<D> {
             let kernel = self.outer(run, factor);
             let fx = &factor[run.start as usize..][..run.len as usize];
             let v = &v[run.slot as usize..][..run.len as usize];
-            for (fx, v) in fx.iter().zip(v) {
-                sum += kernel * fx * v;
+            for (&fx, v) in fx.iter().zip(v) {
+                sum += kernel * fx as f64 * v;
             }
         }
         sum
@@ -367,8 +377,8 @@ impl<const D: usize> Kernel<D> {
             let kernel = self.outer(run, factor);
             let fx = &factor[run.start as usize..][..run.len as usize];
             let at = run.slot as usize - c.window.start;
-            for (acc, fx) in acc[at..at + fx.len()].iter_mut().zip(fx) {
-                *acc += w * (kernel * fx);
+            for (acc, &fx) in acc[at..at + fx.len()].iter_mut().zip(fx) {
+                *acc += w * (kernel * fx as f64);
             }
         }
     }
@@ -431,30 +441,32 @@ impl<'a, const D: usize> Ball<'a, D> {
 
     /// Walks the balls of the sorted points `x`: writes each point's factors
     /// `e^(-(x_k - x_j,k)^2 / eps)` along each axis over its box into `factor` (`D` runs of
-    /// [`Self::side`] a point) and lists its runs into `r`, each line of its ball cut at its
-    /// blocked cells, a run's first cell named by its near number; marks the cells reached.
+    /// [`Self::side`] a point, rounded to single precision) and lists its runs into `r`, each
+    /// line of its ball cut at its blocked cells, a run's first cell named by its near number;
+    /// marks the cells reached. The ball test is on the squared distances in double precision.
     fn walk(
         &self,
         x: &[Vector<D>],
         epsilon: f64,
-        factor: &mut [f64],
+        factor: &mut [f32],
         r: &mut Runs,
         reached: &[AtomicBool],
     ) {
         r.first.clear();
         r.run.clear();
         r.first.push(0);
+        let mut d2 = vec![0.0; D * self.side()];
         for (x, f) in x.iter().zip(factor.chunks_mut(D * self.side())) {
             let (lo, len) = self.bounds(x);
-            for (k, f) in f.chunks_mut(self.side()).enumerate() {
-                for (i, f) in (lo[k]..lo[k] + len[k]).zip(f) {
-                    *f = ((i as f64 + 0.5) * self.tg.h - x[k]).powi(2);
+            for (k, d2) in d2.chunks_mut(self.side()).enumerate() {
+                for (i, d2) in (lo[k]..lo[k] + len[k]).zip(d2) {
+                    *d2 = ((i as f64 + 0.5) * self.tg.h - x[k]).powi(2);
                 }
             }
-            for l in self.lines(lo, len, f) {
+            for l in self.lines(lo, len, &d2) {
                 self.line_runs(&l, reached, &mut r.run);
             }
-            f.iter_mut().for_each(|f| *f = (-*f / epsilon).exp());
+            (f.iter_mut().zip(&d2)).for_each(|(f, d2)| *f = (-d2 / epsilon).exp() as f32);
             r.first.push(r.run.len() as u32);
         }
     }
@@ -643,8 +655,11 @@ mod tests {
                     d2 <= KERNEL_CUTOFF * epsilon * (1.0 + 1e-12),
                     "point {p}, cell {j}"
                 );
+                // Each of the D factors rounded to f32 (relative error at most 2^-24), their
+                // product and the exponentials in f64.
                 let exact = (-d2 / epsilon).exp();
-                assert!((kpj / exact - 1.0).abs() < 1e-12, "point {p}, cell {j}");
+                let bound = D as f64 * f32::EPSILON as f64 / 2.0 + 1e-12;
+                assert!((kpj / exact - 1.0).abs() <= bound, "point {p}, cell {j}");
             }
         }
         let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * b.abs();
@@ -667,6 +682,52 @@ mod tests {
             (u, sums),
             (taken.clone(), kernel.columns(0.0, |p| taken[p]))
         );
+    }
+
+    /// Every `K_pj` of random points on an open grid against its known value: the product of
+    /// its per-axis exponentials, each rounded to single precision as stored, bit for bit (the
+    /// last axis first, as [`Kernel::outer`] multiplies them); and so within `D 2^-24` (to
+    /// first order) of the product of the exponentials in double precision, relative to it.
+    fn kernel_values_are_single_precision_factors_multiplied<const D: usize>(
+        dims: [usize; D],
+        epsilon: f64,
+    ) {
+        let tg = TransportGrid::new(Grid::new(dims), 0.5);
+        let mut rng = StdRng::seed_from_u64(10 + D as u64);
+        let side = |k: usize| dims[k] as f64 * tg.h;
+        let points: Vec<Vector<D>> = (0..200)
+            .map(|_| Vector::<D>::from_fn(|k, _| rng.random::<f64>() * side(k)))
+            .collect();
+        let s = SinkhornSettings {
+            epsilon,
+            delta: 0.1,
+            max_iterations: 1,
+        };
+        let kernel = Kernel::new(&tg, &points, &s, Kernel::empty()).unwrap();
+        let active = kernel.active();
+        let rounding = 0.5 * f32::EPSILON as f64;
+        let bound = (1.0 + rounding).powi(D as i32) - 1.0 + 4.0 * f64::EPSILON;
+        let mut entries = 0;
+        for (p, x) in points.iter().enumerate() {
+            kernel.for_each_in_row(p, |k, kpj| {
+                let c = tg.grid.cell_coords(active[k] as usize);
+                let e = |k: usize| (-((c[k] as f64 + 0.5) * tg.h - x[k]).powi(2) / epsilon).exp();
+                let exact: f64 = (0..D).map(e).product();
+                let error = (kpj / exact - 1.0).abs();
+                assert!(error <= bound, "point {p}, slot {k}: {error:e}");
+                let outer = (1..D).rev().fold(1.0, |kpj, k| kpj * e(k) as f32 as f64);
+                assert_eq!(kpj, outer * e(0) as f32 as f64, "point {p}, slot {k}");
+                entries += 1;
+            });
+        }
+        assert!(entries > 20 * points.len(), "{entries} entries");
+    }
+
+    #[test]
+    fn kernel_values_are_single_precision_factors_multiplied_2d_and_3d() {
+        kernel_values_are_single_precision_factors_multiplied([24, 18], 0.1);
+        kernel_values_are_single_precision_factors_multiplied([24, 18], 0.4);
+        kernel_values_are_single_precision_factors_multiplied([12, 10, 9], 0.1);
     }
 
     #[test]
