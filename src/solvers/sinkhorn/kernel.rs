@@ -606,6 +606,26 @@ mod tests {
     use rand::rngs::StdRng;
     use rand::{Rng, SeedableRng};
 
+    /// `n` points drawn uniformly over the transport grid `tg`, and their kernel at `epsilon`.
+    fn random_points_kernel<const D: usize>(
+        tg: &TransportGrid<D>,
+        n: usize,
+        epsilon: f64,
+        rng: &mut StdRng,
+    ) -> (Vec<Vector<D>>, Kernel<D>) {
+        let side = |k: usize| tg.grid.dims[k] as f64 * tg.h;
+        let points: Vec<Vector<D>> = (0..n)
+            .map(|_| Vector::<D>::from_fn(|k, _| rng.random::<f64>() * side(k)))
+            .collect();
+        let s = SinkhornSettings {
+            epsilon,
+            delta: 0.1,
+            max_iterations: 1,
+        };
+        let kernel = Kernel::new(tg, &points, &s, Kernel::empty()).unwrap();
+        (points, kernel)
+    }
+
     /// Every point's row against the kernel written out cell by cell: the free cells within
     /// `sqrt(KERNEL_CUTOFF eps)` of it, each with `e^(-|x_p - x_j|^2 / eps)`; and the row and
     /// column sums against sums over those rows.
@@ -615,16 +635,7 @@ mod tests {
         for j in 0..tg.grid.num_cells() {
             tg.set_free(j, rng.random::<f64>() > 0.2);
         }
-        let side = |k: usize| dims[k] as f64 * tg.h;
-        let points: Vec<Vector<D>> = (0..300)
-            .map(|_| Vector::<D>::from_fn(|k, _| rng.random::<f64>() * side(k)))
-            .collect();
-        let s = SinkhornSettings {
-            epsilon,
-            delta: 0.1,
-            max_iterations: 1,
-        };
-        let kernel = Kernel::new(&tg, &points, &s, Kernel::empty()).unwrap();
+        let (points, kernel) = random_points_kernel(&tg, 300, epsilon, &mut rng);
         let active = kernel.active();
         let v: Vec<f64> = (0..active.len()).map(|_| rng.random()).collect();
         let w: Vec<f64> = (0..points.len()).map(|_| rng.random()).collect();
@@ -694,16 +705,7 @@ mod tests {
     ) {
         let tg = TransportGrid::new(Grid::new(dims), 0.5);
         let mut rng = StdRng::seed_from_u64(10 + D as u64);
-        let side = |k: usize| dims[k] as f64 * tg.h;
-        let points: Vec<Vector<D>> = (0..200)
-            .map(|_| Vector::<D>::from_fn(|k, _| rng.random::<f64>() * side(k)))
-            .collect();
-        let s = SinkhornSettings {
-            epsilon,
-            delta: 0.1,
-            max_iterations: 1,
-        };
-        let kernel = Kernel::new(&tg, &points, &s, Kernel::empty()).unwrap();
+        let (points, kernel) = random_points_kernel(&tg, 200, epsilon, &mut rng);
         let active = kernel.active();
         let rounding = 0.5 * f32::EPSILON as f64;
         let bound = (1.0 + rounding).powi(D as i32) - 1.0 + 4.0 * f64::EPSILON;
