@@ -24,6 +24,7 @@ build --release`; `--bin PATH` names another binary (the one that ran the jobs).
 import argparse
 import csv
 import math
+import re
 import subprocess
 import sys
 from collections import defaultdict
@@ -44,9 +45,11 @@ def plan(binary, matrix):
         # id, scene (a label may hold spaces), method, then seven numbers
         f = line.split()
         n = f[-7:]
+        res = re.search(r"-r(\d+)-s", f[0])
         jobs.append(
             dict(
                 id=f[0],
+                res=res.group(1) if res else None,
                 scene=" ".join(f[1:-8]),
                 method=f[-8],
                 cells=float(n[0]),
@@ -64,9 +67,10 @@ def runs(path):
 
 
 def pair(jobs, rows, path):
-    """Each measured row with its job: the rows of a scene and method follow their jobs' order
-    (the report writes them in the plan's order); a scene and method with no rows (jobs not
-    run) is left out, one with some rows missing is refused."""
+    """Each measured row with its job: within a scene and method, a job that names its
+    resolution (`-r150-` in its id) takes the row of that resolution, and the jobs at the
+    scene's own size take the rows left, in order (the report writes them in the plan's order);
+    jobs without a row (not run) are left out, a row without a job is refused."""
     by_key = defaultdict(list)
     for j in jobs:
         by_key[(j["scene"], j["method"])].append(j)
@@ -75,10 +79,12 @@ def pair(jobs, rows, path):
         rows_by_key[(r["scene"], r["method"])].append(r)
     pairs = []
     for key, rs in rows_by_key.items():
-        js = by_key.get(key, [])
-        if len(js) != len(rs):
-            sys.exit(f"{path}: {key[0]} {key[1]}: {len(rs)} runs but {len(js)} jobs in the plan")
-        for j, r in zip(js, rs):
+        named = {j["res"]: j for j in by_key.get(key, []) if j["res"] is not None}
+        own = [j for j in by_key.get(key, []) if j["res"] is None]
+        for r in rs:
+            j = named.pop(r["res"], None) or (own.pop(0) if own else None)
+            if j is None:
+                sys.exit(f"{path}: {key[0]} {key[1]} {r['res']}: a run with no job in the plan")
             measured = float(r["ms_per_sim_s"]) / 1e3 * j["sim_s"]
             pairs.append(
                 dict(

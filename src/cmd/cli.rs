@@ -276,9 +276,17 @@ pub struct ReportArgs {
     /// Build the report (report.md, report.csv, plots, report.rrd, written into DIR; with --docs
     /// the manual's pages) from the jobs' results kept in DIR: of the matrix they were run for
     /// (each result keeps its matrix options), or of the one the matrix options given name;
-    /// nothing is run, and jobs without a result are listed as missing
-    #[arg(long, value_name = "DIR", conflicts_with = "out")]
-    pub merge: Option<PathBuf>,
+    /// nothing is run, and jobs without a result are listed as missing. Several folders
+    /// (comma-separated): a job's result is the first folder's that has one, and the report
+    /// goes into the first. Results of other builds of cellflip merge too, each build named
+    /// with its jobs
+    #[arg(
+        long,
+        value_name = "DIR",
+        value_delimiter = ',',
+        conflicts_with = "out"
+    )]
+    pub merge: Vec<PathBuf>,
     /// No progress bar and no closing line
     #[arg(long, short)]
     pub quiet: bool,

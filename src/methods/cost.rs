@@ -188,13 +188,14 @@ pub struct StepCost {
 /// ([`crate::scene::MemoryEstimate`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Unit {
-    /// The particles it holds: the particle stages' work (FLIP, IDP, Power PIC's transport).
+    /// The particles it holds: the particle stages' work (FLIP, IDP, Power PIC's transport),
+    /// and ccp's band, whose correction is most of its step: 2.25 us a band particle a step on
+    /// dam-3d at 100^3 and 2.52 on drop-3d at 300^3, where a liquid cell cost 16.2 and 2.5 us
+    /// (the drop's deep pool is cells without band particles; docs/results-paper/report.csv).
     Particle,
     /// The liquid's cells, whatever it holds: for a method whose step works on the liquid's
     /// cells more than on its particles (narrow-band FLIP's level set and pressure over all of
-    /// the liquid while it holds particles only in the band; ccp's correction, dearer per
-    /// particle at one particle a cell: dam-1ppc-2d 1.6-2.1 us a particle a step, dam-2d 0.7-0.9;
-    /// docs/results/report.csv, 480cee2).
+    /// the liquid while it holds particles only in the band).
     LiquidCell,
 }
 

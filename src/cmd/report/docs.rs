@@ -106,17 +106,58 @@ impl Provenance {
     }
 
     /// The first line of both generated texts: when, where and how the figures of `results`
-    /// were made, on the machines that ran them ([`machines`]).
+    /// were made, on the machines that ran them ([`machines`]), and by which builds when not
+    /// all by this one ([`builds`]).
     pub fn line(&self, results: &[Measured]) -> String {
         format!(
-            "Generated {} at commit `{}` (cellflip {}) on {} by `cellflip {}`.",
+            "Generated {} at commit `{}` (cellflip {}) on {} by `cellflip {}`.{}",
             self.date,
             self.commit,
             env!("CARGO_PKG_VERSION"),
             machines(results),
-            self.command
+            self.command,
+            builds(results)
         )
     }
+}
+
+/// The builds of cellflip that ran `results`, when not all this one: each with how many jobs,
+/// the most first, and the jobs of every build but that first by name. Empty when this build
+/// ran them all.
+fn builds(results: &[Measured]) -> String {
+    if results.iter().all(Measured::ours) {
+        return String::new();
+    }
+    let mut by: BTreeMap<&str, Vec<&Measured>> = BTreeMap::new();
+    for m in results {
+        by.entry(&m.build).or_default().push(m);
+    }
+    let mut by: Vec<(&str, Vec<&Measured>)> = by.into_iter().collect();
+    by.sort_by_key(|(_, runs)| std::cmp::Reverse(runs.len()));
+    let each: Vec<String> = (by.iter().enumerate())
+        .map(|(i, (build, runs))| {
+            let this = match *build == crate::checkpoint::build() {
+                true => "this one, ",
+                false => "",
+            };
+            let named: Vec<String> = (runs.iter())
+                .map(|m| format!("{} {} {}", m.spec.label, m.spec.method.name(), m.res))
+                .collect();
+            let jobs = match i {
+                0 => String::new(),
+                _ => format!(": {}", named.join(", ")),
+            };
+            format!("{} of {this}{build}{jobs}", count(runs.len(), "job"))
+        })
+        .collect();
+    let whose = match by.len() {
+        1 => "another build".to_string(),
+        n => format!("{n} builds"),
+    };
+    format!(
+        " Its runs are of {whose} of cellflip (version and CRC-32 of the executable): {}.",
+        each.join("; ")
+    )
 }
 
 /// The machines that ran `results` (at least one), as each result keeps its own: the one kind

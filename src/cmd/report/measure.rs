@@ -29,6 +29,7 @@ pub const COLUMNS: &[(&str, &str)] = &[
     ("seed", "random seed"),
     ("tables", "accuracy, stability or both"),
     ("status", "ok, interrupted, failed: step N: why, or not run: why"),
+    ("build", "the build of cellflip that ran it: its version and a CRC-32 of its executable"),
     ("dim", "2 or 3"),
     ("particles", "particles held at the end"),
     ("grid_cells", "cells of the grid, every axis's count multiplied"),

@@ -16,6 +16,9 @@ pub struct Measured {
     pub seed: u64,
     pub status: String,
     pub dim: usize,
+    /// The build of cellflip that ran it ([`crate::checkpoint::build`]: version and CRC-32 of
+    /// its executable); a merge may take results of several.
+    pub build: String,
     /// The machine of the process that ran it (that finished it, when resumed); `None` for a
     /// result kept before results recorded their machine.
     pub machine: Option<Machine>,
@@ -37,6 +40,7 @@ impl Measured {
             seed: spec.seed.unwrap_or(0),
             status: String::new(),
             dim: 0,
+            build: crate::checkpoint::build().into(),
             machine: Some(Machine::here(rayon::current_num_threads())),
             values: BTreeMap::new(),
             volume: vec![],
@@ -47,6 +51,12 @@ impl Measured {
 
     pub fn ok(&self) -> bool {
         self.status == "ok"
+    }
+
+    /// Whether this build of cellflip ran it (a run of another may not equal what this one
+    /// computes: a report run again runs it again).
+    pub fn ours(&self) -> bool {
+        self.build == crate::checkpoint::build()
     }
 
     /// A figure by column name (NaN when the run has none).

@@ -24,7 +24,7 @@ use crate::validation::MartinMoyceProbe;
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use measure::Measured;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Where a run's scene comes from.
 #[derive(Clone, Debug)]
@@ -291,8 +291,8 @@ pub fn scene_of(spec: &RunSpec) -> Result<Scene> {
 /// `cellflip report`: the plan (`--plan`), some jobs (`--job`), the merge of their results
 /// (`--merge`), or all three in one process.
 pub fn report(args: &ReportArgs) -> Result<()> {
-    if let Some(dir) = &args.merge {
-        return merge(&sweep::merged(args, dir)?, dir);
+    if !args.merge.is_empty() {
+        return merge(&sweep::merged(args, &args.merge)?, &args.merge);
     }
     let specs = matrix(args)?;
     if args.plan {
@@ -319,7 +319,8 @@ pub fn report(args: &ReportArgs) -> Result<()> {
     if args.job.is_empty() {
         // An interrupted matrix would leave the manual with half its runs: keep the pages.
         let to_docs = docs.filter(|_| !interrupted);
-        write(args, &specs, &args.out, &provenance, to_docs.as_ref())?;
+        let out = [args.out.clone()];
+        write(args, &specs, &out, &provenance, to_docs.as_ref())?;
     }
     if interrupted {
         anyhow::bail!(
@@ -331,12 +332,13 @@ pub fn report(args: &ReportArgs) -> Result<()> {
     Ok(())
 }
 
-/// `--merge DIR`: the report (with `--docs`, the manual's pages) of the matrix `args` ask for
-/// ([`sweep::merged`]) from the results kept in `dir`, nothing run.
-fn merge(args: &ReportArgs, dir: &Path) -> Result<()> {
+/// `--merge DIR[,DIR...]`: the report (with `--docs`, the manual's pages) of the matrix `args`
+/// ask for ([`sweep::merged`]) from the results kept in `dirs`, written into the first, nothing
+/// run.
+fn merge(args: &ReportArgs, dirs: &[PathBuf]) -> Result<()> {
     let provenance = docs::Provenance::now(&command());
     let specs = matrix(args)?;
-    write(args, &specs, dir, &provenance, docs_target(args)?.as_ref())
+    write(args, &specs, dirs, &provenance, docs_target(args)?.as_ref())
 }
 
 /// With `--docs`, the manual's pages in the folder the command runs from (checked first).
@@ -347,17 +349,18 @@ fn docs_target(args: &ReportArgs) -> Result<Option<docs::DocsTarget>> {
     }
 }
 
-/// Writes the report of the results kept in `dir` there (or the manual's pages), under the
-/// provenance line of the machines that ran them, lists the jobs without a result and says
-/// where it all went.
+/// Writes the report of the results kept in `dirs` into the first (or the manual's pages),
+/// under the provenance line of the machines and builds that ran them, lists the jobs without
+/// a result and says where it all went.
 fn write(
     args: &ReportArgs,
     specs: &[RunSpec],
-    dir: &Path,
+    dirs: &[PathBuf],
     provenance: &docs::Provenance,
     docs: Option<&docs::DocsTarget>,
 ) -> Result<()> {
-    let (results, missing) = sweep::gather(dir, specs, &options::MatrixOptions::of(args))?;
+    let (results, missing) = sweep::gather(dirs, specs, &options::MatrixOptions::of(args))?;
+    let dir = &dirs[0];
     let header = provenance.line(&results);
     for (spec, why) in &missing {
         eprintln!(
@@ -450,10 +453,17 @@ pub fn run_all(
         ));
         let files = saved::RunFiles::of(out, spec, matrix);
         match saved::load_result(&files.result, spec) {
-            Ok(Some(_)) => {
+            Ok(Some(m)) if m.ours() => {
                 bar.inc(1);
                 continue;
             }
+            Ok(Some(m)) => bar.suspend(|| {
+                let file = files.result.display();
+                eprintln!(
+                    "warning: '{file}' kept by another build ({}); running it again",
+                    m.build
+                )
+            }),
             Ok(None) => {}
             Err(e) => bar.suspend(|| eprintln!("warning: {e:#}; running it again")),
         }
@@ -574,5 +584,53 @@ mod tests {
                   machine not recorded) by `cellflip ";
         assert!(line.contains(on), "{line}");
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// A merge of two folders takes each job's result from the first that has one, whichever
+    /// build kept it, and names the builds (the jobs of all but the one with the most); a
+    /// report run again over another build's result runs it again.
+    #[test]
+    fn a_merge_of_several_folders_names_the_builds_that_ran_its_jobs() {
+        let base = std::env::temp_dir().join(format!("cellflip-builds-{}", std::process::id()));
+        let (a, b) = (base.join("a"), base.join("b"));
+        let line = "--scenes dam-2d --methods flip,ccp,idp --res 24 --duration 0.05 -q";
+        let merged = args(&format!("{line} --merge {},{}", a.display(), b.display()));
+        let specs = matrix(&merged).unwrap();
+        let matrix_options = options::MatrixOptions::of(&merged);
+        let keep = |dir: &Path, spec: &RunSpec, build: &str, steps: f64| {
+            let m = Measured {
+                status: "ok".into(),
+                build: build.into(),
+                values: [("steps".to_string(), steps)].into(),
+                ..Measured::new(spec)
+            };
+            saved::save_result(&saved::RunFiles::of(dir, spec, &matrix_options), &m).unwrap();
+        };
+        let (old, older) = ("cellflip 0.0.9 (0000aaaa)", "cellflip 0.0.8 (0000bbbb)");
+        keep(&a, &specs[0], old, 1.0);
+        keep(&a, &specs[1], old, 2.0);
+        keep(&b, &specs[1], older, 3.0);
+        keep(&b, &specs[2], older, 4.0);
+        report(&merged).unwrap();
+        let md = std::fs::read_to_string(a.join("report.md")).unwrap();
+        let said = md.lines().find(|l| l.starts_with("Generated ")).unwrap();
+        let builds = "Its runs are of 2 builds of cellflip (version and CRC-32 of the \
+                      executable): 2 jobs of cellflip 0.0.9 (0000aaaa); 1 job of cellflip 0.0.8 \
+                      (0000bbbb): dam-2d idp 24.";
+        assert!(said.ends_with(builds), "{said}");
+        let csv = std::fs::read_to_string(a.join("report.csv")).unwrap();
+        let rows: Vec<&str> = csv.lines().skip(1).collect();
+        assert_eq!(rows.len(), 3, "{csv}");
+        assert!(rows[1].contains(old) && rows[2].contains(older), "{csv}");
+
+        let flip = "--scenes dam-2d --methods flip --res 24 --duration 0.05 -q";
+        let run_again = args(&format!("{flip} --out {}", a.display()));
+        report(&run_again).unwrap();
+        let files = saved::RunFiles::of(&a, &specs[0], &options::MatrixOptions::of(&run_again));
+        let kept = saved::load_result(&files.result, &specs[0])
+            .unwrap()
+            .unwrap();
+        assert!(kept.ours() && kept.get("steps") > 1.0, "{}", kept.build);
+        std::fs::remove_dir_all(&base).unwrap();
     }
 }

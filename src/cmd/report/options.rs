@@ -138,7 +138,7 @@ pub(crate) mod tests {
             assert_eq!(MatrixOptions::from_meta(&o.to_meta()), o);
             let again = o.apply(&args("--merge x")).unwrap();
             assert_eq!(MatrixOptions::of(&again), o, "{line}");
-            assert_eq!(again.merge.as_deref(), Some(std::path::Path::new("x")));
+            assert_eq!(again.merge, [std::path::PathBuf::from("x")]);
         }
         assert!(!MatrixOptions::given(&args("-q --merge x")));
         assert!(MatrixOptions::given(&args("--matrix default")));

@@ -47,6 +47,7 @@ pub fn csv(results: &[Measured]) -> String {
                 "seed" => m.seed.to_string(),
                 "tables" => tables(&m.spec).into(),
                 "status" => field(&m.status),
+                "build" => field(&m.build),
                 "dim" => m.dim.to_string(),
                 c => number(m.get(c)),
             })
@@ -401,6 +402,7 @@ mod tests {
             seed: 1,
             status: "ok".into(),
             dim: 3,
+            build: crate::checkpoint::build().into(),
             machine: None,
             values: [("n_mean", n), ("held_mean", held)]
                 .map(|(k, v)| (k.to_string(), v))

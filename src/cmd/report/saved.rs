@@ -69,7 +69,7 @@ pub fn id(spec: &RunSpec) -> String {
 pub fn save_result(files: &RunFiles, m: &Measured) -> Result<()> {
     let path = &files.result;
     let mut w = Writer::default();
-    w.meta("program", crate::checkpoint::build());
+    w.meta("program", &*m.build);
     w.meta("matrix", files.matrix.to_meta());
     w.meta("status", &*m.status);
     w.meta("res", m.res.to_string());
@@ -93,20 +93,15 @@ pub fn save_result(files: &RunFiles, m: &Measured) -> Result<()> {
         .map_err(|e| anyhow!("cannot write '{}': {e}", path.display()))
 }
 
-/// A run kept by [`save_result`], for `spec`: `None` when there is none, an error (why) when
-/// the file is there but cannot be taken (damaged, or kept by another build).
+/// A run kept by [`save_result`], for `spec`, by whichever build ran it ([`Measured::build`]:
+/// a merge takes it and names its build, a report run again runs it again): `None` when there
+/// is none, an error (why) when the file is there but cannot be read.
 pub fn load_result(path: &Path, spec: &RunSpec) -> Result<Option<Measured>> {
     let Ok(bytes) = std::fs::read(path) else {
         return Ok(None);
     };
     let read = || -> Result<Measured, SnapshotError> {
         let r = Reader::from_bytes(bytes)?;
-        let program = r.meta("program")?;
-        if program != crate::checkpoint::build() {
-            return Err(SnapshotError::Header(format!(
-                "kept by another build ({program})"
-            )));
-        }
         let names = r.meta("values")?;
         let values = r.slice::<f64>("values", None)?;
         let names: Vec<&str> = names.split('\n').filter(|n| !n.is_empty()).collect();
@@ -116,6 +111,7 @@ pub fn load_result(path: &Path, spec: &RunSpec) -> Result<Option<Measured>> {
             seed: parsed(&r, "seed")?,
             status: r.meta("status")?.to_string(),
             dim: parsed(&r, "dim")?,
+            build: r.meta("program")?.to_string(),
             machine: read_machine(&r)?,
             values: names.iter().map(|n| n.to_string()).zip(values).collect(),
             volume: read_pairs(&r, "volume")?,
@@ -157,12 +153,11 @@ fn parsed<T: std::str::FromStr>(r: &Reader, k: &str) -> Result<T, SnapshotError>
         .map_err(|_| SnapshotError::Header(format!("meta.{k} is '{v}'")))
 }
 
-/// The matrix a result kept by this build was planned from; `None` for a file that is not
-/// one (damaged, or kept by another build, which is never merged).
+/// The matrix a kept result (of any build) was planned from; `None` for a file that is not
+/// one (damaged) or one kept before results named their matrix.
 pub fn matrix_of(path: &Path) -> Option<MatrixOptions> {
     let r = Reader::from_bytes(std::fs::read(path).ok()?).ok()?;
-    let ours = r.meta("program").ok()? == crate::checkpoint::build();
-    ours.then(|| r.meta("matrix").ok().map(MatrixOptions::from_meta))?
+    r.meta("matrix").ok().map(MatrixOptions::from_meta)
 }
 
 fn pairs(w: &mut Writer<'_>, name: &str, series: &[(f64, f64)]) {

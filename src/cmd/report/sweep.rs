@@ -206,32 +206,43 @@ pub fn not_run(missing: &[Missing<'_>]) -> Result<String> {
 /// A job without a result, and why (not run, or its file cannot be taken).
 pub type Missing<'a> = (&'a RunSpec, String);
 
-/// The results of the matrix's jobs kept in `dir`, in the plan's order, and the jobs that
-/// have none. Fails when there is none at all, naming the command that merges each matrix of
-/// the results there (`matrix` is the one asked for, that of `specs`).
+/// The results of the matrix's jobs kept in `dirs`, in the plan's order (each job's from the
+/// first folder that has one, by whichever build), and the jobs that have none. Fails when
+/// there is none at all, naming the command that merges each matrix of the results there
+/// (`matrix` is the one asked for, that of `specs`).
 pub fn gather<'a>(
-    dir: &Path,
+    dirs: &[PathBuf],
     specs: &'a [RunSpec],
     matrix: &MatrixOptions,
 ) -> Result<(Vec<Measured>, Vec<Missing<'a>>)> {
     let (mut results, mut missing) = (vec![], vec![]);
     for spec in specs {
-        let files = RunFiles::of(dir, spec, matrix);
-        match saved::load_result(&files.result, spec) {
-            Ok(Some(m)) => results.push(m),
-            Ok(None) => missing.push((spec, "not run".to_string())),
-            Err(e) => missing.push((spec, format!("{e:#}"))),
+        let mut why = vec![];
+        let found = dirs.iter().find_map(|dir| {
+            let files = RunFiles::of(dir, spec, matrix);
+            match saved::load_result(&files.result, spec) {
+                Ok(found) => found,
+                Err(e) => {
+                    why.push(format!("{e:#}"));
+                    None
+                }
+            }
+        });
+        match found {
+            Some(m) => results.push(m),
+            None if why.is_empty() => missing.push((spec, "not run".to_string())),
+            None => missing.push((spec, why.join("; "))),
         }
     }
     if !results.is_empty() {
         return Ok((results, missing));
     }
-    let kept = kept_matrices(dir);
+    let kept = kept_matrices(dirs);
     let none = format!(
-        "--merge {}: no result of this matrix's {} jobs ({matrix}) in '{}'",
-        dir.display(),
+        "--merge {}: no result of this matrix's {} jobs ({matrix}) in {}",
+        folders(dirs),
         specs.len(),
-        dir.join("runs").display()
+        in_runs(dirs)
     );
     if !kept.is_empty() {
         let others = match kept.len() {
@@ -240,45 +251,59 @@ pub fn gather<'a>(
         };
         bail!(
             "{none}; the results there are of {others}, merged with:\n{}",
-            commands(dir, &kept)
+            commands(dirs, &kept)
         );
     }
-    let there = counted(result_files(dir).len());
-    bail!("{none} ({there} there, of another build of cellflip or damaged)")
+    let there: usize = dirs.iter().map(|d| result_files(d).len()).sum();
+    bail!("{none} ({} there, damaged)", counted(there))
 }
 
-/// The report `--merge DIR` writes, as options: those given or, without any, those of the
-/// matrix DIR's results were planned from. Refuses a folder of several matrices' results then,
-/// naming the command that merges each.
-pub fn merged(args: &ReportArgs, dir: &Path) -> Result<ReportArgs> {
-    let kept = kept_matrices(dir);
+/// The report `--merge DIR[,DIR...]` writes, as options: those given or, without any, those of
+/// the matrix the folders' results were planned from. Refuses results of several matrices
+/// then, naming the command that merges each.
+pub fn merged(args: &ReportArgs, dirs: &[PathBuf]) -> Result<ReportArgs> {
+    let kept = kept_matrices(dirs);
     let mut matrices = kept.keys();
     match (MatrixOptions::given(args), matrices.next(), matrices.next()) {
         (true, _, _) | (false, None, _) => Ok(args.clone()),
         (false, Some(one), None) => one.apply(args).with_context(|| {
             format!(
                 "--merge {}: its results are of the matrix {one}",
-                dir.display()
+                folders(dirs)
             )
         }),
         (false, Some(_), Some(_)) => bail!(
             "--merge {}: its results are of {} matrices; name one with its options:\n{}",
-            dir.display(),
+            folders(dirs),
             kept.len(),
-            commands(dir, &kept)
+            commands(dirs, &kept)
         ),
     }
 }
 
-/// The matrices this build's results in `dir` were planned from, with how many results each.
-fn kept_matrices(dir: &Path) -> BTreeMap<MatrixOptions, usize> {
+/// The matrices the results in `dirs` were planned from, with how many results each.
+fn kept_matrices(dirs: &[PathBuf]) -> BTreeMap<MatrixOptions, usize> {
     let mut kept = BTreeMap::new();
-    for path in result_files(dir) {
+    for path in dirs.iter().flat_map(|d| result_files(d)) {
         if let Some(m) = saved::matrix_of(&path) {
             *kept.entry(m).or_default() += 1;
         }
     }
     kept
+}
+
+/// The folders as `--merge` takes them: `a,b`.
+fn folders(dirs: &[PathBuf]) -> String {
+    let names: Vec<String> = dirs.iter().map(|d| d.display().to_string()).collect();
+    names.join(",")
+}
+
+/// Where the results of `dirs` are kept: `'a/runs'` or `'a/runs' or 'b/runs'`.
+fn in_runs(dirs: &[PathBuf]) -> String {
+    let each: Vec<String> = (dirs.iter())
+        .map(|d| format!("'{}'", d.join("runs").display()))
+        .collect();
+    each.join(" or ")
 }
 
 /// The result files under `dir/runs`.
@@ -292,9 +317,9 @@ fn result_files(dir: &Path) -> Vec<PathBuf> {
         .collect()
 }
 
-/// The command that merges each of the `kept` matrices in `dir`, a line each with its count.
-fn commands(dir: &Path, kept: &BTreeMap<MatrixOptions, usize>) -> String {
-    let dir = shell_word(&dir.display().to_string());
+/// The command that merges each of the `kept` matrices in `dirs`, a line each with its count.
+fn commands(dirs: &[PathBuf], kept: &BTreeMap<MatrixOptions, usize>) -> String {
+    let dir = shell_word(&folders(dirs));
     let line = |(m, n): (&MatrixOptions, &usize)| {
         format!("  cellflip report --merge {dir} {m}    ({})", counted(*n))
     };
