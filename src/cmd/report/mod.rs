@@ -588,7 +588,8 @@ mod tests {
 
     /// A merge of two folders takes each job's result from the first that has one, whichever
     /// build kept it, and names the builds (the jobs of all but the one with the most); a
-    /// report run again over another build's result runs it again.
+    /// result without its grid's cells takes its scene's; a report run again over another
+    /// build's result runs it again.
     #[test]
     fn a_merge_of_several_folders_names_the_builds_that_ran_its_jobs() {
         let base = std::env::temp_dir().join(format!("cellflip-builds-{}", std::process::id()));
@@ -622,6 +623,11 @@ mod tests {
         let rows: Vec<&str> = csv.lines().skip(1).collect();
         assert_eq!(rows.len(), 3, "{csv}");
         assert!(rows[1].contains(old) && rows[2].contains(older), "{csv}");
+        // Kept without their grid's cells (as results before 87cfc95), they take the scene's.
+        let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
+        let at = header.iter().position(|c| *c == "grid_cells").unwrap();
+        let cells: Vec<&str> = rows.iter().map(|r| r.split(',').nth(at).unwrap()).collect();
+        assert_eq!(cells, ["576.0"; 3], "{csv}");
 
         let flip = "--scenes dam-2d --methods flip --res 24 --duration 0.05 -q";
         let run_again = args(&format!("{flip} --out {}", a.display()));

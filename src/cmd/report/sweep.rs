@@ -229,7 +229,7 @@ pub fn gather<'a>(
             }
         });
         match found {
-            Some(m) => results.push(m),
+            Some(m) => results.push(with_grid_cells(m)),
             None if why.is_empty() => missing.push((spec, "not run".to_string())),
             None => missing.push((spec, why.join("; "))),
         }
@@ -256,6 +256,18 @@ pub fn gather<'a>(
     }
     let there: usize = dirs.iter().map(|d| result_files(d).len()).sum();
     bail!("{none} ({} there, damaged)", counted(there))
+}
+
+/// `m` with its grid's cells: a result kept before results recorded them (before `87cfc95`)
+/// takes them from its scene at its size, as the run had them.
+fn with_grid_cells(mut m: Measured) -> Measured {
+    if !m.values.contains_key("grid_cells") {
+        if let Ok(scene) = scene_of(&m.spec) {
+            let cells = scene.dims.iter().product::<usize>() as f64;
+            m.values.insert("grid_cells".into(), cells);
+        }
+    }
+    m
 }
 
 /// The report `--merge DIR[,DIR...]` writes, as options: those given or, without any, those of
