@@ -120,9 +120,9 @@ impl MethodType for Ccp {
 
     fn step_cost(_settings: &CcpSettings, dim: usize) -> StepCost {
         // ns per band particle and per cell, [2D, 3D], fitted by tools/cost-fit.py to the whole
-        // runs of the default and paper matrices (2026-11-29: 480cee2's, and drop-3d at 300^3
-        // by 1ff1530; docs/results/report.csv and docs/results-paper/report.csv;
-        // docs/cluster.md).
-        StepCost::of(dim, [(600.0, 75.0), (504.0, 387.0)]).per_driven(Unit::Particle)
+        // runs of the default and paper matrices (2026-11-29: 480cee2's, drop-3d at 300^3 by
+        // 1ff1530 and the half-size drop and falling obstacle by 8cb4dd1;
+        // docs/results/report.csv and docs/results-paper/report.csv; docs/cluster.md).
+        StepCost::of(dim, [(600.0, 75.0), (525.0, 273.0)]).per_driven(Unit::Particle)
     }
 }
