@@ -414,6 +414,15 @@ fn a_report_stopped_and_started_again_goes_on_where_it_stopped() {
         (1, 1),
         "stopped mid-run"
     );
+    // A merge meanwhile names the stopped job's newest checkpoint.
+    let merged = cellflip().args(["report", "--merge"]).arg(&split).output();
+    let merged = merged.unwrap();
+    common::ok(&merged);
+    let said = String::from_utf8_lossy(&merged.stderr);
+    assert!(
+        said.contains("missing: dam-2d ccp 100: under way (checkpoint after step "),
+        "{said}"
+    );
     let loud: Vec<String> = args(&split).into_iter().filter(|a| a != "-q").collect();
     let again = cellflip().args(loud).output();
     let again = again.unwrap();

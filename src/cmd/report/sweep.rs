@@ -230,7 +230,7 @@ pub fn gather<'a>(
         });
         match found {
             Some(m) => results.push(with_grid_cells(m)),
-            None if why.is_empty() => missing.push((spec, "not run".to_string())),
+            None if why.is_empty() => missing.push((spec, under_way(dirs, spec, matrix))),
             None => missing.push((spec, why.join("; "))),
         }
     }
@@ -256,6 +256,21 @@ pub fn gather<'a>(
     }
     let there: usize = dirs.iter().map(|d| result_files(d).len()).sum();
     bail!("{none} ({} there, damaged)", counted(there))
+}
+
+/// Why a job has no result in `dirs`: "under way" with the step of its newest checkpoint in
+/// the first folder that has one (a long job stopped between sittings, or running), else "not
+/// run".
+fn under_way(dirs: &[PathBuf], spec: &RunSpec, matrix: &MatrixOptions) -> String {
+    let step = dirs.iter().find_map(|dir| {
+        let checkpoints = RunFiles::of(dir, spec, matrix).checkpoints;
+        checkpoints
+            .is_dir()
+            .then(|| crate::checkpoint::open(&checkpoints).ok())?
+    });
+    step.map_or("not run".into(), |c| {
+        format!("under way (checkpoint after step {})", c.step)
+    })
 }
 
 /// `m` with its grid's cells: a result kept before results recorded them (before `87cfc95`)
