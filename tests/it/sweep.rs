@@ -339,19 +339,18 @@ fn cost_ratios(args: &[&str], csv: &str) -> Vec<(String, String, f64)> {
         let mut jobs: Vec<Option<Job<'_>>> = jobs.into_iter().map(Some).collect();
         rows.iter()
             .map(|row| {
-                // A job that names its resolution takes the row of that resolution; one at the
-                // scene's own size takes the first row left.
-                let ours = |j: &Job<'_>, named: bool| {
-                    let at = j.spec.res.map(|r| r.to_string());
-                    j.spec.label == row[scene]
-                        && j.spec.method.name() == row[method]
-                        && at.as_deref().map_or(!named, |r| named && r == row[res])
+                // The job that names the row's resolution, else the first left at the scene's
+                // own size (no resolution named).
+                let at = |res: Option<&str>| {
+                    jobs.iter().position(|j| {
+                        j.as_ref().is_some_and(|j| {
+                            let named = j.spec.res.map(|r| r.to_string());
+                            (j.spec.label == row[scene] && j.spec.method.name() == row[method])
+                                && named.as_deref() == res
+                        })
+                    })
                 };
-                let at = |named| {
-                    jobs.iter()
-                        .position(|j| j.as_ref().is_some_and(|j| ours(j, named)))
-                };
-                let job = (at(true).or_else(|| at(false)))
+                let job = (at(Some(row[res])).or_else(|| at(None)))
                     .and_then(|i| jobs[i].take())
                     .unwrap_or_else(|| panic!("{} {}: no such job left", row[scene], row[method]));
                 let measured = row[per_s].parse::<f64>().unwrap() / 1e3 * job.sim_secs;

@@ -136,16 +136,15 @@ fn builds(results: &[Measured]) -> String {
     by.sort_by_key(|(_, runs)| std::cmp::Reverse(runs.len()));
     let each: Vec<String> = (by.iter().enumerate())
         .map(|(i, (build, runs))| {
-            let this = match *build == crate::checkpoint::build() {
-                true => "this one, ",
-                false => "",
-            };
-            let named: Vec<String> = (runs.iter())
-                .map(|m| format!("{} {} {}", m.spec.label, m.spec.method.name(), m.res))
-                .collect();
+            let this = if runs[0].ours() { "this one, " } else { "" };
             let jobs = match i {
                 0 => String::new(),
-                _ => format!(": {}", named.join(", ")),
+                _ => {
+                    let named: Vec<String> = (runs.iter())
+                        .map(|m| format!("{} {} {}", m.spec.label, m.spec.method.name(), m.res))
+                        .collect();
+                    format!(": {}", named.join(", "))
+                }
             };
             format!("{} of {this}{build}{jobs}", count(runs.len(), "job"))
         })
