@@ -229,6 +229,12 @@ impl<const D: usize> Kernel<D> {
         &self.active
     }
 
+    /// The chunks of the column sums' count.
+    #[cfg(test)]
+    pub(super) fn chunks(&self) -> usize {
+        self.chunks.len()
+    }
+
     /// The points' count.
     pub(super) fn points(&self) -> usize {
         self.order.len()
@@ -294,16 +300,12 @@ impl<const D: usize> Kernel<D> {
     where
         T: Copy + Send + Sync + AddAssign + Mul<f64, Output = T>,
     {
-        let parts: Vec<Vec<T>> = (self.chunks.par_iter())
-            .map(|c| {
-                let mut acc = vec![zero; c.window.len()];
-                for i in c.points.clone() {
-                    self.scatter_row(i, w(self.order[i] as usize), c, &mut acc);
-                }
-                acc
-            })
-            .collect();
-        self.add_windows(zero, &parts)
+        let scatter = |c: &Chunk, acc: &mut [T]| {
+            for i in c.points.clone() {
+                self.scatter_row(i, w(self.order[i] as usize), c, acc);
+            }
+        };
+        self.in_waves(zero, scatter, |()| {})
     }
 
     /// A Sinkhorn row update and the column sums of its result in one pass over the rows
@@ -347,23 +349,54 @@ impl<const D: usize> Kernel<D> {
     where
         T: Copy + Send + Sync + AddAssign + Mul<f64, Output = T>,
     {
-        let parts: Vec<(Vec<T>, Vec<T>)> = (self.chunks.par_iter())
-            .map(|c| {
-                let mut acc = vec![zero; c.window.len()];
-                let u = (c.points.clone())
+        let mut sorted = Vec::with_capacity(self.order.len());
+        let sums = self.in_waves(
+            zero,
+            |c, acc| {
+                (c.points.clone())
                     .map(|i| {
                         let u = w(self.order[i] as usize, volume / self.row_sum_at(i, v));
-                        self.scatter_row(i, u, c, &mut acc);
+                        self.scatter_row(i, u, c, acc);
                         u
                     })
-                    .collect();
-                (u, acc)
-            })
-            .collect();
-        let sorted: Vec<T> = parts.iter().flat_map(|(u, _)| u).copied().collect();
+                    .collect::<Vec<T>>()
+            },
+            |u| sorted.extend(u),
+        );
         let u = self.rank.par_iter().map(|&i| sorted[i as usize]).collect();
-        let sums: Vec<Vec<T>> = parts.into_iter().map(|(_, acc)| acc).collect();
-        (u, self.add_windows(zero, &sums))
+        (u, sums)
+    }
+
+    /// Column sums a wave of chunks at a time ([`wave_len`]): each chunk's `scatter` adds its
+    /// points' rows into its window of slots (and gives what else it computes, which `keep`
+    /// takes in chunk order), and the windows are added into one value per slot in chunk
+    /// order.
+    fn in_waves<T, U: Send>(
+        &self,
+        zero: T,
+        scatter: impl Fn(&Chunk, &mut [T]) -> U + Sync,
+        mut keep: impl FnMut(U),
+    ) -> Vec<T>
+    where
+        T: Copy + Send + Sync + AddAssign,
+    {
+        let mut sums = vec![zero; self.active.len()];
+        for wave in self.chunks.chunks(wave_len()) {
+            let parts: Vec<(U, Vec<T>)> = (wave.par_iter())
+                .map(|c| {
+                    let mut acc = vec![zero; c.window.len()];
+                    (scatter(c, &mut acc), acc)
+                })
+                .collect();
+            let windows: Vec<Vec<T>> = (parts.into_iter())
+                .map(|(u, acc)| {
+                    keep(u);
+                    acc
+                })
+                .collect();
+            add_windows(&mut sums, wave, &windows);
+        }
+        sums
     }
 
     /// Adds `w K_pj` of the point at sorted place `i` into the window `acc` of its chunk `c`.
@@ -382,24 +415,36 @@ impl<const D: usize> Kernel<D> {
             }
         }
     }
+}
 
-    /// The chunks' windows `parts` added into one value per slot, in chunk order.
-    fn add_windows<T>(&self, zero: T, parts: &[Vec<T>]) -> Vec<T>
-    where
-        T: Copy + Send + Sync + AddAssign,
-    {
-        let mut out = vec![zero; self.active.len()];
-        (out.par_chunks_mut(SLOT_BLOCK).enumerate()).for_each(|(b, out)| {
-            let block = b * SLOT_BLOCK..b * SLOT_BLOCK + out.len();
-            for (c, part) in self.chunks.iter().zip(parts) {
-                let (lo, hi) = (block.start.max(c.window.start), block.end.min(c.window.end));
-                for k in lo..hi {
-                    out[k - block.start] += part[k - c.window.start];
-                }
+/// Chunks whose windows are held at once: the column sums go a wave of chunks at a time,
+/// each wave's windows added into the sums before the next is made. A chunk's window spans
+/// every slot its points' balls reach, a few planes of cells across the grid's slowest axis
+/// however few its points, so all the windows at once would hold about the points times a
+/// plane's cells, growing as the fifth power of the resolution (docs/benchmarks/memory.md,
+/// "Power PIC's column windows"). Four chunks a thread keep every thread busy; the sums are
+/// the same whatever the wave's length (each slot's windows are added in chunk order).
+fn wave_len() -> usize {
+    (4 * rayon::current_num_threads()).max(16)
+}
+
+/// Adds the windows `parts` of the chunks `wave` into `out`, one value per slot, in chunk
+/// order.
+fn add_windows<T>(out: &mut [T], wave: &[Chunk], parts: &[Vec<T>])
+where
+    T: Copy + Send + Sync + AddAssign,
+{
+    let start = wave.iter().map(|c| c.window.start).min().unwrap_or(0);
+    let end = wave.iter().map(|c| c.window.end).max().unwrap_or(0);
+    (out[start..end].par_chunks_mut(SLOT_BLOCK).enumerate()).for_each(|(b, out)| {
+        let block = start + b * SLOT_BLOCK..start + b * SLOT_BLOCK + out.len();
+        for (c, part) in wave.iter().zip(parts) {
+            let (lo, hi) = (block.start.max(c.window.start), block.end.min(c.window.end));
+            for k in lo..hi {
+                out[k - block.start] += part[k - c.window.start];
             }
-        });
-        out
-    }
+        }
+    });
 }
 
 /// What building a kernel needs of the grid: the transport grid, the cells near the points
@@ -469,6 +514,10 @@ impl<'a, const D: usize> Ball<'a, D> {
             (f.iter_mut().zip(&d2)).for_each(|(f, d2)| *f = (-d2 / epsilon).exp() as f32);
             r.first.push(r.run.len() as u32);
         }
+        // The list grew by doubling: up to twice the runs it holds, kept for the step (a
+        // third of a point's bytes in 3D, heaptrack on deep-pool-3d at 40^3). Giving the rest
+        // back costs a reallocation of the piece when it grows.
+        r.run.shrink_to_fit();
     }
 
     /// Lists the runs of the line `l` of a ball into `runs`: its free cells, cut at the

@@ -57,7 +57,9 @@
 //! cut, every kept `K_pj` is at least `1e-12`, far inside the range of `f64`, and a scaling
 //! that leaves it is reported ([`SinkhornError::Diverged`]). Columns are summed by scattering
 //! chunks of spatially sorted points (their size set by the point count) into their own
-//! windows of cells, added in chunk order: results are the same whatever the thread count.
+//! windows of cells, added in chunk order: results are the same whatever the thread count. A
+//! wave of chunks at a time holds its windows, so that the windows held do not grow with the
+//! points times a plane of cells.
 //! A solve may start from the previous one's plan ([`Transport::solve`]): from its scalings,
 //! the points' carried with them, and into its storage.
 //!
@@ -756,6 +758,29 @@ mod tests {
         let (a, b) = (solve(1), solve(2));
         assert_eq!((&a.v, a.iterations), (&b.v, b.iterations));
         assert_eq!(a.columns(0.0, |_| 1.0), b.columns(0.0, |_| 1.0));
+    }
+
+    /// With more chunks than a wave holds on one thread (16), and one wave for all of them on
+    /// eight threads (32 a wave): the same plan, bit for bit.
+    #[test]
+    fn the_plan_is_the_same_whatever_the_waves_of_chunks() {
+        let s = SinkhornSettings { delta: 1e-3, ..S };
+        let (tg, pts, v) = instance([40, 40, 40], 100_000, 0.8, 5);
+        let solve = |threads| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| {
+                let t = Transport::solve(&tg, &Air::Capacity, &pts, v, &s, None).unwrap();
+                let sums = t.columns(0.0, |p| p as f64);
+                (t, sums)
+            })
+        };
+        let ((a, sums_a), (b, sums_b)) = (solve(1), solve(8));
+        assert!((17..=32).contains(&a.kernel.chunks()), "{}", a.kernel.chunks());
+        assert_eq!((&a.v, &a.u, a.iterations), (&b.v, &b.u, b.iterations));
+        assert_eq!(sums_a, sums_b);
     }
 
     #[test]
