@@ -184,11 +184,20 @@ fn label(x: f64) -> String {
 }
 
 /// A tick label on a log axis at `log10` value `x`: the quantity to two significant digits
-/// (ticks fall between powers of ten).
+/// (ticks fall between powers of ten), from 10,000 on in thousands, millions or billions
+/// (`32k`, `3.2M`: the cells and particles of the time-per-step plots).
 fn log_label(x: f64) -> String {
     let v = 10f64.powf(x);
     let unit = 10f64.powf(x.floor() - 1.0);
-    label((v / unit).round() * unit)
+    let v = (v / unit).round() * unit;
+    if v < 1e4 {
+        return label(v);
+    }
+    let (scale, suffix) = [(1e9, "G"), (1e6, "M"), (1e3, "k")]
+        .into_iter()
+        .find(|&(s, _)| v >= s)
+        .expect("v >= 1e4");
+    format!("{}{suffix}", label(v / scale))
 }
 
 /// The labels of the accuracy runs, in matrix order.
@@ -401,6 +410,10 @@ mod tests {
         assert_eq!(at(39.8107), "40");
         assert_eq!(at(6309.57), "6300");
         assert_eq!(at(0.0398107), "0.04");
-        assert_eq!(at(1.0e7), "10000000");
+        assert_eq!(at(1.0e7), "10M");
+        assert_eq!(at(3.2e5), "320k");
+        assert_eq!(at(3.2e6), "3.2M");
+        assert_eq!(at(12_000.0), "12k");
+        assert_eq!(at(2.5e10), "25G");
     }
 }
