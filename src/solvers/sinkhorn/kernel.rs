@@ -514,10 +514,6 @@ impl<'a, const D: usize> Ball<'a, D> {
             (f.iter_mut().zip(&d2)).for_each(|(f, d2)| *f = (-d2 / epsilon).exp() as f32);
             r.first.push(r.run.len() as u32);
         }
-        // The list grew by doubling: up to twice the runs it holds, kept for the step (a
-        // third of a point's bytes in 3D, heaptrack on deep-pool-3d at 40^3). Giving the rest
-        // back costs a reallocation of the piece when it grows.
-        r.run.shrink_to_fit();
     }
 
     /// Lists the runs of the line `l` of a ball into `runs`: its free cells, cut at the
