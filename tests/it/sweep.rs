@@ -280,9 +280,12 @@ fn the_cost_model_is_within_2x_of_the_default_matrix_as_measured() {
 /// The same for the jobs of the paper's matrix that have run (docs/results-paper/report.csv,
 /// whole runs at the paper's sizes), each within the bound its method's fit meets, rounded up
 /// to a tenth (2026-11-29, 480cee2, every job run alone, and ccp's drop-3d at 300^3 by
-/// 1ff1530 and at 150^3 with the half falling obstacle by 8cb4dd1): issues 73 and 76 ask
-/// 1.5x, which ccp's 3D jobs (2.00x either way, the half drop over and the large obstacle
-/// under; the bound was 1.7x before the half-size runs were measured) and Power PIC's 2D jobs do not meet (docs/cluster.md, "The cost model", says why).
+/// 1ff1530 and at 150^3 with the half falling obstacle by 8cb4dd1, narrow-band FLIP's at
+/// 300^3 by 1bf2d98): issues 73 and 76 ask 1.5x, which ccp's 3D jobs (2.00x either way, the
+/// half drop over and the large obstacle under; the bound was 1.7x before the half-size runs
+/// were measured) and Power PIC's 2D jobs do not meet (docs/cluster.md, "The cost model",
+/// says why). Narrow-band FLIP's bound was 1.3x before its drop at 300^3, which its refit
+/// puts 1.49x over, the dams under.
 #[test]
 fn the_cost_model_is_within_bounds_of_the_paper_matrix_as_measured() {
     let ratios = cost_ratios(&["--matrix", "paper"], "docs/results-paper/report.csv");
@@ -291,7 +294,7 @@ fn the_cost_model_is_within_bounds_of_the_paper_matrix_as_measured() {
         "flip" => 1.3,
         "ccp" => 2.1,
         "idp" => 1.4,
-        "nbflip" => 1.3,
+        "nbflip" => 1.5,
         _ => 1.8,
     });
 }
