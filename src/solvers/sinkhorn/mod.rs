@@ -744,43 +744,44 @@ mod tests {
         assert!((v - 1.0).abs() < 1e-8, "{v}");
     }
 
-    #[test]
-    fn the_plan_is_the_same_whatever_the_thread_count() {
+    /// Solves the instance `(tg, points, v)` on `threads[0]` and on `threads[1]` threads and
+    /// asserts the same plan, bit for bit (scalings, iterations, column sums); gives the
+    /// kernel's chunk count.
+    fn same_plan_on<const D: usize>(
+        (tg, points, v): &(TransportGrid<D>, Vec<Vector<D>>, f64),
+        threads: [usize; 2],
+    ) -> usize {
         let s = SinkhornSettings { delta: 1e-3, ..S };
-        let (tg, pts, v) = instance([10, 8, 6], 200, 0.8, 3);
-        let solve = |threads| {
+        let [a, b] = threads.map(|threads| {
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(threads)
                 .build()
                 .unwrap();
-            pool.install(|| Transport::solve(&tg, &Air::Capacity, &pts, v, &s, None).unwrap())
-        };
-        let (a, b) = (solve(1), solve(2));
-        assert_eq!((&a.v, a.iterations), (&b.v, b.iterations));
-        assert_eq!(a.columns(0.0, |_| 1.0), b.columns(0.0, |_| 1.0));
+            pool.install(|| {
+                let t = Transport::solve(tg, &Air::Capacity, points, *v, &s, None).unwrap();
+                let sums = t.columns(0.0, |p| p as f64);
+                (t, sums)
+            })
+        });
+        assert_eq!(
+            (&a.0.v, &a.0.u, a.0.iterations),
+            (&b.0.v, &b.0.u, b.0.iterations)
+        );
+        assert_eq!(a.1, b.1);
+        a.0.kernel.chunks()
+    }
+
+    #[test]
+    fn the_plan_is_the_same_whatever_the_thread_count() {
+        same_plan_on(&instance([10, 8, 6], 200, 0.8, 3), [1, 2]);
     }
 
     /// With more chunks than a wave holds on one thread (16), and one wave for all of them on
     /// eight threads (32 a wave): the same plan, bit for bit.
     #[test]
     fn the_plan_is_the_same_whatever_the_waves_of_chunks() {
-        let s = SinkhornSettings { delta: 1e-3, ..S };
-        let (tg, pts, v) = instance([40, 40, 40], 100_000, 0.8, 5);
-        let solve = |threads| {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .unwrap();
-            pool.install(|| {
-                let t = Transport::solve(&tg, &Air::Capacity, &pts, v, &s, None).unwrap();
-                let sums = t.columns(0.0, |p| p as f64);
-                (t, sums)
-            })
-        };
-        let ((a, sums_a), (b, sums_b)) = (solve(1), solve(8));
-        assert!((17..=32).contains(&a.kernel.chunks()), "{}", a.kernel.chunks());
-        assert_eq!((&a.v, &a.u, a.iterations), (&b.v, &b.u, b.iterations));
-        assert_eq!(sums_a, sums_b);
+        let chunks = same_plan_on(&instance([40, 40, 40], 100_000, 0.8, 5), [1, 8]);
+        assert!((17..=32).contains(&chunks), "{chunks}");
     }
 
     #[test]
