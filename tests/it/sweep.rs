@@ -268,6 +268,25 @@ fn the_plan_lists_jobs_larger_than_this_machine_and_only_those_are_refused() {
     );
 }
 
+/// The results kept beside the default matrix's page (docs/results/runs/, written by `report
+/// --docs`) merge on any checkout into the page's own report.csv: the repository holds what the
+/// page was made from. (The paper's page keeps none yet: its runs of 2026-11-29 were lost with
+/// their machine before results were kept beside the pages; docs/cluster.md.)
+#[test]
+fn the_results_kept_beside_the_page_merge_into_its_csv() {
+    let dir = scratch_dir("kept_beside_page");
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let kept = root.join("docs/results");
+    let folders = format!("{},{}", dir.display(), kept.display());
+    let out = Command::new(env!("CARGO_BIN_EXE_cellflip"))
+        .args(["report", "--merge", &folders, "-q"])
+        .output()
+        .unwrap();
+    ok(&out);
+    let csv = |d: &Path| std::fs::read_to_string(d.join("report.csv")).unwrap();
+    assert_eq!(csv(&dir), csv(&kept));
+}
+
 /// The cost model's estimate of each job of the default matrix against the wall time that job
 /// took in the committed results (docs/results/report.csv): within 2x either way.
 #[test]

@@ -372,7 +372,10 @@ fn write(
     }
     let not_run = sweep::not_run(&missing)?;
     match docs {
-        Some(target) => write_docs(target, specs, &results, &header, &not_run)?,
+        Some(target) => {
+            write_docs(target, specs, &results, &header, &not_run)?;
+            keep_results(target, &results, &options::MatrixOptions::of(args))?;
+        }
         None => write_all(dir, specs, &results, &header, &not_run)?,
     }
     if !args.quiet {
@@ -541,6 +544,31 @@ fn write_docs(
     std::fs::write(&target.page, text)
         .with_context(|| format!("cannot write '{}'", target.page.display()))?;
     target.write_headline(&docs::headline(results, header))
+}
+
+/// `--docs`: the page's results kept beside it in `docs/<page>/runs/`, as `--out` keeps them,
+/// and no others: the repository holds what its page was made from, so that any checkout
+/// merges it again (`--merge NEW,docs/results-paper` puts new results before them) when the
+/// folders that ran its jobs are gone with their machine (docs/cluster.md, "Plan, job, merge").
+fn keep_results(
+    target: &docs::DocsTarget,
+    results: &[Measured],
+    matrix: &options::MatrixOptions,
+) -> Result<()> {
+    let kept: Vec<PathBuf> = results
+        .iter()
+        .map(|m| {
+            let files = saved::RunFiles::of(&target.plots, &m.spec, matrix);
+            saved::save_result(&files, m).map(|()| files.result)
+        })
+        .collect::<Result<_>>()?;
+    for old in sweep::result_files(&target.plots) {
+        if !kept.contains(&old) {
+            std::fs::remove_file(&old)
+                .with_context(|| format!("cannot remove '{}'", old.display()))?;
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]

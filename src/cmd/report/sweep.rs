@@ -334,7 +334,7 @@ fn in_runs(dirs: &[PathBuf]) -> String {
 }
 
 /// The result files under `dir/runs`.
-fn result_files(dir: &Path) -> Vec<PathBuf> {
+pub fn result_files(dir: &Path) -> Vec<PathBuf> {
     let Ok(entries) = std::fs::read_dir(dir.join("runs")) else {
         return vec![];
     };
