@@ -356,45 +356,53 @@ fn docs_mode_refuses_a_folder_without_the_readme_markers_before_running() {
     assert!(!dir.join("docs").exists(), "nothing written");
 }
 
-/// `--docs` keeps the page's results beside it (docs/results/runs/) and no others, and a
-/// checkout merges them again into the page's own report.csv without the folder that ran them.
+/// `--docs` keeps the page's results beside it (docs/results-paper/runs/ for the paper's
+/// matrix, two of whose cheap jobs ran) and no others, and a checkout merges them again into
+/// the page's own report.csv without the folder that ran them.
 #[test]
 fn docs_mode_keeps_the_pages_results_in_the_repository() {
     let dir = common::scratch_dir("report_docs_kept");
     let readme = format!("# cellflip\n{}\n{}\n", docs::BEGIN, docs::END);
     std::fs::write(dir.join("README.md"), readme).unwrap();
-    let runs = dir.join("docs/results/runs");
+    let runs = dir.join("docs/results-paper/runs");
     std::fs::create_dir_all(&runs).unwrap();
-    std::fs::write(
-        runs.join("gone-flip-r24-s1-00000000.result"),
-        "a job no longer on the page",
-    )
-    .unwrap();
-    let matrix = ["--scenes", "dam-2d", "--methods", "flip,ccp", "--res", "24"];
-    let docs_run = [
-        &["report"][..],
-        &matrix,
-        &["--duration", "0.05", "--docs", "-q", "--out", "ran"],
-    ];
-    common::ok(&common::cellflip_in(&dir, &docs_run.concat()));
-    let kept: Vec<String> = std::fs::read_dir(&runs)
+    let stale = runs.join("gone-flip-r24-s1-00000000.result");
+    std::fs::write(&stale, "a job no longer on the page").unwrap();
+    let plan = common::cellflip_in(&dir, &["report", "--matrix", "paper", "--plan"]);
+    common::ok(&plan);
+    let plan = String::from_utf8_lossy(&plan.stdout);
+    let ids: Vec<&str> = (plan.lines())
+        .filter(|l| l.starts_with("drop-2d-flip-") || l.starts_with("drop-2d-ccp-"))
+        .map(|l| l.split_whitespace().next().unwrap())
+        .collect();
+    assert_eq!(ids.len(), 2, "{plan}");
+    let paper = ["report", "--matrix", "paper", "-q"];
+    let jobs = ids.join(",");
+    common::ok(&common::cellflip_in(
+        &dir,
+        &[&paper[..], &["--out", "ran", "--job", &jobs]].concat(),
+    ));
+    common::ok(&common::cellflip_in(
+        &dir,
+        &[&paper[..], &["--merge", "ran", "--docs"]].concat(),
+    ));
+    let mut kept: Vec<String> = std::fs::read_dir(&runs)
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
         .collect();
-    assert_eq!(kept.len(), 2, "{kept:?}");
-    assert!(
-        kept.iter()
-            .all(|f| f.starts_with("dam-2d-") && f.ends_with(".result")),
-        "{kept:?}"
-    );
+    kept.sort();
+    let mut expected: Vec<String> = ids.iter().map(|id| format!("{id}.result")).collect();
+    expected.sort();
+    assert_eq!(kept, expected, "the page's results and no others");
     std::fs::remove_dir_all(dir.join("ran")).unwrap();
     std::fs::create_dir(dir.join("again")).unwrap();
-    common::ok(&common::cellflip_in(
-        &dir,
-        &["report", "--merge", "again,docs/results", "-q"],
-    ));
+    let again = ["report", "--merge", "again,docs/results-paper", "-q"];
+    common::ok(&common::cellflip_in(&dir, &again));
     let csv = |p: &str| std::fs::read_to_string(dir.join(p)).unwrap();
-    assert_eq!(csv("again/report.csv"), csv("docs/results/report.csv"));
+    assert_eq!(
+        csv("again/report.csv"),
+        csv("docs/results-paper/report.csv")
+    );
 }
 
 /// A report stopped by Ctrl-C while its second run goes on, then started again with the same

@@ -288,12 +288,16 @@ fn the_results_kept_beside_the_page_merge_into_its_csv() {
 }
 
 /// The cost model's estimate of each job of the default matrix against the wall time that job
-/// took in the committed results (docs/results/report.csv): within 2x either way.
+/// took in the committed results (docs/results/report.csv): within 2x either way, on the
+/// machine that made the page (its factor, estimate over measured: [`within_on_one_machine`]).
+/// The factor was 1.00 for the page of 480cee2, whose machine the model was fitted on, and is
+/// 1.48 for fd194fe's (2026-11-29): a machine of the same kind 1.5x faster, whose memory copy
+/// measured 40 GB/s against 19. The paper's page (of 480cee2's machine) gives 1.01.
 #[test]
 fn the_cost_model_is_within_2x_of_the_default_matrix_as_measured() {
     let ratios = cost_ratios(&["--budget", "90"], "docs/results/report.csv");
     assert_eq!(ratios.len(), 95);
-    within(&ratios, |_| 2.0);
+    within_on_one_machine(&ratios, |_| 2.0);
 }
 
 /// The same for the jobs of the paper's matrix that have run (docs/results-paper/report.csv,
@@ -309,7 +313,7 @@ fn the_cost_model_is_within_2x_of_the_default_matrix_as_measured() {
 fn the_cost_model_is_within_bounds_of_the_paper_matrix_as_measured() {
     let ratios = cost_ratios(&["--matrix", "paper"], "docs/results-paper/report.csv");
     assert!(ratios.len() >= 40, "{} jobs measured", ratios.len());
-    within(&ratios, |method| match method {
+    within_on_one_machine(&ratios, |method| match method {
         "flip" => 1.3,
         "ccp" => 2.1,
         "idp" => 1.4,
@@ -383,13 +387,31 @@ fn cost_ratios(args: &[&str], csv: &str) -> Vec<(String, String, f64)> {
     })
 }
 
-/// Fails naming every job whose ratio is beyond its method's bound either way.
-fn within(ratios: &[(String, String, f64)], bound: impl Fn(&str) -> f64) {
+/// The speed of the machine that made a page against the one the cost model was fitted on:
+/// the middle (geometrically) of the factors `f` under which every job's `ratio / f` is within
+/// its method's bound either way. Fails naming every job beyond its bound at that `f` when
+/// there is none, and when `f` is beyond 2x either way (these 2-core machines differ by up to
+/// 2x: env). A page is made on whatever machine its session has, and the model's CPU-seconds
+/// are those of the machine it was fitted on; what the bounds guard is how the model follows
+/// the jobs' sizes and methods, which no single factor can mend.
+fn within_on_one_machine(ratios: &[(String, String, f64)], bound: impl Fn(&str) -> f64) -> f64 {
+    let ln_bound = |m: &str| bound(m).ln();
+    let lo = (ratios.iter()).fold(f64::MIN, |lo, (_, m, r)| lo.max(r.ln() - ln_bound(m)));
+    let hi = (ratios.iter()).fold(f64::MAX, |hi, (_, m, r)| hi.min(r.ln() + ln_bound(m)));
+    let f = ((lo + hi) / 2.0).exp();
     let beyond: Vec<String> = (ratios.iter())
-        .filter(|(_, m, r)| !(1.0 / bound(m.as_str())..=bound(m.as_str())).contains(r))
-        .map(|(id, _, r)| format!("{id}: {r:.2}"))
+        .filter(|(_, m, r)| (r / f).ln().abs() > ln_bound(m))
+        .map(|(id, _, r)| format!("{id}: {:.2}", r / f))
         .collect();
-    assert!(beyond.is_empty(), "estimate / measured: {beyond:?}");
+    assert!(
+        beyond.is_empty(),
+        "estimate / measured over the machine's factor {f:.2}: {beyond:?}"
+    );
+    assert!(
+        (0.5..=2.0).contains(&f),
+        "the page's machine is {f:.2}x the model's"
+    );
+    f
 }
 
 /// The paper's matrix: every scene of sec. 8 at the size the paper names (docs/cluster.md), five
