@@ -270,8 +270,9 @@ fn the_plan_lists_jobs_larger_than_this_machine_and_only_those_are_refused() {
 
 /// The results kept beside the default matrix's page (docs/results/runs/, written by `report
 /// --docs`) merge on any checkout into the page's own report.csv: the repository holds what the
-/// page was made from. (The paper's page keeps none yet: its runs of 2026-11-29 were lost with
-/// their machine before results were kept beside the pages; docs/cluster.md.)
+/// page was made from. (Not the paper's page yet: its own runs were lost with their machine
+/// before pages kept their results, and its runs/ holds newer runs of its jobs until it is
+/// merged again; docs/cluster.md.)
 #[test]
 fn the_results_kept_beside_the_page_merge_into_its_csv() {
     let dir = scratch_dir("kept_beside_page");
@@ -394,7 +395,7 @@ fn cost_ratios(args: &[&str], csv: &str) -> Vec<(String, String, f64)> {
 /// 2x: env). A page is made on whatever machine its session has, and the model's CPU-seconds
 /// are those of the machine it was fitted on; what the bounds guard is how the model follows
 /// the jobs' sizes and methods, which no single factor can mend.
-fn within_on_one_machine(ratios: &[(String, String, f64)], bound: impl Fn(&str) -> f64) -> f64 {
+fn within_on_one_machine(ratios: &[(String, String, f64)], bound: impl Fn(&str) -> f64) {
     let ln_bound = |m: &str| bound(m).ln();
     let lo = (ratios.iter()).fold(f64::MIN, |lo, (_, m, r)| lo.max(r.ln() - ln_bound(m)));
     let hi = (ratios.iter()).fold(f64::MAX, |hi, (_, m, r)| hi.min(r.ln() + ln_bound(m)));
@@ -411,7 +412,6 @@ fn within_on_one_machine(ratios: &[(String, String, f64)], bound: impl Fn(&str) 
         (0.5..=2.0).contains(&f),
         "the page's machine is {f:.2}x the model's"
     );
-    f
 }
 
 /// The paper's matrix: every scene of sec. 8 at the size the paper names (docs/cluster.md), five
