@@ -222,24 +222,21 @@ impl<const D: usize> FluidMethod<D> for PowerPicSim<D> {
         let flip = s.config.flip_ratio;
         let solid = &s.solids.solid;
         let pos = &s.particles.pos;
-        let moved: Vec<(Vector<D>, Vector<D>, f64)> = (0..pos.len())
-            .into_par_iter()
-            .map(|p| {
-                let (mut mass, mut centre) = (0.0, Vector::<D>::zeros());
-                let (mut un, mut du) = (Vector::<D>::zeros(), Vector::<D>::zeros());
-                plan.for_each_in_row(p, |k, xj, t| {
-                    let (a, b) = at_cells[k];
-                    mass += t;
-                    centre += t * xj;
-                    un += t * a;
-                    du += t * b;
-                });
-                let (un, du) = (un / mass, du / mass);
-                let v = flip * (s.particles.vel[p] + du) + (1.0 - flip) * un;
-                let x = displace(g, solid, &pos[p], centre / mass - pos[p]);
-                (x, v, (mass / self.volume - 1.0).abs())
-            })
-            .collect();
+        let moved: Vec<(Vector<D>, Vector<D>, f64)> = plan.by_rows(|p| {
+            let (mut mass, mut centre) = (0.0, Vector::<D>::zeros());
+            let (mut un, mut du) = (Vector::<D>::zeros(), Vector::<D>::zeros());
+            plan.for_each_in_row(p, |k, xj, t| {
+                let (a, b) = at_cells[k];
+                mass += t;
+                centre += t * xj;
+                un += t * a;
+                du += t * b;
+            });
+            let (un, du) = (un / mass, du / mass);
+            let v = flip * (s.particles.vel[p] + du) + (1.0 - flip) * un;
+            let x = displace(g, solid, &pos[p], centre / mass - pos[p]);
+            (x, v, (mass / self.volume - 1.0).abs())
+        });
         self.row_error = 0.0;
         for (p, (x, v, e)) in moved.into_iter().enumerate() {
             s.particles.pos[p] = x;

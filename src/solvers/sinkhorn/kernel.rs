@@ -272,6 +272,20 @@ impl<const D: usize> Kernel<D> {
         }
     }
 
+    /// `f(p)` of every point `p`, by point: computed in the sorted order, so that the rows
+    /// that follow one another read neighbouring slots (a walk by point would jump across the
+    /// grid from row to row).
+    pub(super) fn by_rows<T>(&self, f: impl Fn(usize) -> T + Sync) -> Vec<T>
+    where
+        T: Copy + Send + Sync,
+    {
+        let sorted: Vec<T> = (self.order.par_iter())
+            .with_min_len(ROW_GRAIN)
+            .map(|&p| f(p as usize))
+            .collect();
+        self.rank.par_iter().map(|&i| sorted[i as usize]).collect()
+    }
+
     /// `sum_j K_pj v_j` of point `p`.
     pub(super) fn row_sum(&self, p: usize, v: &[f64]) -> f64 {
         self.row_sum_at(self.rank[p] as usize, v)
@@ -721,6 +735,12 @@ mod tests {
         let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * b.abs();
         let sums: Vec<f64> = (0..points.len()).map(|p| kernel.row_sum(p, &v)).collect();
         assert!(sums.iter().zip(&rows).all(|(&a, &b)| close(a, b)));
+        // Walked in the sorted order, given back by point.
+        let by_rows = kernel.by_rows(|p| (p, kernel.row_sum(p, &v)));
+        assert_eq!(
+            by_rows,
+            sums.iter().copied().enumerate().collect::<Vec<_>>()
+        );
         let cols = kernel.columns(0.0, |p| w[p]);
         assert!(cols.iter().zip(&columns).all(|(&a, &b)| close(a, b)));
         // The fused row update and column sums: the same numbers as the two passes, bit for bit.

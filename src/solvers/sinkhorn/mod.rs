@@ -534,6 +534,16 @@ impl<const D: usize> Transport<D> {
         (self.kernel).for_each_in_row(p, |k, kpj| f(k, self.centre[k], u * kpj * self.v[k]));
     }
 
+    /// `f(p)` of every point `p` of the solve, by point, computed in the order that keeps the
+    /// rows' cells in cache (the points sorted by cell); `f` may read rows with
+    /// [`Self::for_each_in_row`].
+    pub fn by_rows<T>(&self, f: impl Fn(usize) -> T + Sync) -> Vec<T>
+    where
+        T: Copy + Send + Sync,
+    {
+        self.kernel.by_rows(f)
+    }
+
     /// Each slot's cell: the cells with capacity within the reach of some point.
     pub fn active_cells(&self) -> &[u32] {
         &self.active
