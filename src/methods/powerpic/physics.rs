@@ -237,6 +237,7 @@ impl<const D: usize> FluidMethod<D> for PowerPicSim<D> {
             let x = displace(g, solid, &pos[p], centre / mass - pos[p]);
             (x, v, (mass / self.volume - 1.0).abs())
         });
+        assert_eq!(moved.len(), pos.len(), "one row per particle of the solve");
         self.row_error = 0.0;
         for (p, (x, v, e)) in moved.into_iter().enumerate() {
             s.particles.pos[p] = x;
