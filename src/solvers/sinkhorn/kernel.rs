@@ -283,6 +283,11 @@ impl<const D: usize> Kernel<D> {
             .with_min_len(ROW_GRAIN)
             .map(|&p| f(p as usize))
             .collect();
+        self.by_point(&sorted)
+    }
+
+    /// Values given in the sorted order, `sorted`, by point.
+    fn by_point<T: Copy + Send + Sync>(&self, sorted: &[T]) -> Vec<T> {
         self.rank.par_iter().map(|&i| sorted[i as usize]).collect()
     }
 
@@ -377,8 +382,7 @@ impl<const D: usize> Kernel<D> {
             },
             |u| sorted.extend(u),
         );
-        let u = self.rank.par_iter().map(|&i| sorted[i as usize]).collect();
-        (u, sums)
+        (self.by_point(&sorted), sums)
     }
 
     /// Column sums a wave of chunks at a time ([`wave_len`]): each chunk's `scatter` adds its
