@@ -119,10 +119,10 @@ impl MethodType for Ccp {
     }
 
     fn step_cost(_settings: &CcpSettings, dim: usize) -> StepCost {
-        // ns per band particle and per cell, [2D, 3D], fitted by tools/cost-fit.py to the whole
-        // runs of the default and paper matrices (2026-11-29: 480cee2's, drop-3d at 300^3 by
-        // 1ff1530 and the half-size drop and falling obstacle by 8cb4dd1;
-        // docs/results/report.csv and docs/results-paper/report.csv; docs/cluster.md).
-        StepCost::of(dim, [(600.0, 75.0), (525.0, 273.0)]).per_driven(Unit::Particle)
+        // ns per band particle and per cell, [2D, 3D], fitted by tools/cost-fit.py to the whole runs of
+        // the default and paper matrices as their pages hold them (2026-11-30: every run of the
+        // binary of fd194fe on one 2-core AMD EPYC, memory copy 34-45 GB/s; docs/results/report.csv
+        // and docs/results-paper/report.csv; docs/cluster.md, "The cost model").
+        StepCost::of(dim, [(416.0, 72.0), (344.0, 196.0)]).per_driven(Unit::Particle)
     }
 }

@@ -40,11 +40,10 @@ impl MethodType for Flip {
 
     fn step_cost(_settings: &NoSettings, dim: usize) -> StepCost {
         // ns per unit and per cell, [2D, 3D], fitted by tools/cost-fit.py to the whole runs of
-        // the default and paper matrices (2026-11-29, 480cee2, docs/results/report.csv and
-        // docs/results-paper/report.csv; docs/cluster.md); the 3D pair refitted with FLIP's
-        // whole drop-3d at 300^3 (1bf2d98: 1,162 steps, 5,143 s of stages, which (96, 51) put
-        // at 0.75x): worst 1.16x.
-        StepCost::of(dim, [(209.0, 0.0), (111.0, 59.0)])
+        // the default and paper matrices as their pages hold them (2026-11-30: every run of the
+        // binary of fd194fe on one 2-core AMD EPYC, memory copy 34-45 GB/s; docs/results/report.csv
+        // and docs/results-paper/report.csv; docs/cluster.md, "The cost model").
+        StepCost::of(dim, [(145.0, 8.0), (95.0, 32.0)])
     }
 }
 

@@ -105,8 +105,9 @@ impl MethodType for Idp {
 
     fn step_cost(_settings: &IdpSettings, dim: usize) -> StepCost {
         // ns per unit and per cell, [2D, 3D], fitted by tools/cost-fit.py to the whole runs of
-        // the default and paper matrices (2026-11-29, 480cee2, docs/results/report.csv and
-        // docs/results-paper/report.csv; docs/cluster.md).
-        StepCost::of(dim, [(413.0, 0.0), (241.0, 54.0)])
+        // the default and paper matrices as their pages hold them (2026-11-30: every run of the
+        // binary of fd194fe on one 2-core AMD EPYC, memory copy 34-45 GB/s; docs/results/report.csv
+        // and docs/results-paper/report.csv; docs/cluster.md, "The cost model").
+        StepCost::of(dim, [(286.0, 0.0), (138.0, 41.0)])
     }
 }

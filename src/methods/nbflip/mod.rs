@@ -105,9 +105,9 @@ impl MethodType for Nbflip {
 
     fn step_cost(_settings: &NbflipSettings, dim: usize) -> StepCost {
         // ns per unit and per cell, [2D, 3D], fitted by tools/cost-fit.py to the whole runs of
-        // the default and paper matrices (2026-11-29, 480cee2, docs/results/report.csv and
-        // docs/results-paper/report.csv; docs/cluster.md); 3D refitted with drop-3d at 300^3
-        // (1bf2d98), which (495, 178) put at 1.66x its time.
-        StepCost::of(dim, [(714.0, 35.0), (536.0, 150.0)]).per_driven(Unit::LiquidCell)
+        // the default and paper matrices as their pages hold them (2026-11-30: every run of the
+        // binary of fd194fe on one 2-core AMD EPYC, memory copy 34-45 GB/s; docs/results/report.csv
+        // and docs/results-paper/report.csv; docs/cluster.md, "The cost model").
+        StepCost::of(dim, [(434.0, 51.0), (376.0, 86.0)]).per_driven(Unit::LiquidCell)
     }
 }
