@@ -10,6 +10,7 @@ use anyhow::{anyhow, Context, Result};
 use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
 use std::path::Path;
 
 /// The bundled font (DejaVu Sans, Bitstream Vera licence: assets/DejaVuSans-LICENSE.txt).
@@ -37,6 +38,17 @@ pub struct Chart {
     pub series: Vec<Series>,
     /// Where the legend goes (away from the data).
     pub legend: SeriesLabelPosition,
+    /// Words written on the plot, each under a point.
+    pub notes: Vec<Note>,
+}
+
+/// A word written on a plot under the point `at` (in the chart's coordinates), its end, middle
+/// or start there as `align` says.
+#[derive(Clone)]
+pub struct Note {
+    pub at: (f64, f64),
+    pub text: String,
+    pub align: HPos,
 }
 
 fn color(k: MethodKind) -> RGBColor {
@@ -165,6 +177,12 @@ fn plot_series<'a, DB: DrawingBackend + 'a>(
             }
         }
     }
+    let note = |n: &Note| {
+        let style = ("sans-serif", 12).into_font().color(&RGBColor(90, 90, 90));
+        let style = style.pos(Pos::new(n.align, VPos::Top));
+        EmptyElement::at(n.at) + Text::new(n.text.clone(), (0, 8), style)
+    };
+    chart.draw_series(c.notes.iter().map(note))?;
     chart
         .configure_series_labels()
         .background_style(WHITE.mix(0.8))
@@ -272,6 +290,7 @@ fn pareto(results: &[Measured]) -> Vec<(String, Chart)> {
                 log_y: false,
                 series,
                 legend: SeriesLabelPosition::UpperRight,
+                notes: vec![],
             };
             out.push((
                 format!(
@@ -319,6 +338,7 @@ fn volumes(results: &[Measured]) -> Vec<(String, Chart)> {
                 log_y: false,
                 series,
                 legend: SeriesLabelPosition::LowerLeft,
+                notes: vec![],
             };
             (format!("volume-{}", slug(&label)), chart)
         })
@@ -350,6 +370,10 @@ fn time_per_step_3d(results: &[Measured]) -> Option<(String, Chart)> {
         })
         .filter(|s| !s.points.is_empty())
         .collect();
+    let at = |m: &Measured| (m.get("grid_cells").log10(), m.get("ms_per_step").log10());
+    let named: Vec<(String, (f64, f64))> = (runs.iter())
+        .map(|m| (m.spec.label.clone(), at(m)))
+        .collect();
     let chart = Chart {
         title: "3D: time per step against the grid's cells".into(),
         x: "grid cells (log)".into(),
@@ -358,8 +382,37 @@ fn time_per_step_3d(results: &[Measured]) -> Option<(String, Chart)> {
         log_y: true,
         series,
         legend: SeriesLabelPosition::UpperLeft,
+        notes: column_notes(&named),
     };
     Some(("time-per-step-3d".into(), chart))
+}
+
+/// One note a column of points (the points of one name at one x): the name, under the
+/// column's lowest point, ending there in the right third of the x range and starting there
+/// in the left third, so that it stays on the plot.
+fn column_notes(points: &[(String, (f64, f64))]) -> Vec<Note> {
+    let xs = points.iter().map(|p| p.1 .0);
+    let (lo, hi) = (
+        xs.clone().fold(f64::MAX, f64::min),
+        xs.fold(f64::MIN, f64::max),
+    );
+    let mut notes: Vec<Note> = vec![];
+    for (name, (x, y)) in points {
+        let column = |n: &&mut Note| n.text == *name && n.at.0 == *x;
+        match notes.iter_mut().find(|n| column(n)) {
+            Some(n) => n.at.1 = n.at.1.min(*y),
+            None => notes.push(Note {
+                at: (*x, *y),
+                text: name.clone(),
+                align: match (x - lo) / (hi - lo).max(f64::MIN_POSITIVE) {
+                    f if f < 1.0 / 3.0 => HPos::Left,
+                    f if f > 2.0 / 3.0 => HPos::Right,
+                    _ => HPos::Center,
+                },
+            }),
+        }
+    }
+    notes
 }
 
 /// The surge front against Martin & Moyce (1952), per method at the middle resolution.
@@ -395,6 +448,7 @@ fn martin_moyce(results: &[Measured]) -> Result<Vec<(String, Chart)>> {
         log_y: false,
         series,
         legend: SeriesLabelPosition::UpperLeft,
+        notes: vec![],
     };
     Ok(vec![("martin-moyce-front".into(), chart)])
 }
@@ -402,6 +456,34 @@ fn martin_moyce(results: &[Measured]) -> Result<Vec<(String, Chart)>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// One note a column of points, under its lowest point, aligned so as to stay on the plot.
+    #[test]
+    fn each_column_of_points_gets_one_note_under_its_lowest_point() {
+        let p = |name: &str, x: f64, y: f64| (name.to_string(), (x, y));
+        let points = [
+            p("dam-3d", 6.0, 2.0),
+            p("large-obstacle-3d", 5.6, 1.5),
+            p("dam-3d", 6.0, 1.2),
+            p("drop-3d", 7.4, 3.6),
+            p("drop-3d", 6.5, 2.7),
+            p("dam-3d", 6.0, 3.1),
+        ];
+        let notes = column_notes(&points);
+        let got: Vec<(&str, (f64, f64))> = notes.iter().map(|n| (&n.text[..], n.at)).collect();
+        let want = [
+            ("dam-3d", (6.0, 1.2)),
+            ("large-obstacle-3d", (5.6, 1.5)),
+            ("drop-3d", (7.4, 3.6)),
+            ("drop-3d", (6.5, 2.7)),
+        ];
+        assert_eq!(got, want);
+        let aligns: Vec<HPos> = notes.iter().map(|n| n.align).collect();
+        assert!(matches!(
+            aligns[..],
+            [HPos::Left, HPos::Left, HPos::Right, HPos::Center]
+        ));
+    }
 
     #[test]
     fn a_log_axis_labels_its_ticks_with_two_significant_digits() {
