@@ -289,7 +289,7 @@ fn the_results_kept_beside_the_page_merge_into_its_csv() {
             .unwrap();
         ok(&out);
         let csv = |d: &Path| std::fs::read_to_string(d.join("report.csv")).unwrap();
-        assert!(csv(&dir) == csv(&kept), "{page}: the merge differs");
+        assert_eq!(csv(&dir), csv(&kept), "{page}: the merge differs");
     }
 }
 

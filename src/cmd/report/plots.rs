@@ -44,7 +44,6 @@ pub struct Chart {
 
 /// A word written on a plot under the point `at` (in the chart's coordinates), its end, middle
 /// or start there as `align` says.
-#[derive(Clone)]
 pub struct Note {
     pub at: (f64, f64),
     pub text: String,
@@ -359,18 +358,18 @@ fn time_per_step_3d(results: &[Measured]) -> Option<(String, Chart)> {
     if sizes.len() < 2 {
         return None;
     }
+    let at = |m: &&Measured| (m.get("grid_cells").log10(), m.get("ms_per_step").log10());
     let series = (MethodKind::ALL.iter())
         .map(|&k| Series {
             name: k.name().to_string(),
             color: color(k),
             points: (runs.iter().filter(|m| m.spec.method == k))
-                .map(|m| (m.get("grid_cells").log10(), m.get("ms_per_step").log10()))
+                .map(at)
                 .collect(),
             markers: true,
         })
         .filter(|s| !s.points.is_empty())
         .collect();
-    let at = |m: &Measured| (m.get("grid_cells").log10(), m.get("ms_per_step").log10());
     let named: Vec<(String, (f64, f64))> = (runs.iter())
         .map(|m| (m.spec.label.clone(), at(m)))
         .collect();
@@ -398,8 +397,7 @@ fn column_notes(points: &[(String, (f64, f64))]) -> Vec<Note> {
     );
     let mut notes: Vec<Note> = vec![];
     for (name, (x, y)) in points {
-        let column = |n: &&mut Note| n.text == *name && n.at.0 == *x;
-        match notes.iter_mut().find(|n| column(n)) {
+        match notes.iter_mut().find(|n| n.text == *name && n.at.0 == *x) {
             Some(n) => n.at.1 = n.at.1.min(*y),
             None => notes.push(Note {
                 at: (*x, *y),

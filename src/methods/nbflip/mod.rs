@@ -104,10 +104,8 @@ impl MethodType for Nbflip {
     }
 
     fn step_cost(_settings: &NbflipSettings, dim: usize) -> StepCost {
-        // ns per unit and per cell, [2D, 3D], fitted by tools/cost-fit.py to the whole runs of
-        // the default and paper matrices as their pages hold them (2026-11-30: every run of the
-        // binary of fd194fe on one 2-core AMD EPYC, memory copy 34-45 GB/s; docs/results/report.csv
-        // and docs/results-paper/report.csv; docs/cluster.md, "The cost model").
+        // ns per unit and per cell, [2D, 3D]: the 2026-11-30 fit of tools/cost-fit.py
+        // (docs/cluster.md, "The cost model", says on which runs and how close).
         StepCost::of(dim, [(434.0, 51.0), (376.0, 86.0)]).per_driven(Unit::LiquidCell)
     }
 }
