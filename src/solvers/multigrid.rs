@@ -156,6 +156,10 @@ const ROW_GRAIN: usize = PAR_GRAIN / 2;
 /// while the stencil stays one byte; every finest row's diagonal is a whole count.
 const EIGHTHS: u8 = 8;
 
+/// The largest [`Stencil::count`]: six neighbours (3D) of at most two whole counts each (a
+/// Dirichlet one at its nearest, [`Cells::dirichlet_weight`]: `2 side / (side + 1)`).
+const MAX_COUNT: usize = 2 * 6 * EIGHTHS as usize;
+
 /// Red-black Gauss-Seidel sweeps before and after each coarse correction.
 pub const SWEEPS: usize = 2;
 
@@ -298,9 +302,8 @@ struct Operator<const D: usize> {
     scale: f64,
     /// The diagonal's unit: `scale / EIGHTHS`.
     unit: f64,
-    /// `1 / D'` by [`Stencil::count`]: `1 / (unit * count)`, and `1 / scale` for none (a
-    /// neighbour weighs at most two, [`Cells::dirichlet_weight`]).
-    inverse: [f64; 4 * 3 * EIGHTHS as usize + 1],
+    /// `1 / D'` by [`Stencil::count`]: `1 / (unit * count)`, and `1 / scale` for none.
+    inverse: [f64; MAX_COUNT + 1],
 }
 
 /// A level's rows in their order: its unknown cells `cells` (ascending), the red ones (even
@@ -383,6 +386,7 @@ impl<const D: usize> Operator<D> {
             .filter(|&i| stencil[i].count == 0)
             .map(|i| i as u32)
             .collect();
+        let unit = scale / EIGHTHS as f64;
         let op = Operator {
             shape,
             row,
@@ -391,10 +395,10 @@ impl<const D: usize> Operator<D> {
             stencil,
             lonely,
             scale,
-            unit: scale / EIGHTHS as f64,
+            unit,
             inverse: std::array::from_fn(|n| match n {
                 0 => 1.0 / scale,
-                n => 1.0 / (scale / EIGHTHS as f64 * n as f64),
+                n => 1.0 / (unit * n as f64),
             }),
         };
         (op, level_row)
@@ -620,27 +624,26 @@ impl<'a, const D: usize> Cells<'a, D> {
     fn dirichlet_weight(&self, c: [usize; D], a: usize, up: bool) -> u8 {
         let (side, fine) = (self.side, Shape::new(self.finest.dims));
         let centre = (2 * c[a] + 1) * side;
-        let behind = match up {
-            true => (c[a] + 1) * side..((c[a] + 2) * side).min(fine.dims[a]),
-            false => (c[a] - 1) * side..c[a] * side,
+        // The finest layers behind the face, nearest first.
+        let (near, depth) = match up {
+            true => (
+                (c[a] + 1) * side,
+                side.min(fine.dims[a] - (c[a] + 1) * side),
+            ),
+            false => (c[a] * side - 1, side),
         };
+        let layer = |k: usize| if up { near + k } else { near - k };
         let (mut lo, mut hi) = self.block(c);
         (lo[a], hi[a]) = (0, 1);
         let (mut sum, mut columns) = (0.0, 0);
         for mut f in block_cells(lo, hi) {
-            let steps = behind.clone();
-            let mut along = |p: usize| {
+            let mut class_at = |p: usize| {
                 f[a] = p;
                 (self.finest.class)(fine.index(f))
             };
-            let first = match up {
-                true => steps
-                    .map(|p| (p, along(p)))
-                    .find(|&(_, k)| k != CellClass::Unknown),
-                false => (steps.rev())
-                    .map(|p| (p, along(p)))
-                    .find(|&(_, k)| k != CellClass::Unknown),
-            };
+            let first = (0..depth)
+                .map(|k| (layer(k), class_at(layer(k))))
+                .find(|&(_, class)| class != CellClass::Unknown);
             if let Some((p, CellClass::Dirichlet)) = first {
                 sum += 2.0 * side as f64 / (2 * p + 1).abs_diff(centre) as f64;
                 columns += 1;
