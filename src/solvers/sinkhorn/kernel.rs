@@ -33,8 +33,11 @@
 //! ([`Active::around_spans`], the cubes of side `2 ceil(r / h) + 1` around their cells) are
 //! numbered densely, a line of cells along axis 0 at a time, while the kernel is built.
 
+mod lanes;
+
 use super::{SinkhornError, SinkhornSettings, TransportGrid};
 use crate::grid::active::{line_spans, Active, CellNumbers};
+use crate::grid::lanes::cpu_has_lanes;
 use crate::grid::{strides, Vector};
 use crate::solvers::NONE;
 use rayon::prelude::*;
@@ -338,8 +341,9 @@ impl<const D: usize> Kernel<D> {
         volume: f64,
         relax: Option<impl Fn(usize, f64) -> f64 + Sync>,
     ) -> RowUpdate {
+        let lanes = cpu_has_lanes();
         let Some(relax) = relax else {
-            let (exact, sums) = self.rows_and_sums(v, volume, 0.0, |_, u| u);
+            let (exact, sums) = self.rows_and_sums(v, volume, 0.0, |_, u| u, lanes);
             return RowUpdate {
                 exact,
                 relaxed: None,
@@ -347,7 +351,7 @@ impl<const D: usize> Kernel<D> {
             };
         };
         let pair = |p, u| Vector::<2>::new(relax(p, u), u);
-        let (u, sums) = self.rows_and_sums(v, volume, Vector::<2>::zeros(), pair);
+        let (u, sums) = self.rows_and_sums(v, volume, Vector::<2>::zeros(), pair, lanes);
         let split = |x: &[Vector<2>], k: usize| x.par_iter().map(|x| x[k]).collect();
         RowUpdate {
             exact: split(&u, 1),
@@ -357,28 +361,31 @@ impl<const D: usize> Kernel<D> {
     }
 
     /// The fused pass of [`Self::rows_then_columns`]: each point's `w(p, u*_p)`, by point, and
-    /// their column sums.
+    /// their column sums; four cells at a time with `lanes` (AVX2, [`lanes`]: the same bits).
     fn rows_and_sums<T>(
         &self,
         v: &[f64],
         volume: f64,
         zero: T,
         w: impl Fn(usize, f64) -> T + Sync,
+        lanes: bool,
     ) -> (Vec<T>, Vec<T>)
     where
-        T: Copy + Send + Sync + AddAssign + Mul<f64, Output = T>,
+        T: lanes::Summand + Send + Sync,
     {
         let mut sorted = Vec::with_capacity(self.order.len());
         let sums = self.in_waves(
             zero,
-            |c, acc| {
-                (c.points.clone())
+            |c, acc| match lanes {
+                // SAFETY: `lanes` only where the CPU has AVX2 (`cpu_has_lanes`).
+                true => unsafe { self.chunk_rows_in_lanes(c, v, volume, &w, acc) },
+                false => (c.points.clone())
                     .map(|i| {
                         let u = w(self.order[i] as usize, volume / self.row_sum_at(i, v));
                         self.scatter_row(i, u, c, acc);
                         u
                     })
-                    .collect::<Vec<T>>()
+                    .collect::<Vec<T>>(),
             },
             |u| sorted.extend(u),
         );
@@ -386,9 +393,9 @@ impl<const D: usize> Kernel<D> {
     }
 
     /// Column sums a wave of chunks at a time ([`wave_len`]): each chunk's `scatter` adds its
-    /// points' rows into its window of slots (and gives what else it computes, which `keep`
-    /// takes in chunk order), and the windows are added into one value per slot in chunk
-    /// order.
+    /// points' rows into its window of slots (which has [`lanes::PAD`] spare at its end) and
+    /// gives what else it computes, which `keep` takes in chunk order; the windows are added
+    /// into one value per slot in chunk order.
     fn in_waves<T, U: Send>(
         &self,
         zero: T,
@@ -402,7 +409,7 @@ impl<const D: usize> Kernel<D> {
         for wave in self.chunks.chunks(wave_len()) {
             let parts: Vec<(U, Vec<T>)> = (wave.par_iter())
                 .map(|c| {
-                    let mut acc = vec![zero; c.window.len()];
+                    let mut acc = vec![zero; c.window.len() + lanes::PAD];
                     (scatter(c, &mut acc), acc)
                 })
                 .collect();
@@ -799,6 +806,43 @@ mod tests {
         kernel_values_are_single_precision_factors_multiplied([24, 18], 0.1);
         kernel_values_are_single_precision_factors_multiplied([24, 18], 0.4);
         kernel_values_are_single_precision_factors_multiplied([12, 10, 9], 0.1);
+    }
+
+    /// The fused pass four cells at a time ([`lanes`]) against the one-cell code, bit for bit,
+    /// with one scaling and with pairs, on grids with blocked cells (runs cut short) and at two
+    /// kernel widths (boxes of 7 and 15 cells a side: runs of one group of four and of four).
+    fn lanes_give_the_one_cell_bits<const D: usize>(dims: [usize; D], epsilon: f64) {
+        let mut tg = TransportGrid::new(Grid::new(dims), 0.5);
+        let mut rng = StdRng::seed_from_u64(20 + D as u64);
+        for j in 0..tg.grid.num_cells() {
+            tg.set_free(j, rng.random::<f64>() > 0.15);
+        }
+        let (points, kernel) = random_points_kernel(&tg, 700, epsilon, &mut rng);
+        let v: Vec<f64> = (0..kernel.active().len()).map(|_| rng.random()).collect();
+        let w: Vec<f64> = (0..points.len()).map(|_| rng.random()).collect();
+        let bits = |x: &[f64]| x.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        let one = |lanes| kernel.rows_and_sums(&v, 0.25, 0.0, |_, u| u, lanes);
+        let (scalar, lanes) = (one(false), one(true));
+        assert_eq!(bits(&scalar.0), bits(&lanes.0));
+        assert_eq!(bits(&scalar.1), bits(&lanes.1));
+        let pair = |p: usize, u: f64| Vector::<2>::new(u * w[p], u);
+        let two = |lanes| kernel.rows_and_sums(&v, 0.25, Vector::<2>::zeros(), pair, lanes);
+        let (scalar, lanes) = (two(false), two(true));
+        let flat = |x: &[Vector<2>]| x.iter().flat_map(|x| [x[0], x[1]]).collect::<Vec<_>>();
+        assert_eq!(bits(&flat(&scalar.0)), bits(&flat(&lanes.0)));
+        assert_eq!(bits(&flat(&scalar.1)), bits(&flat(&lanes.1)));
+    }
+
+    #[test]
+    fn lanes_give_the_one_cell_bits_2d_and_3d() {
+        if !cpu_has_lanes() {
+            eprintln!("no AVX2 here: the four-lane code was not exercised");
+            return;
+        }
+        lanes_give_the_one_cell_bits([40, 30], 0.1);
+        lanes_give_the_one_cell_bits([40, 30], 0.4);
+        lanes_give_the_one_cell_bits([16, 14, 12], 0.1);
+        lanes_give_the_one_cell_bits([16, 14, 12], 0.4);
     }
 
     #[test]

@@ -1,0 +1,155 @@
+//! The fused row update and column sums of [`Kernel`] four cells of a run at a time, in
+//! 256-bit AVX2 registers (issue 73).
+//!
+//! **Why.** A point's row is about 40 runs of about 4 cells in 3D at the defaults, so the
+//! one-cell loops spend about as much on each run's loop as on its cells. Here a run is
+//! one group of four cells or two (a run has at most [`Ball::side`](super::Ball::side)
+//! cells): each group's `K_pj = outer f_0` is made once for both halves of the pass (kept
+//! for the scatter), and its four column sums are added with one load, one multiplication,
+//! one addition and one store.
+//!
+//! **The same bits as the one-cell code.** Every lane does what the one-cell code does for its
+//! cell, in the same order, with no fused multiply-add: `K_pj = outer f_0`, the row sum adds
+//! `K_pj v_j` one cell at a time in grid order, and each slot's sum adds `w K_pj`. A run's
+//! last group holds zeros past its end (masked loads of the factors and of `v`), which add
+//! `+0` to the row sum and to the window's slots past the run: those are exact (every sum is
+//! `+0` or positive), so a group is stored whole. A chunk's window has [`PAD`] spare slots
+//! for the last run's group. The results are the same whether or not a CPU has AVX2, and the
+//! golden digests did not change.
+
+use super::{Chunk, Kernel};
+use crate::grid::Vector;
+use std::arch::x86_64::*;
+use std::ops::{AddAssign, Mul};
+
+/// Spare slots at the end of a chunk's window: a run's last group may store up to three past
+/// it.
+pub(super) const PAD: usize = 3;
+
+/// The first `n` of four 64-bit lanes set, for `n` in `0..=4`.
+const MASK64: [[i64; 4]; 5] = [
+    [0, 0, 0, 0],
+    [-1, 0, 0, 0],
+    [-1, -1, 0, 0],
+    [-1, -1, -1, 0],
+    [-1, -1, -1, -1],
+];
+
+/// The first `n` of four 32-bit lanes set, for `n` in `0..=4`.
+const MASK32: [[i32; 4]; 5] = [
+    [0, 0, 0, 0],
+    [-1, 0, 0, 0],
+    [-1, -1, 0, 0],
+    [-1, -1, -1, 0],
+    [-1, -1, -1, -1],
+];
+
+/// A value the column sums add in lanes: a scaling, or a pair of them (relaxed, exact).
+pub(super) trait Summand: Copy + AddAssign + Mul<f64, Output = Self> {
+    /// `acc[c] += w * k[c]` for the four cells `k`, each lane as the one-cell `*acc += w * k`.
+    ///
+    /// # Safety
+    /// Only on a CPU with AVX2; `acc` is valid for four values.
+    unsafe fn add_scaled(acc: *mut Self, w: Self, k: __m256d);
+}
+
+impl Summand for f64 {
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    unsafe fn add_scaled(acc: *mut f64, w: f64, k: __m256d) {
+        let sum = _mm256_add_pd(_mm256_loadu_pd(acc), _mm256_mul_pd(_mm256_set1_pd(w), k));
+        _mm256_storeu_pd(acc, sum);
+    }
+}
+
+// Four pairs are eight `f64` in a row: a `Vector<2>` is its two components, nothing else.
+const _: () = assert!(std::mem::size_of::<Vector<2>>() == 2 * std::mem::size_of::<f64>());
+
+impl Summand for Vector<2> {
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    unsafe fn add_scaled(acc: *mut Vector<2>, w: Vector<2>, k: __m256d) {
+        let (acc, w) = (acc.cast::<f64>(), _mm256_setr_pd(w[0], w[1], w[0], w[1]));
+        // Each cell's `K_pj` twice, for the two components of its slot.
+        let halves = [
+            _mm256_permute4x64_pd::<0b01_01_00_00>(k),
+            _mm256_permute4x64_pd::<0b11_11_10_10>(k),
+        ];
+        for (h, k) in halves.into_iter().enumerate() {
+            let at = acc.add(4 * h);
+            _mm256_storeu_pd(at, _mm256_add_pd(_mm256_loadu_pd(at), _mm256_mul_pd(w, k)));
+        }
+    }
+}
+
+impl<const D: usize> Kernel<D> {
+    /// [`Kernel::rows_and_sums`]' work on the chunk `c`: each point's `w(p, u*_p)`, in the
+    /// sorted order, added as `w K_pj` into the chunk's window `acc` (with its [`PAD`]).
+    ///
+    /// # Safety
+    /// Only on a CPU with AVX2.
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn chunk_rows_in_lanes<T: Summand>(
+        &self,
+        c: &Chunk,
+        v: &[f64],
+        volume: f64,
+        w: &impl Fn(usize, f64) -> T,
+        acc: &mut [T],
+    ) -> Vec<T> {
+        assert_eq!(
+            acc.len(),
+            c.window.len() + PAD,
+            "a window with its spare slots"
+        );
+        let mut out = Vec::with_capacity(c.points.len());
+        let mut kernel = Vec::new();
+        for i in c.points.clone() {
+            kernel.clear();
+            let u = w(
+                self.order[i] as usize,
+                volume / self.row_sum_in_lanes(i, v, &mut kernel),
+            );
+            let mut groups = kernel.iter();
+            for run in self.runs_at(i).0 {
+                let at = run.slot as usize - c.window.start;
+                let acc = &mut acc[at..at + run.len as usize + PAD];
+                for g in (0..run.len as usize).step_by(4) {
+                    let k = *groups.next().expect("a group a four cells of a run");
+                    T::add_scaled(acc.as_mut_ptr().add(g), u, k);
+                }
+            }
+            out.push(u);
+        }
+        out
+    }
+
+    /// `sum_j K_pj v_j` of the point at sorted place `i`, as [`Kernel::row_sum_at`] adds it;
+    /// each group of four cells' `K_pj` pushed onto `kernel`, zeros past a run's end.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    unsafe fn row_sum_in_lanes(&self, i: usize, v: &[f64], kernel: &mut Vec<__m256d>) -> f64 {
+        let (runs, factor) = self.runs_at(i);
+        let mut sum = 0.0;
+        for run in runs {
+            let outer = _mm256_set1_pd(self.outer(run, factor));
+            let fx = &factor[run.start as usize..][..run.len as usize];
+            let v = &v[run.slot as usize..][..run.len as usize];
+            for g in (0..fx.len()).step_by(4) {
+                let n = (fx.len() - g).min(4);
+                let m32 = _mm_loadu_si128(MASK32[n].as_ptr().cast());
+                let m64 = _mm256_loadu_si256(MASK64[n].as_ptr().cast());
+                let f = _mm256_cvtps_pd(_mm_maskload_ps(fx.as_ptr().add(g), m32));
+                let k = _mm256_mul_pd(outer, f);
+                let t = _mm256_mul_pd(k, _mm256_maskload_pd(v.as_ptr().add(g), m64));
+                kernel.push(k);
+                let (lo, hi) = (_mm256_castpd256_pd128(t), _mm256_extractf128_pd::<1>(t));
+                sum += _mm_cvtsd_f64(lo);
+                sum += _mm_cvtsd_f64(_mm_unpackhi_pd(lo, lo));
+                sum += _mm_cvtsd_f64(hi);
+                sum += _mm_cvtsd_f64(_mm_unpackhi_pd(hi, hi));
+            }
+        }
+        sum
+    }
+}
