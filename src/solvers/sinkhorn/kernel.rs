@@ -35,7 +35,7 @@
 
 mod lanes;
 
-use super::{SinkhornError, SinkhornSettings, TransportGrid};
+use super::{SinkhornError, SinkhornSettings, TransportGrid, VALUE_GRAIN};
 use crate::grid::active::{line_spans, Active, CellNumbers};
 use crate::grid::lanes::cpu_has_lanes;
 use crate::grid::{strides, Vector};
@@ -291,7 +291,9 @@ impl<const D: usize> Kernel<D> {
 
     /// Values given in the sorted order, `sorted`, by point.
     fn by_point<T: Copy + Send + Sync>(&self, sorted: &[T]) -> Vec<T> {
-        self.rank.par_iter().map(|&i| sorted[i as usize]).collect()
+        (self.rank.par_iter().with_min_len(VALUE_GRAIN))
+            .map(|&i| sorted[i as usize])
+            .collect()
     }
 
     /// `sum_j K_pj v_j` of point `p`.
@@ -352,7 +354,12 @@ impl<const D: usize> Kernel<D> {
         };
         let pair = |p, u| Vector::<2>::new(relax(p, u), u);
         let (u, sums) = self.rows_and_sums(v, volume, Vector::<2>::zeros(), pair, lanes);
-        let split = |x: &[Vector<2>], k: usize| x.par_iter().map(|x| x[k]).collect();
+        let split = |x: &[Vector<2>], k| {
+            x.par_iter()
+                .with_min_len(VALUE_GRAIN)
+                .map(|x| x[k])
+                .collect()
+        };
         RowUpdate {
             exact: split(&u, 1),
             relaxed: Some((split(&u, 0), split(&sums, 0))),

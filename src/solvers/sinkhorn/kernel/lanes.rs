@@ -115,7 +115,7 @@ impl<const D: usize> Kernel<D> {
                 let at = run.slot as usize - c.window.start;
                 let acc = &mut acc[at..at + run.len as usize + PAD];
                 for g in (0..run.len as usize).step_by(4) {
-                    let k = *groups.next().expect("a group a four cells of a run");
+                    let k = *groups.next().expect("a group of four cells of a run");
                     T::add_scaled(acc.as_mut_ptr().add(g), u, k);
                 }
             }
