@@ -7,7 +7,7 @@ use crate::draw::Image;
 use crate::grid::{Grid, MacField, Vector};
 use crate::methods::seam::{FluidMethod, MethodRecording, MethodReport};
 use crate::snapshot::{check_elements, check_indices, Reader, SnapshotError, Writer};
-use crate::solvers::sinkhorn::{Air, SinkhornError, Transport, TransportGrid};
+use crate::solvers::sinkhorn::{Air, SinkhornError, Summand, Transport, TransportGrid};
 use crate::stages::advect::displace;
 use crate::stages::invariants::InvariantViolation;
 use crate::stages::transfer::{self, Known};
@@ -341,6 +341,9 @@ impl<const D: usize> std::ops::Mul<f64> for MassMomentum<D> {
         Self(self.0 * a, self.1 * a)
     }
 }
+
+/// Added into the column sums a cell at a time.
+impl<const D: usize> Summand for MassMomentum<D> {}
 
 #[cfg(test)]
 mod tests {

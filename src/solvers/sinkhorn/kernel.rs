@@ -35,6 +35,8 @@
 
 mod lanes;
 
+pub use lanes::Summand;
+
 use super::{SinkhornError, SinkhornSettings, TransportGrid, VALUE_GRAIN};
 use crate::grid::active::{line_spans, Active, CellNumbers};
 use crate::grid::lanes::cpu_has_lanes;
@@ -322,11 +324,23 @@ impl<const D: usize> Kernel<D> {
     /// count).
     pub(super) fn columns<T>(&self, zero: T, w: impl Fn(usize) -> T + Sync) -> Vec<T>
     where
-        T: Copy + Send + Sync + AddAssign + Mul<f64, Output = T>,
+        T: Summand + Send + Sync,
     {
-        let scatter = |c: &Chunk, acc: &mut [T]| {
-            for i in c.points.clone() {
-                self.scatter_row(i, w(self.order[i] as usize), c, acc);
+        self.columns_in(zero, w, cpu_has_lanes())
+    }
+
+    /// [`Self::columns`], four cells at a time with `lanes` (AVX2, [`lanes`]: the same bits).
+    fn columns_in<T>(&self, zero: T, w: impl Fn(usize) -> T + Sync, lanes: bool) -> Vec<T>
+    where
+        T: Summand + Send + Sync,
+    {
+        let scatter = |c: &Chunk, acc: &mut [T]| match lanes {
+            // SAFETY: `lanes` only where the CPU has AVX2.
+            true => unsafe { self.chunk_columns_in_lanes(c, &w, acc) },
+            false => {
+                for i in c.points.clone() {
+                    self.scatter_row(i, w(self.order[i] as usize), c, acc);
+                }
             }
         };
         self.in_waves(zero, scatter, |()| {})
@@ -378,7 +392,7 @@ impl<const D: usize> Kernel<D> {
         lanes: bool,
     ) -> (Vec<T>, Vec<T>)
     where
-        T: lanes::Summand + Send + Sync,
+        T: Summand + Send + Sync,
     {
         let mut sorted = Vec::with_capacity(self.order.len());
         let sums = self.in_waves(
@@ -815,9 +829,29 @@ mod tests {
         kernel_values_are_single_precision_factors_multiplied([12, 10, 9], 0.1);
     }
 
+    /// A value [`Summand`] adds a cell at a time.
+    #[derive(Clone, Copy)]
+    struct Triple([f64; 3]);
+
+    impl AddAssign for Triple {
+        fn add_assign(&mut self, o: Self) {
+            (0..3).for_each(|k| self.0[k] += o.0[k]);
+        }
+    }
+
+    impl Mul<f64> for Triple {
+        type Output = Self;
+        fn mul(self, a: f64) -> Self {
+            Triple(self.0.map(|x| x * a))
+        }
+    }
+
+    impl Summand for Triple {}
+
     /// The fused pass four cells at a time ([`lanes`]) against the one-cell code, bit for bit,
-    /// with one scaling and with pairs, on grids with blocked cells (runs cut short) and at two
-    /// kernel widths (boxes of 7 and 15 cells a side: runs of one group of four and of four).
+    /// with one scaling and with pairs, and the column sums alone, on grids with blocked cells
+    /// (runs cut short) and at two kernel widths (boxes of 9 and 15 cells a side: runs of up to
+    /// three and four groups of four).
     fn lanes_give_the_one_cell_bits<const D: usize>(dims: [usize; D], epsilon: f64) {
         let mut tg = TransportGrid::new(Grid::new(dims), 0.5);
         let mut rng = StdRng::seed_from_u64(20 + D as u64);
@@ -838,6 +872,13 @@ mod tests {
         let flat = |x: &[Vector<2>]| x.iter().flat_map(|x| [x[0], x[1]]).collect::<Vec<_>>();
         assert_eq!(bits(&flat(&scalar.0)), bits(&flat(&lanes.0)));
         assert_eq!(bits(&flat(&scalar.1)), bits(&flat(&lanes.1)));
+        // The column sums alone: a scaling in lanes, and a value added a cell at a time.
+        let columns = |lanes| kernel.columns_in(0.0, |p| w[p], lanes);
+        assert_eq!(bits(&columns(false)), bits(&columns(true)));
+        let triple = |p: usize| Triple([w[p], 1.0 - w[p], 3.0 * w[p]]);
+        let triples = |lanes| kernel.columns_in(Triple([0.0; 3]), triple, lanes);
+        let flat = |x: &[Triple]| x.iter().flat_map(|x| x.0).collect::<Vec<_>>();
+        assert_eq!(bits(&flat(&triples(false))), bits(&flat(&triples(true))));
     }
 
     #[test]

@@ -73,9 +73,9 @@
 mod kernel;
 
 use crate::grid::{Grid, Vector};
+pub use kernel::Summand;
 use kernel::{Kernel, RowUpdate};
 use rayon::prelude::*;
-use std::ops::{AddAssign, Mul};
 
 /// The kernel is cut where `|x_p - x_j|^2 / eps` exceeds this: `exp(-27.63) = 1e-12`, far
 /// below the tolerances `delta` the iteration is run to.
@@ -526,7 +526,7 @@ impl<const D: usize> Transport<D> {
     /// cell).
     pub fn columns<T>(&self, zero: T, w: impl Fn(usize) -> T + Sync) -> Vec<T>
     where
-        T: Copy + Send + Sync + AddAssign + Mul<f64, Output = T>,
+        T: Summand + Send + Sync,
     {
         let mut c = self.kernel.columns(zero, |p| w(p) * self.u[p]);
         c.iter_mut().zip(&self.v).for_each(|(c, &v)| *c = *c * v);

@@ -44,13 +44,20 @@ const MASK32: [[i32; 4]; 5] = [
     [-1, -1, -1, -1],
 ];
 
-/// A value the column sums add in lanes: a scaling, or a pair of them (relaxed, exact).
-pub(super) trait Summand: Copy + AddAssign + Mul<f64, Output = Self> {
-    /// `acc[c] += w * k[c]` for the four cells `k`, each lane as the one-cell `*acc += w * k`.
+/// A value the column sums add: a scaling or a pair of them (relaxed, exact) in lanes, or any
+/// other (a cell's mass and momentum) a cell at a time, as the one-cell code does.
+pub trait Summand: Copy + AddAssign + Mul<f64, Output = Self> {
+    /// `acc[c] += w * k[c]` for the four cells `k`, each as the one-cell `*acc += w * k`.
     ///
     /// # Safety
     /// Only on a CPU with AVX2; `acc` is valid for four values.
-    unsafe fn add_scaled(acc: *mut Self, w: Self, k: __m256d);
+    #[inline]
+    unsafe fn add_scaled(acc: *mut Self, w: Self, k: __m256d) {
+        let k: [f64; 4] = std::mem::transmute(k);
+        for (c, k) in k.into_iter().enumerate() {
+            *acc.add(c) += w * k;
+        }
+    }
 }
 
 impl Summand for f64 {
@@ -124,6 +131,38 @@ impl<const D: usize> Kernel<D> {
         out
     }
 
+    /// [`Kernel::columns`]' work on the chunk `c`: `w(p) K_pj` of its points added into its
+    /// window `acc` (with its [`PAD`]).
+    ///
+    /// # Safety
+    /// Only on a CPU with AVX2.
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn chunk_columns_in_lanes<T: Summand>(
+        &self,
+        c: &Chunk,
+        w: &impl Fn(usize) -> T,
+        acc: &mut [T],
+    ) {
+        assert_eq!(
+            acc.len(),
+            c.window.len() + PAD,
+            "a window with its spare slots"
+        );
+        for i in c.points.clone() {
+            let u = w(self.order[i] as usize);
+            let (runs, factor) = self.runs_at(i);
+            for run in runs {
+                let outer = _mm256_set1_pd(self.outer(run, factor));
+                let fx = &factor[run.start as usize..][..run.len as usize];
+                let at = run.slot as usize - c.window.start;
+                let acc = &mut acc[at..at + fx.len() + PAD];
+                for g in (0..fx.len()).step_by(4) {
+                    T::add_scaled(acc.as_mut_ptr().add(g), u, group(outer, fx, g));
+                }
+            }
+        }
+    }
+
     /// `sum_j K_pj v_j` of the point at sorted place `i`, as [`Kernel::row_sum_at`] adds it;
     /// each group of four cells' `K_pj` pushed onto `kernel`, zeros past a run's end.
     #[inline]
@@ -136,11 +175,8 @@ impl<const D: usize> Kernel<D> {
             let fx = &factor[run.start as usize..][..run.len as usize];
             let v = &v[run.slot as usize..][..run.len as usize];
             for g in (0..fx.len()).step_by(4) {
-                let n = (fx.len() - g).min(4);
-                let m32 = _mm_loadu_si128(MASK32[n].as_ptr().cast());
-                let m64 = _mm256_loadu_si256(MASK64[n].as_ptr().cast());
-                let f = _mm256_cvtps_pd(_mm_maskload_ps(fx.as_ptr().add(g), m32));
-                let k = _mm256_mul_pd(outer, f);
+                let k = group(outer, fx, g);
+                let m64 = _mm256_loadu_si256(MASK64[(fx.len() - g).min(4)].as_ptr().cast());
                 let t = _mm256_mul_pd(k, _mm256_maskload_pd(v.as_ptr().add(g), m64));
                 kernel.push(k);
                 let (lo, hi) = (_mm256_castpd256_pd128(t), _mm256_extractf128_pd::<1>(t));
@@ -152,4 +188,16 @@ impl<const D: usize> Kernel<D> {
         }
         sum
     }
+}
+
+/// The `K_pj = outer f_0` of the four cells of a run from its `g`-th, `fx` the run's factors
+/// along axis 0: zeros past the run's end.
+#[inline]
+#[target_feature(enable = "avx2")]
+unsafe fn group(outer: __m256d, fx: &[f32], g: usize) -> __m256d {
+    let m32 = _mm_loadu_si128(MASK32[(fx.len() - g).min(4)].as_ptr().cast());
+    _mm256_mul_pd(
+        outer,
+        _mm256_cvtps_pd(_mm_maskload_ps(fx.as_ptr().add(g), m32)),
+    )
 }
