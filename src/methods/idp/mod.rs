@@ -106,6 +106,6 @@ impl MethodType for Idp {
     fn step_cost(_settings: &IdpSettings, dim: usize) -> StepCost {
         // ns per unit and per cell, [2D, 3D]: the 2026-11-30 fit of tools/cost-fit.py
         // (docs/cluster.md, "The cost model", says on which runs and how close).
-        StepCost::of(dim, [(286.0, 0.0), (138.0, 41.0)])
+        StepCost::of(dim, [(286.0, 0.0), (209.0, 61.0)])
     }
 }
