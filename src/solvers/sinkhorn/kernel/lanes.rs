@@ -26,24 +26,6 @@ use std::ops::{AddAssign, Mul};
 /// it.
 pub(super) const PAD: usize = 3;
 
-/// The first `n` of four 64-bit lanes set, for `n` in `0..=4`.
-const MASK64: [[i64; 4]; 5] = [
-    [0, 0, 0, 0],
-    [-1, 0, 0, 0],
-    [-1, -1, 0, 0],
-    [-1, -1, -1, 0],
-    [-1, -1, -1, -1],
-];
-
-/// The first `n` of four 32-bit lanes set, for `n` in `0..=4`.
-const MASK32: [[i32; 4]; 5] = [
-    [0, 0, 0, 0],
-    [-1, 0, 0, 0],
-    [-1, -1, 0, 0],
-    [-1, -1, -1, 0],
-    [-1, -1, -1, -1],
-];
-
 /// A value the column sums add: a scaling or a pair of them (relaxed, exact) in lanes, or any
 /// other (a cell's mass and momentum) a cell at a time, as the one-cell code does.
 pub trait Summand: Copy + AddAssign + Mul<f64, Output = Self> {
@@ -157,7 +139,7 @@ impl<const D: usize> Kernel<D> {
                 let at = run.slot as usize - c.window.start;
                 let acc = &mut acc[at..at + fx.len() + PAD];
                 for g in (0..fx.len()).step_by(4) {
-                    T::add_scaled(acc.as_mut_ptr().add(g), u, group(outer, fx, g));
+                    T::add_scaled(acc.as_mut_ptr().add(g), u, group(outer, fx, g).0);
                 }
             }
         }
@@ -175,9 +157,8 @@ impl<const D: usize> Kernel<D> {
             let fx = &factor[run.start as usize..][..run.len as usize];
             let v = &v[run.slot as usize..][..run.len as usize];
             for g in (0..fx.len()).step_by(4) {
-                let k = group(outer, fx, g);
-                let m64 = _mm256_loadu_si256(MASK64[(fx.len() - g).min(4)].as_ptr().cast());
-                let t = _mm256_mul_pd(k, _mm256_maskload_pd(v.as_ptr().add(g), m64));
+                let (k, cells) = group(outer, fx, g);
+                let t = _mm256_mul_pd(k, _mm256_maskload_pd(v.as_ptr().add(g), cells));
                 kernel.push(k);
                 let (lo, hi) = (_mm256_castpd256_pd128(t), _mm256_extractf128_pd::<1>(t));
                 sum += _mm_cvtsd_f64(lo);
@@ -191,13 +172,12 @@ impl<const D: usize> Kernel<D> {
 }
 
 /// The `K_pj = outer f_0` of the four cells of a run from its `g`-th, `fx` the run's factors
-/// along axis 0: zeros past the run's end.
+/// along axis 0 (zeros past the run's end), and the mask of those in the run (64-bit lanes).
 #[inline]
 #[target_feature(enable = "avx2")]
-unsafe fn group(outer: __m256d, fx: &[f32], g: usize) -> __m256d {
-    let m32 = _mm_loadu_si128(MASK32[(fx.len() - g).min(4)].as_ptr().cast());
-    _mm256_mul_pd(
-        outer,
-        _mm256_cvtps_pd(_mm_maskload_ps(fx.as_ptr().add(g), m32)),
-    )
+unsafe fn group(outer: __m256d, fx: &[f32], g: usize) -> (__m256d, __m256i) {
+    let left = _mm_set1_epi32((fx.len() - g) as i32);
+    let cells = _mm_cmpgt_epi32(left, _mm_setr_epi32(0, 1, 2, 3));
+    let f = _mm256_cvtps_pd(_mm_maskload_ps(fx.as_ptr().add(g), cells));
+    (_mm256_mul_pd(outer, f), _mm256_cvtepi32_epi64(cells))
 }
