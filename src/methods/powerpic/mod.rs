@@ -134,8 +134,9 @@ impl MethodType for Powerpic {
     }
 
     fn step_cost(_settings: &PowerPicSettings, dim: usize) -> StepCost {
-        // ns per unit and per cell, [2D, 3D]: the 2026-11-30 fit of tools/cost-fit.py
-        // (docs/cluster.md, "The cost model", says on which runs and how close).
-        StepCost::of(dim, [(475.0, 258.0), (520.0, 1151.0)]).per_driven(Unit::Particle)
+        // ns per unit and per cell, [2D, 3D]: tools/cost-fit.py on the pages of 280ddf8's
+        // Power PIC runs, 2026-11-30 (docs/cluster.md, "The cost model", says on which runs
+        // and how close).
+        StepCost::of(dim, [(455.0, 159.0), (591.0, 845.0)]).per_driven(Unit::Particle)
     }
 }
