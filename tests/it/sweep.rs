@@ -297,7 +297,8 @@ fn the_results_kept_beside_the_page_merge_into_its_csv() {
 /// took in the committed results (docs/results/report.csv): within 2x either way, on the
 /// machine that made the page (its factor, estimate over measured: [`within_on_one_machine`]).
 /// The model is fitted on both pages as made by the binary of fd194fe on one machine
-/// (2026-11-29 and -30, memory copy 34-45 GB/s). The earlier fit, on the pages of 480cee2 (a
+/// (2026-11-29 and -30, memory copy 34-45 GB/s), Power PIC's on its runs of 280ddf8 there
+/// (2026-11-30, 30.5 GB/s). The earlier fit, on the pages of 480cee2 (a
 /// machine of the same kind whose memory copy measured 19 GB/s), put this machine's pages at
 /// factors of 1.43 to 1.48.
 #[test]
@@ -308,12 +309,12 @@ fn the_cost_model_is_within_2x_of_the_default_matrix_as_measured() {
 }
 
 /// The same for the jobs of the paper's matrix that have run (docs/results-paper/report.csv,
-/// whole runs at the paper's sizes, every one by the binary of fd194fe on one machine, each job
-/// alone; 2026-11-30), each within the bound its method's fit meets, rounded up to a tenth:
-/// issues 73 and 76 ask 1.5x, which ccp's 3D jobs (1.98x either way, the half drop over and the
-/// large obstacle under), Power PIC's 2D jobs (1.75x) and IDP's 3D jobs (1.52x: its drop at
-/// 300^3, 2026-11-30, ran beside builds and its correction grows through the run) do not meet
-/// (docs/cluster.md, "The cost model", says why).
+/// whole runs at the paper's sizes, by the binary of fd194fe on one machine and Power PIC's by
+/// that of 280ddf8, each job alone; 2026-11-30), each within the bound its method's fit meets,
+/// rounded up to a tenth: issues 73 and 76 ask 1.5x, which ccp's 3D jobs (1.98x either way, the
+/// half drop over and the large obstacle under), Power PIC's 2D jobs (1.65x) and IDP's 3D jobs
+/// (1.52x: its drop at 300^3, 2026-11-30, ran beside builds and its correction grows through
+/// the run) do not meet (docs/cluster.md, "The cost model", says why).
 #[test]
 fn the_cost_model_is_within_bounds_of_the_paper_matrix_as_measured() {
     let ratios = cost_ratios(&["--matrix", "paper"], "docs/results-paper/report.csv");
@@ -323,7 +324,7 @@ fn the_cost_model_is_within_bounds_of_the_paper_matrix_as_measured() {
         "ccp" => 2.1,
         "idp" => 1.6,
         "nbflip" => 1.5,
-        _ => 1.8,
+        _ => 1.7,
     });
 }
 
