@@ -500,7 +500,8 @@ impl<const D: usize> Operator<D> {
 
     /// The weight of the coupling across the face along axis `a` (`plus`: the `+a` one) of
     /// the cell with stencil `s`: the face's area over the distance between the two cells'
-    /// centroids, in this level's cells (a finite-volume flux; 1 between whole cells). A cut
+    /// centroids, in this level's cells (a finite-volume flux; exactly 1 on a row without
+    /// [`Stencil::partial`] bits, whose hot paths skip it). A cut
     /// cell is the last along its axis, so only a `+a` neighbour can be cut along `a`; the
     /// weight seen from either side is the same, and the operator stays symmetric.
     fn face_weight(&self, s: &Stencil<D>, a: usize, plus: bool) -> f64 {
@@ -1162,11 +1163,7 @@ impl Dense {
             for ax in 0..D {
                 for (j, plus) in [(s.plus[ax], true), (s.minus[ax], false)] {
                     if j != NONE {
-                        let w = match s.partial {
-                            0 => 1.0,
-                            _ => op.face_weight(s, ax, plus),
-                        };
-                        a[i * n + j as usize] = -op.scale * w;
+                        a[i * n + j as usize] = -op.scale * op.face_weight(s, ax, plus);
                     }
                 }
             }
