@@ -29,7 +29,12 @@
 //! problem short-circuits the channel (a 64 x 64 serpentine: 469 iterations to 1e-12; with
 //! closed faces kept, 157, both with unknown-first coarsening; the dam problems do not
 //! change). Coarsening stops once a level has
-//! at most [`COARSEST_ROWS`] rows.
+//! at most [`COARSEST_ROWS`] rows, or earlier where the next level would lose the liquid's
+//! image ([`loses_the_liquid`]: it would keep under a quarter of the rows that halving every
+//! axis keeps, as when a pool's last layer is thinner than two coarse cells), if that level's
+//! dense factor is cheap beside the finest level. Otherwise the layer's smoothest modes got no
+//! coarse correction at all: a pool 15 cells deep on 160 x 160 cells took 11 PCG iterations
+//! where one 16 deep took 9 (its 400-row layer on level 3 vanished on level 4).
 //!
 //! **Coarse operators: rediscretisation**, as McAdams, rather than Galerkin `R A P`: the
 //! coarse matrix is the same (2D+1)-point stencil on the coarse classes, across open faces
@@ -64,9 +69,19 @@
 //! **Transfers.** Prolongation `P` is trilinear (bilinear in 2D) interpolation of
 //! cell-centred values, as McAdams: a fine cell takes 3/4 of its parent and 1/4 of the
 //! parent's neighbour on its side, per axis. Of the `2^D` coarse cells so weighted, an
-//! unknown gives its value, a Dirichlet cell its zero, and a Neumann cell, the outside, or a
-//! cell behind a closed face of the parent the parent's value (the mirror image a no-flux
-//! wall implies), so that `P` maps a constant to a constant away from Dirichlet cells.
+//! unknown gives its value, a Neumann cell, the outside, or a cell behind a closed face of
+//! the parent the parent's value (the mirror image a no-flux wall implies), so that `P` maps
+//! a constant to a constant away from Dirichlet cells; and a Dirichlet cell next to rows
+//! gives the ghost value the coarse operator's distance weight implies ([`Ghosts`]): each
+//! such row's value extrapolated linearly to the zero at distance `theta` behind that face,
+//! `x (1 - 1 / theta)`, averaged over the rows it borders (other Dirichlet cells give zero).
+//! Giving zero there instead put the coarse surface's zero at the coarse cell's centre, up to
+//! a coarse cell nearer than the fine one, so that the fine liquid under a Dirichlet coarse
+//! cell took a quarter of the correction below it where a linear profile asks for about a
+//! half: a pool 15 cells deep took 12 PCG iterations where one 16 deep took 9 (both 9 now),
+//! drop-3d at 300^3 13 (9 with the early stop above). `R = P^T` restricts into those
+//! cells too and hands each one's sum back to its rows with the same weights, so the
+//! V-cycle stays symmetric.
 //! Restriction is exactly `R = P^T`, evaluated as a gather over the `4^D` fine cells that may
 //! interpolate from each coarse cell. Both read their neighbours' values from the vector
 //! spread over the level's grid (zero off the rows), not through a row lookup per cell; and
@@ -157,6 +172,24 @@ pub struct Finest<'a, const D: usize> {
 /// solve and each application `2 n^2`, well below one fine-level sweep.
 pub const COARSEST_ROWS: usize = 256;
 
+/// Operations per finest row that the coarsest level's dense factor may cost (`n^3 / 6` for
+/// `n` rows) when coarsening stops early ([`loses_the_liquid`]), once per solve: about 4% of
+/// a 9-iteration solve, whose V-cycles spend about 165 instructions a finest row each
+/// (docs/benchmarks/pressure.md). A pool 15 cells deep on 160 x 160 cells stops at 400 rows,
+/// 28 operations a finest row: 2.3-2.7 ms of a 147 ms pressure stage.
+const DENSE_OPS_PER_ROW: usize = 64;
+
+/// Whether coarsening should stop at a level of `rows` rows because the next keeps only
+/// `next` of them: fewer than `1 / 2^(D + 1)`, a quarter of what halving every axis keeps, so
+/// that liquid thinner than two of this level's cells (a shallow pool's last layer, a small
+/// drop) has no image below (Dirichlet-first coarsening makes any coarse cell that reaches
+/// air a known zero). The level's smoothest modes would then get no coarse correction; as
+/// the coarsest level they are solved exactly, if its dense factor costs at most
+/// [`DENSE_OPS_PER_ROW`] operations per finest row (`finest` rows).
+fn loses_the_liquid<const D: usize>(rows: usize, next: usize, finest: usize) -> bool {
+    next << (D + 1) < rows && rows.pow(3) / 6 <= DENSE_OPS_PER_ROW * finest
+}
+
 /// The fewest rows a parallel loop over a level's rows gives one task: a row's stencil
 /// (seven or eight gathers) is several vector entries' work, so half of [`PAR_GRAIN`]
 /// ([`PAR_GRAIN`] itself left each half-sweep of a 100^3 dam's 54,000 rows on one thread:
@@ -233,6 +266,9 @@ impl<const D: usize> Shape<D> {
         Shape::new(self.dims.map(|d| d.div_ceil(2)))
     }
 }
+
+/// A value per face of a cell: `[a][0]` the `-a` one, `[a][1]` the `+a` one.
+type Faces<const D: usize> = [[u8; 2]; D];
 
 /// A row's cell coordinates, stored so that no loop of the V-cycle divides.
 type At<const D: usize> = [u16; D];
@@ -329,6 +365,92 @@ struct Operator<const D: usize> {
     /// The diagonal over `scale` of each row with [`Stencil::partial`] bits (any value for
     /// the others); empty when the level has none.
     partial_diag: Vec<f64>,
+    /// The Dirichlet cells next to the rows, and how prolongation extrapolates into them
+    /// (empty on the finest level).
+    ghosts: Ghosts,
+}
+
+/// The Dirichlet cells of a coarse level next to its rows, each with the rows whose values it
+/// takes in prolongation: ghost `g` at cell `cell[g]` is `sum alpha x[row]` over
+/// `from[first[g]..first[g + 1]]`.
+#[derive(Default)]
+struct Ghosts {
+    cell: Vec<u32>,
+    first: Vec<u32>,
+    from: Vec<(u32, f64)>,
+}
+
+impl Ghosts {
+    /// The ghosts of the rows of `cells` (the `unknown` ones, each at row `level_row` with its
+    /// faces' Dirichlet `weight`): a row's Dirichlet neighbour across a face
+    /// extrapolates it linearly to the zero at distance `theta` ([`Cells::dirichlet_weight`]):
+    /// `x (1 - 1 / theta)`, averaged over the rows it neighbours.
+    fn new<const D: usize>(
+        cells: &Cells<D>,
+        unknown: &[At<D>],
+        level_row: &[u32],
+        weight: &[Faces<D>],
+    ) -> Self {
+        let mut pairs: Vec<(u32, u32, u8)> = (0..unknown.len())
+            .into_par_iter()
+            .with_min_len(ROW_GRAIN)
+            .flat_map_iter(|k| {
+                let mut v = Vec::new();
+                cells.for_each_face(widen(unknown[k]), |a, plus, nb, class| {
+                    if class == CellClass::Dirichlet {
+                        v.push((nb as u32, level_row[k], weight[k][a][plus as usize]));
+                    }
+                });
+                v
+            })
+            .collect();
+        pairs.par_sort_unstable();
+        let mut g = Ghosts::default();
+        for group in pairs.chunk_by(|p, q| p.0 == q.0) {
+            g.cell.push(group[0].0);
+            g.first.push(g.from.len() as u32);
+            let m = group.len() as f64;
+            for &(_, row, w) in group {
+                g.from.push((row, (1.0 - w as f64 / EIGHTHS as f64) / m));
+            }
+        }
+        g.first.push(g.from.len() as u32);
+        g
+    }
+
+    fn len(&self) -> usize {
+        self.cell.len()
+    }
+
+    fn sources(&self, g: usize) -> &[(u32, f64)] {
+        &self.from[self.first[g] as usize..self.first[g + 1] as usize]
+    }
+
+    /// Writes each ghost's value from the rows' `x` at its cell of `dense` (`E x`).
+    fn extrapolate(&self, x: &[f64], dense: &mut [f64]) {
+        let values: Vec<f64> = (0..self.len())
+            .into_par_iter()
+            .with_min_len(ROW_GRAIN)
+            .map(|g| {
+                self.sources(g)
+                    .iter()
+                    .map(|&(r, a)| a * x[r as usize])
+                    .sum()
+            })
+            .collect();
+        for (&cell, v) in self.cell.iter().zip(values) {
+            dense[cell as usize] = v;
+        }
+    }
+
+    /// Adds each ghost's `sums` entry back to its rows' `b` (`E^T`), in the ghosts' order.
+    fn hand_back(&self, sums: &[f64], b: &mut [f64]) {
+        for (g, &sum) in sums.iter().enumerate() {
+            for &(r, a) in self.sources(g) {
+                b[r as usize] += a * sum;
+            }
+        }
+    }
 }
 
 /// A level's rows in their order: its unknown cells `cells` (ascending), the red ones (even
@@ -385,9 +507,13 @@ impl<const D: usize> Operator<D> {
     /// A coarser level: the stencil of the module doc on `cells`, scaled by `scale`.
     fn new(cells: &Cells<D>, scale: f64) -> Self {
         let unknown = cells.unknowns();
-        let stencil =
-            |k: usize, row: &[u32], _: &[u32]| Self::stencil_of(cells, row, widen(unknown[k]));
-        let mut op = Self::build(cells.shape, &unknown, scale, stencil).0;
+        let weight: Vec<Faces<D>> = (unknown.par_iter().with_min_len(ROW_GRAIN))
+            .map(|&c| cells.dirichlet_weights(widen(c)))
+            .collect();
+        let stencil = |k: usize, row: &[u32], _: &[u32]| {
+            Self::stencil_of(cells, row, widen(unknown[k]), &weight[k])
+        };
+        let (mut op, level_row) = Self::build(cells.shape, &unknown, scale, stencil);
         op.extent = std::array::from_fn(|a| cells.extent(cells.shape.dims[a] - 1, a));
         if op.stencil.iter().any(|s| s.partial != 0) {
             op.partial_diag = (op.at.par_iter().zip(&op.stencil))
@@ -398,6 +524,7 @@ impl<const D: usize> Operator<D> {
                 })
                 .collect();
         }
+        op.ghosts = Ghosts::new(cells, &unknown, &level_row, &weight);
         op
     }
 
@@ -439,12 +566,13 @@ impl<const D: usize> Operator<D> {
             }),
             extent: [1.0; D],
             partial_diag: vec![],
+            ghosts: Ghosts::default(),
         };
         (op, level_row)
     }
 
     /// The row of cell `c`: its neighbours across open faces.
-    fn stencil_of(cells: &Cells<D>, row: &[u32], c: [usize; D]) -> Stencil<D> {
+    fn stencil_of(cells: &Cells<D>, row: &[u32], c: [usize; D], weight: &Faces<D>) -> Stencil<D> {
         let mut s = Stencil {
             plus: [NONE; D],
             minus: [NONE; D],
@@ -467,7 +595,7 @@ impl<const D: usize> Operator<D> {
                 }) = r;
                 s.count += EIGHTHS;
             }
-            CellClass::Dirichlet => s.count += cells.dirichlet_weight(c, a, plus),
+            CellClass::Dirichlet => s.count += weight[a][plus as usize],
         });
         s
     }
@@ -787,6 +915,18 @@ impl<'a, const D: usize> Cells<'a, D> {
         }
     }
 
+    /// [`Cells::dirichlet_weight`] of each face of cell `c` with a Dirichlet neighbour (0 for
+    /// the others), worked out once for its stencil and its [`Ghosts`].
+    fn dirichlet_weights(&self, c: [usize; D]) -> Faces<D> {
+        let mut w = [[0; 2]; D];
+        self.for_each_face(c, |a, plus, _, class| {
+            if class == CellClass::Dirichlet {
+                w[a][plus as usize] = self.dirichlet_weight(c, a, plus);
+            }
+        });
+        w
+    }
+
     /// [`Cells::class`] of a cell not kept, from the finest cells it covers (it stops at the
     /// first Dirichlet one: most such cells are air).
     #[cold]
@@ -1068,56 +1208,62 @@ impl<const D: usize> Level<D> {
     }
 
     /// `coarse.b = P^T r` (restriction of this level's residual), a gather over [`block`]:
-    /// from [`Level::dense`] alone where the block is not [`Level::loose`], else row by row.
+    /// from [`Level::dense`] alone where the block is not [`Level::loose`], else row by row;
+    /// gathered at the coarse level's [`Ghosts`] too and handed back to their rows.
     fn restrict(&mut self, coarse: &mut Level<D>) {
         self.spread(true);
         let (fine, cop, dense, loose) = (&self.op.shape, &coarse.op, &self.dense, &self.loose);
         let block = block(fine);
+        let gather = |k: [usize; D]| {
+            let base = fine.index(k.map(|v| 2 * v));
+            let inside = |code: usize| {
+                (0..D).all(|a| (2 * k[a] + (code >> (2 * a) & 3)).wrapping_sub(1) < fine.dims[a])
+            };
+            let interior = (0..D).all(|a| k[a] > 0 && 2 * k[a] + 2 < fine.dims[a]);
+            if interior && !loose[cop.shape.index(k)] {
+                return full_weighting(dense, base, &fine.stride);
+            }
+            let mut sum = 0.0;
+            for (code, &(offset, w, moved)) in block.iter().enumerate() {
+                if !interior && !inside(code) {
+                    continue;
+                }
+                // A zero residual (a black row's, or no row's) adds nothing.
+                if dense[base.wrapping_add_signed(offset)] == 0.0 {
+                    continue;
+                }
+                let r = self.op.row[base.wrapping_add_signed(offset)] as usize;
+                let Some(r) = r.checked_sub(1) else { continue };
+                if moved & !self.movable[r] != 0 {
+                    continue;
+                }
+                let w = if moved == 0 {
+                    w + self.to_parent[r] as f64
+                } else {
+                    w
+                };
+                sum += w * self.r[r];
+            }
+            sum
+        };
         (coarse.b.par_iter_mut().with_min_len(ROW_GRAIN / 4))
             .zip(&cop.at)
-            .for_each(|(b, &k)| {
-                let k = widen(k);
-                let base = fine.index(k.map(|v| 2 * v));
-                let inside = |code: usize| {
-                    (0..D)
-                        .all(|a| (2 * k[a] + (code >> (2 * a) & 3)).wrapping_sub(1) < fine.dims[a])
-                };
-                let interior = (0..D).all(|a| k[a] > 0 && 2 * k[a] + 2 < fine.dims[a]);
-                if interior && !loose[cop.shape.index(k)] {
-                    *b = full_weighting(dense, base, &fine.stride);
-                    return;
-                }
-                let mut sum = 0.0;
-                for (code, &(offset, w, moved)) in block.iter().enumerate() {
-                    if !interior && !inside(code) {
-                        continue;
-                    }
-                    // A zero residual (a black row's, or no row's) adds nothing.
-                    if dense[base.wrapping_add_signed(offset)] == 0.0 {
-                        continue;
-                    }
-                    let r = self.op.row[base.wrapping_add_signed(offset)] as usize;
-                    let Some(r) = r.checked_sub(1) else { continue };
-                    if moved & !self.movable[r] != 0 {
-                        continue;
-                    }
-                    let w = if moved == 0 {
-                        w + self.to_parent[r] as f64
-                    } else {
-                        w
-                    };
-                    sum += w * self.r[r];
-                }
-                *b = sum;
-            });
+            .for_each(|(b, &k)| *b = gather(widen(k)));
+        // The Dirichlet cells prolongation extrapolates into: `R = E^T P^T`.
+        let ghosts = &cop.ghosts;
+        let sums: Vec<f64> = (ghosts.cell.par_iter().with_min_len(ROW_GRAIN / 4))
+            .map(|&cell| gather(coords(&cop.shape.dims, cell as usize)))
+            .collect();
+        ghosts.hand_back(&sums, &mut coarse.b);
     }
 
     /// `x += P coarse.x` (prolongation of the coarse correction), reading the corners'
-    /// values from the coarse level's [`Level::dense`] (zero at Dirichlet and Neumann cells).
-    /// Only on the red rows and [`Operator::lonely`]: post-smoothing starts with the black
+    /// values from the coarse level's [`Level::dense`] (its [`Ghosts`] written there first;
+    /// zero at the other Dirichlet cells and at Neumann cells). Only on the red rows and [`Operator::lonely`]: post-smoothing starts with the black
     /// rows, and overwrites every other black row's `x` without reading it.
     fn prolong_add(&self, coarse: &mut Level<D>, x: &mut [f64]) {
         coarse.spread(false);
+        (coarse.op.ghosts).extrapolate(&coarse.x, &mut coarse.dense);
         let (cop, xc) = (&coarse.op, &coarse.dense);
         let (op, to_parent, movable) = (&self.op, &self.to_parent, &self.movable);
         let weight: Vec<f64> = (0..1 << D).map(corner_weight::<D>).collect();
@@ -1143,6 +1289,10 @@ impl<const D: usize> Level<D> {
         for &i in &op.lonely {
             x[i as usize] += correction(i as usize);
         }
+        // Restriction reads this grid's other cells as zero.
+        for &cell in &cop.ghosts.cell {
+            coarse.dense[cell as usize] = 0.0;
+        }
     }
 }
 
@@ -1150,8 +1300,10 @@ impl<const D: usize> Level<D> {
 /// `(scale / |K|) 1_K 1_K^T` added on every closed part `K` (see the module doc).
 struct Dense {
     n: usize,
-    /// The lower factor, row-major.
+    /// The lower factor `L`, row-major.
     l: Vec<f64>,
+    /// `L^T`, row-major, so that the backward substitution reads rows too.
+    lt: Vec<f64>,
 }
 
 impl Dense {
@@ -1177,34 +1329,55 @@ impl Dense {
             }
         }
         cholesky(n, &mut a);
-        Dense { n, l: a }
+        let mut lt = vec![0.0; n * n];
+        for i in 0..n {
+            for j in 0..=i {
+                lt[j * n + i] = a[i * n + j];
+            }
+        }
+        Dense { n, l: a, lt }
     }
 
     /// `x = (L L^T)^-1 b`.
     fn solve(&self, b: &[f64], x: &mut [f64]) {
-        let (n, l) = (self.n, &self.l);
+        let (n, l, lt) = (self.n, &self.l, &self.lt);
         for i in 0..n {
-            let s: f64 = (0..i).map(|k| l[i * n + k] * x[k]).sum();
-            x[i] = (b[i] - s) / l[i * n + i];
+            x[i] = (b[i] - dot4(&l[i * n..i * n + i], &x[..i])) / l[i * n + i];
         }
         for i in (0..n).rev() {
-            let s: f64 = (i + 1..n).map(|k| l[k * n + i] * x[k]).sum();
-            x[i] = (x[i] - s) / l[i * n + i];
+            x[i] = (x[i] - dot4(&lt[i * n + i + 1..(i + 1) * n], &x[i + 1..])) / lt[i * n + i];
         }
     }
+}
+
+/// `a . b` in four interleaved partial sums, so that the processor overlaps the additions
+/// (one running sum waits on each): the dense factor's and its solves' inner loop.
+fn dot4(a: &[f64], b: &[f64]) -> f64 {
+    let mut s = [0.0; 4];
+    let (a4, b4) = (a.chunks_exact(4), b.chunks_exact(4));
+    let tail: f64 = (a4.remainder().iter().zip(b4.remainder()))
+        .map(|(p, q)| p * q)
+        .sum();
+    for (p, q) in a4.zip(b4) {
+        for k in 0..4 {
+            s[k] += p[k] * q[k];
+        }
+    }
+    (s[0] + s[1]) + (s[2] + s[3]) + tail
 }
 
 /// In-place Cholesky `A = L L^T` of a symmetric positive definite row-major `n x n` matrix;
 /// the lower triangle receives `L` (the upper is left as it was and never read).
 fn cholesky(n: usize, a: &mut [f64]) {
     for j in 0..n {
-        let d = a[j * n + j] - (0..j).map(|k| a[j * n + k].powi(2)).sum::<f64>();
+        let d = a[j * n + j] - dot4(&a[j * n..j * n + j], &a[j * n..j * n + j]);
         assert!(d > 0.0, "coarsest multigrid matrix not positive definite");
         let d = d.sqrt();
         a[j * n + j] = d;
-        for i in j + 1..n {
-            let s: f64 = (0..j).map(|k| a[i * n + k] * a[j * n + k]).sum();
-            a[i * n + j] = (a[i * n + j] - s) / d;
+        let (above, below) = a.split_at_mut((j + 1) * n);
+        let row_j = &above[j * n..j * n + j];
+        for row_i in below.chunks_exact_mut(n) {
+            row_i[j] = (row_i[j] - dot4(&row_i[..j], row_j)) / d;
         }
     }
 }
@@ -1274,6 +1447,7 @@ impl<const D: usize> Multigrid<D> {
         );
         let mut cells = Cells::finest(finest);
         let (op, level_row) = Operator::finest(finest);
+        let finest_rows = op.len();
         let mut levels = vec![Level::new(op, true)];
         let coarser = 2f64.powi(D as i32 - 2);
         loop {
@@ -1281,10 +1455,14 @@ impl<const D: usize> Multigrid<D> {
             if fine.op.len() <= COARSEST_ROWS {
                 break;
             }
-            cells = cells.coarsen(&fine.op.at);
-            fine.link(&cells);
-            let scale = fine.op.scale * coarser;
-            levels.push(Level::new(Operator::new(&cells, scale), false));
+            let next_cells = cells.coarsen(&fine.op.at);
+            let next = Operator::new(&next_cells, fine.op.scale * coarser);
+            if loses_the_liquid::<D>(fine.op.len(), next.len(), finest_rows) {
+                break;
+            }
+            fine.link(&next_cells);
+            cells = next_cells;
+            levels.push(Level::new(next, false));
         }
         let coarsest = Dense::new(&levels.last().expect("the coarsest level").op);
         Multigrid {
@@ -1583,13 +1761,7 @@ mod tests {
     fn a_coarse_dirichlet_neighbour_weighs_one_over_its_distance_2d_and_3d() {
         fn check<const D: usize>(dims: [usize; D]) {
             for (depth, weight) in [(4, 11), (5, 6)] {
-                let class: Vec<CellClass> = (0..dims.iter().product())
-                    .map(|c| match coords(&dims, c)[D - 1] < depth {
-                        true => CellClass::Unknown,
-                        false => CellClass::Dirichlet,
-                    })
-                    .collect();
-                let mg = multigrid(dims, &class);
+                let mg = multigrid(dims, &pool(dims, depth));
                 let op = &mg.levels[1].op;
                 let mut c = [2; D];
                 c[D - 1] = 1;
@@ -1603,6 +1775,70 @@ mod tests {
     }
 
     /// `A x` on a level, by its residual with `b = 0`.
+    /// A pool `depth` cells deep along the last axis of `dims`, air above.
+    fn pool<const D: usize>(dims: [usize; D], depth: usize) -> Vec<CellClass> {
+        (0..dims.iter().product())
+            .map(|c| match coords(&dims, c)[D - 1] < depth {
+                true => CellClass::Unknown,
+                false => CellClass::Dirichlet,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn prolongation_carries_a_linear_profile_to_the_fine_surface_2d_and_3d() {
+        // A depth that no coarse level divides: each level's surface sits below the fine one.
+        fn check<const D: usize>(dims: [usize; D], depth: usize) {
+            let mut mg = multigrid(dims, &pool(dims, depth));
+            assert!(mg.levels.len() >= 3, "{} levels", mg.levels.len());
+            // Hydrostatic: zero at the finest level's Dirichlet cell centre.
+            let u = |y: f64| depth as f64 + 0.5 - y;
+            let centre = |k: u16, l: usize| (k as f64 + 0.5) * (1 << l) as f64;
+            for l in 1..mg.levels.len() {
+                let (fine, coarse) = mg.levels.split_at_mut(l);
+                let (fine, coarse) = (&fine[l - 1], &mut coarse[0]);
+                coarse.x = (coarse.op.at.iter())
+                    .map(|k| u(centre(k[D - 1], l)))
+                    .collect();
+                let mut x = vec![0.0; fine.op.len()];
+                fine.prolong_add(coarse, &mut x);
+                // Prolongation adds on the red rows only (`prolong_add`); rows next to a
+                // wall take their parent's value there (a no-flux mirror), not the profile.
+                let free = |i: usize| fine.movable[i] == (1 << D) - 1 && fine.to_parent[i] == 0.0;
+                for i in (0..fine.op.red).filter(|&i| free(i)) {
+                    let exact = u(centre(fine.op.at[i][D - 1], l - 1));
+                    // The coarse Dirichlet distances are kept in eighths of a weight.
+                    assert!(
+                        (x[i] - exact).abs() <= 0.05 * u(0.0),
+                        "level {l}, row at {:?}: {} against {exact}",
+                        fine.op.at[i],
+                        x[i]
+                    );
+                }
+            }
+        }
+        check([128, 32], 15);
+        check([32, 32, 32], 15);
+    }
+
+    #[test]
+    fn a_pool_of_any_depth_keeps_its_last_layer_and_its_iterations_3d() {
+        // 160 x 160 cells: the layer left on level 3 (400 rows) vanishes on level 4 at depth
+        // 15, not at 16.
+        let dims = [160, 160, 32];
+        let iterations = |depth: usize| {
+            let class = pool(dims, depth);
+            let mg = multigrid(dims, &class);
+            let coarsest = mg.levels.last().expect("a level").op.len();
+            let b = vec![1.0; mg.level_row.len()];
+            (coarsest, solve(dims, &class, &b, 1e-9).2.iterations)
+        };
+        let ((rows15, it15), (rows16, it16)) = (iterations(15), iterations(16));
+        assert_eq!(rows15, 400, "the coarsest level keeps the last layer");
+        assert!(rows16 <= COARSEST_ROWS, "{rows16}");
+        assert!(it15 <= it16, "depth 15: {it15} iterations, 16: {it16}");
+    }
+
     fn apply_level<const D: usize>(op: &Operator<D>, x: &[f64]) -> Vec<f64> {
         let mut r = vec![0.0; op.len()];
         op.residual(&vec![0.0; op.len()], x, &mut r, 0..op.len());
@@ -1680,7 +1916,7 @@ mod tests {
             let class = random_classes(dims.iter().product(), 0.25, 0.2, &mut rng);
             let mut mg = multigrid(dims, &class);
             assert!(mg.levels.len() >= 3, "{} levels", mg.levels.len());
-            let (mut loose, mut rows) = (0, 0);
+            let (mut loose, mut rows, mut ghosts) = (0, 0, 0);
             for l in 0..mg.levels.len() - 1 {
                 let (fine, coarse) = mg.levels.split_at_mut(l + 1);
                 let (fine, coarse) = (&mut fine[l], &mut coarse[0]);
@@ -1689,6 +1925,7 @@ mod tests {
                     .filter(|&&k| fine.loose[cop.shape.index(widen(k))])
                     .count();
                 rows += cop.len();
+                ghosts += cop.ghosts.len();
                 // As the V-cycle's residuals: zero on the coupled black rows, where
                 // prolongation skips (`residual_after_black`, `prolong_add`).
                 fine.r = random_vector(fine.r.len(), &mut rng);
@@ -1704,10 +1941,10 @@ mod tests {
                 let (rt, pt) = (dot(&coarse.x, &coarse.b), dot(&fine_x, &fine.r));
                 assert!((rt - pt).abs() <= 1e-12 * rt.abs().max(1.0), "{rt} {pt}");
             }
-            // Both ways of restricting are taken.
+            // Both ways of restricting are taken, and Dirichlet cells extrapolated into.
             assert!(
-                loose > 0 && loose < rows,
-                "{loose} loose of {rows} coarse rows"
+                loose > 0 && loose < rows && ghosts > 0,
+                "{loose} loose of {rows} coarse rows, {ghosts} ghosts"
             );
         }
         check([70, 61], 3);
