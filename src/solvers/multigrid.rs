@@ -168,8 +168,9 @@ pub struct Finest<'a, const D: usize> {
     pub matrix: &'a StencilMatrix<D>,
 }
 
-/// The largest coarsest level: its dense Cholesky factor costs `n^3 / 6` operations per
-/// solve and each application `2 n^2`, well below one fine-level sweep.
+/// The rows at which coarsening stops (unless it stops earlier, [`loses_the_liquid`]): the
+/// coarsest level's dense Cholesky factor costs `n^3 / 6` operations per solve and each
+/// application `2 n^2`, well below one fine-level sweep.
 pub const COARSEST_ROWS: usize = 256;
 
 /// Operations per finest row that the coarsest level's dense factor may cost (`n^3 / 6` for
@@ -1259,8 +1260,9 @@ impl<const D: usize> Level<D> {
 
     /// `x += P coarse.x` (prolongation of the coarse correction), reading the corners'
     /// values from the coarse level's [`Level::dense`] (its [`Ghosts`] written there first;
-    /// zero at the other Dirichlet cells and at Neumann cells). Only on the red rows and [`Operator::lonely`]: post-smoothing starts with the black
-    /// rows, and overwrites every other black row's `x` without reading it.
+    /// zero at the other Dirichlet cells and at Neumann cells). Only on the red rows and
+    /// [`Operator::lonely`]: post-smoothing starts with the black rows, and overwrites every
+    /// other black row's `x` without reading it.
     fn prolong_add(&self, coarse: &mut Level<D>, x: &mut [f64]) {
         coarse.spread(false);
         (coarse.op.ghosts).extrapolate(&coarse.x, &mut coarse.dense);
@@ -1300,10 +1302,9 @@ impl<const D: usize> Level<D> {
 /// `(scale / |K|) 1_K 1_K^T` added on every closed part `K` (see the module doc).
 struct Dense {
     n: usize,
-    /// The lower factor `L`, row-major.
+    /// The factor `L` in the lower triangle and `L^T` in the upper one, row-major, so that
+    /// both substitutions read rows.
     l: Vec<f64>,
-    /// `L^T`, row-major, so that the backward substitution reads rows too.
-    lt: Vec<f64>,
 }
 
 impl Dense {
@@ -1329,23 +1330,22 @@ impl Dense {
             }
         }
         cholesky(n, &mut a);
-        let mut lt = vec![0.0; n * n];
         for i in 0..n {
-            for j in 0..=i {
-                lt[j * n + i] = a[i * n + j];
+            for j in 0..i {
+                a[j * n + i] = a[i * n + j];
             }
         }
-        Dense { n, l: a, lt }
+        Dense { n, l: a }
     }
 
     /// `x = (L L^T)^-1 b`.
     fn solve(&self, b: &[f64], x: &mut [f64]) {
-        let (n, l, lt) = (self.n, &self.l, &self.lt);
+        let (n, l) = (self.n, &self.l);
         for i in 0..n {
             x[i] = (b[i] - dot4(&l[i * n..i * n + i], &x[..i])) / l[i * n + i];
         }
         for i in (0..n).rev() {
-            x[i] = (x[i] - dot4(&lt[i * n + i + 1..(i + 1) * n], &x[i + 1..])) / lt[i * n + i];
+            x[i] = (x[i] - dot4(&l[i * n + i + 1..(i + 1) * n], &x[i + 1..])) / l[i * n + i];
         }
     }
 }
