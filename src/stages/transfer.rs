@@ -42,7 +42,9 @@ const SLAB: usize = 2;
 /// [`SLAB`] cell layers along the last axis; a particle's faces lie within one face layer of
 /// its slab, so slabs two apart write disjoint faces. The even slabs run in parallel, then
 /// the odd ones, each slab's particles in index order: every face sums its particles in one
-/// fixed order, whatever the thread count.
+/// fixed order, whatever the thread count. A face's `m w v` is summed in the field itself and
+/// divided by its `m w` in place, so that a step asks for no third grid-sized array
+/// (docs/benchmarks/flip.md).
 fn splat<const D: usize>(
     grid: &Grid<D>,
     pos: &[Vector<D>],
@@ -50,15 +52,25 @@ fn splat<const D: usize>(
     mass: Option<&[f64]>,
 ) -> (MacField<D>, [Vec<bool>; D]) {
     let (starts, order) = slab_order(grid, pos);
-    // Per face: (sum of m w v, sum of m w).
-    let mut acc: [Vec<[f64; 2]>; D] = std::array::from_fn(|a| vec![[0.0; 2]; grid.num_faces(a)]);
+    // Per face: the sum of m w v, in the field itself, and the sum of m w.
+    let mut field = MacField::zeros(grid);
+    let mut weight: [Vec<f64>; D] = std::array::from_fn(|a| vec![0.0; grid.num_faces(a)]);
     for parity in 0..2 {
-        let mut windows: Vec<_> = (acc.iter_mut().enumerate())
-            .map(|(a, faces)| slab_windows(grid, a, faces, parity).into_iter())
+        let mut windows: Vec<_> = (field.comp.iter_mut().zip(&mut weight).enumerate())
+            .map(|(a, (sums, weights))| {
+                let sums = slab_windows(grid, a, sums, parity).into_iter();
+                sums.zip(slab_windows(grid, a, weights, parity))
+            })
             .collect();
         let jobs: Vec<(usize, [Window; D])> = (parity..starts.len() - 1)
             .step_by(2)
-            .map(|slab| (slab, std::array::from_fn(|a| windows[a].next().unwrap())))
+            .map(|slab| {
+                let win = std::array::from_fn(|a| {
+                    let ((offset, sums), (_, weights)) = windows[a].next().unwrap();
+                    (offset, sums, weights)
+                });
+                (slab, win)
+            })
             .collect();
         // About PAR_GRAIN_PARTICLES particles per task (each pass holds about half of them).
         let per_task = (2 * PAR_GRAIN_PARTICLES * jobs.len()).div_ceil(pos.len().max(1));
@@ -69,11 +81,10 @@ fn splat<const D: usize>(
                     let (x, v) = (&pos[p], &vel[p]);
                     let m = mass.map_or(1.0, |m| m[p]);
                     let at = FacePoint::new(grid, x);
-                    for (a, (offset, faces)) in win.iter_mut().enumerate() {
+                    for (a, (offset, sums, weights)) in win.iter_mut().enumerate() {
                         for (i, w) in FaceStencil::at(grid, &at, a).weights() {
-                            let face = &mut faces[i - *offset];
-                            face[0] += m * w * v[a];
-                            face[1] += m * w;
+                            sums[i - *offset] += m * w * v[a];
+                            weights[i - *offset] += m * w;
                         }
                     }
                 }
@@ -82,17 +93,14 @@ fn splat<const D: usize>(
     // Only the faces beside the points' cells and their neighbours got weight: the rest stay
     // zero and unknown, and their pages are never touched.
     let reached = Active::around_points(grid, pos.par_iter(), 1);
-    let mut field = MacField::zeros(grid);
     let known = std::array::from_fn(|a| {
         let mut known = vec![false; grid.num_faces(a)];
         let faces = reached.faces(a);
         (par_runs(faces, &mut field.comp[a]).zip(par_runs(faces, &mut known))).for_each(
             |((r, u), (_, k))| {
-                for ((u, k), &[s, w]) in u.iter_mut().zip(k).zip(&acc[a][r]) {
+                for ((u, k), &w) in u.iter_mut().zip(k).zip(&weight[a][r]) {
                     *k = w > 1e-12;
-                    if *k {
-                        *u = s / w;
-                    }
+                    *u = if *k { *u / w } else { 0.0 };
                 }
             },
         );
@@ -101,8 +109,9 @@ fn splat<const D: usize>(
     (field, known)
 }
 
-/// A slab's faces of one component: the index of its first face and the faces.
-type Window<'a> = (usize, &'a mut [[f64; 2]]);
+/// A slab's faces of one component: the index of its first face, the faces' sums of `m w v`
+/// and of `m w`.
+type Window<'a> = (usize, &'a mut [f64], &'a mut [f64]);
 
 /// The particles' indices grouped by slab, each group in index order: slab `s` holds
 /// `order[starts[s]..starts[s + 1]]` (a counting sort).
@@ -133,9 +142,9 @@ fn slab_order<const D: usize>(grid: &Grid<D>, pos: &[Vector<D>]) -> (Vec<usize>,
 fn slab_windows<'a, const D: usize>(
     grid: &Grid<D>,
     axis: usize,
-    faces: &'a mut [[f64; 2]],
+    faces: &'a mut [f64],
     parity: usize,
-) -> Vec<Window<'a>> {
+) -> Vec<(usize, &'a mut [f64])> {
     let layers = grid.face_dims(axis)[D - 1];
     let layer = faces.len() / layers;
     let slabs = grid.dims[D - 1].div_ceil(SLAB);
