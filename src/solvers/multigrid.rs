@@ -368,30 +368,37 @@ struct Operator<const D: usize> {
     partial_diag: Vec<f64>,
     /// The Dirichlet cells next to the rows, and how prolongation extrapolates into them
     /// (empty on the finest level).
-    ghosts: Ghosts,
+    ghosts: Ghosts<D>,
 }
 
 /// The Dirichlet cells of a coarse level next to its rows, each with the rows whose values it
 /// takes in prolongation: ghost `g` at cell `cell[g]` is `sum alpha x[row]` over
 /// `from[first[g]..first[g + 1]]`.
-#[derive(Default)]
-struct Ghosts {
+struct Ghosts<const D: usize> {
     cell: Vec<u32>,
+    /// Each ghost's cell coordinates, so that restriction gathers there without dividing.
+    at: Vec<At<D>>,
     first: Vec<u32>,
     from: Vec<(u32, f64)>,
 }
 
-impl Ghosts {
+impl<const D: usize> Default for Ghosts<D> {
+    fn default() -> Self {
+        Ghosts {
+            cell: vec![],
+            at: vec![],
+            first: vec![],
+            from: vec![],
+        }
+    }
+}
+
+impl<const D: usize> Ghosts<D> {
     /// The ghosts of the rows of `cells` (the `unknown` ones, each at row `level_row` with its
     /// faces' Dirichlet `weight`): a row's Dirichlet neighbour across a face
     /// extrapolates it linearly to the zero at distance `theta` ([`Cells::dirichlet_weight`]):
     /// `x (1 - 1 / theta)`, averaged over the rows it neighbours.
-    fn new<const D: usize>(
-        cells: &Cells<D>,
-        unknown: &[At<D>],
-        level_row: &[u32],
-        weight: &[Faces<D>],
-    ) -> Self {
+    fn new(cells: &Cells<D>, unknown: &[At<D>], level_row: &[u32], weight: &[Faces<D>]) -> Self {
         let mut pairs: Vec<(u32, u32, u8)> = (0..unknown.len())
             .into_par_iter()
             .with_min_len(ROW_GRAIN)
@@ -409,6 +416,7 @@ impl Ghosts {
         let mut g = Ghosts::default();
         for group in pairs.chunk_by(|p, q| p.0 == q.0) {
             g.cell.push(group[0].0);
+            g.at.push(coords(&cells.shape.dims, group[0].0 as usize).map(|v| v as u16));
             g.first.push(g.from.len() as u32);
             let m = group.len() as f64;
             for &(_, row, w) in group {
@@ -517,13 +525,14 @@ impl<const D: usize> Operator<D> {
         let (mut op, level_row) = Self::build(cells.shape, &unknown, scale, stencil);
         op.extent = std::array::from_fn(|a| cells.extent(cells.shape.dims[a] - 1, a));
         if op.stencil.iter().any(|s| s.partial != 0) {
-            op.partial_diag = (op.at.par_iter().zip(&op.stencil))
-                .with_min_len(ROW_GRAIN)
-                .map(|(&c, s)| match s.partial {
-                    0 => 0.0,
-                    _ => op.weighted_diag(cells, widen(c), s),
-                })
-                .collect();
+            let mut diag = vec![0.0; op.len()];
+            for (k, &r) in level_row.iter().enumerate() {
+                let s = &op.stencil[r as usize];
+                if s.partial != 0 {
+                    diag[r as usize] = op.weighted_diag(cells, widen(unknown[k]), s, &weight[k]);
+                }
+            }
+            op.partial_diag = diag;
         }
         op.ghosts = Ghosts::new(cells, &unknown, &level_row, &weight);
         op
@@ -601,18 +610,25 @@ impl<const D: usize> Operator<D> {
         s
     }
 
-    /// The diagonal over `scale` of the row of cell `c` with stencil `s`, its faces weighted
+    /// The diagonal over `scale` of the row of cell `c` with stencil `s` and Dirichlet `weight`
+    /// ([`Cells::dirichlet_weights`]), its faces weighted
     /// ([`Operator::face_weight`]; a Dirichlet neighbour's distance weight times the face's
     /// area): the sum of its off-diagonal weights where it has no Dirichlet neighbour, so that
     /// a closed region keeps the constants as its null space.
-    fn weighted_diag(&self, cells: &Cells<D>, c: [usize; D], s: &Stencil<D>) -> f64 {
+    fn weighted_diag(
+        &self,
+        cells: &Cells<D>,
+        c: [usize; D],
+        s: &Stencil<D>,
+        weight: &Faces<D>,
+    ) -> f64 {
         let mut diag = 0.0;
         cells.for_each_face(c, |a, plus, _, class| match class {
             CellClass::Neumann => {}
             CellClass::Unknown => diag += self.face_weight(s, a, plus),
             CellClass::Dirichlet => {
-                let theta = cells.dirichlet_weight(c, a, plus) as f64 / EIGHTHS as f64;
-                diag += self.face_area(s, a) * theta;
+                let over_theta = weight[a][plus as usize] as f64 / EIGHTHS as f64;
+                diag += self.face_area(s, a) * over_theta;
             }
         });
         diag
@@ -1213,49 +1229,53 @@ impl<const D: usize> Level<D> {
     /// gathered at the coarse level's [`Ghosts`] too and handed back to their rows.
     fn restrict(&mut self, coarse: &mut Level<D>) {
         self.spread(true);
-        let (fine, cop, dense, loose) = (&self.op.shape, &coarse.op, &self.dense, &self.loose);
-        let block = block(fine);
-        let gather = |k: [usize; D]| {
-            let base = fine.index(k.map(|v| 2 * v));
-            let inside = |code: usize| {
-                (0..D).all(|a| (2 * k[a] + (code >> (2 * a) & 3)).wrapping_sub(1) < fine.dims[a])
-            };
-            let interior = (0..D).all(|a| k[a] > 0 && 2 * k[a] + 2 < fine.dims[a]);
-            if interior && !loose[cop.shape.index(k)] {
-                return full_weighting(dense, base, &fine.stride);
-            }
-            let mut sum = 0.0;
-            for (code, &(offset, w, moved)) in block.iter().enumerate() {
-                if !interior && !inside(code) {
-                    continue;
-                }
-                // A zero residual (a black row's, or no row's) adds nothing.
-                if dense[base.wrapping_add_signed(offset)] == 0.0 {
-                    continue;
-                }
-                let r = self.op.row[base.wrapping_add_signed(offset)] as usize;
-                let Some(r) = r.checked_sub(1) else { continue };
-                if moved & !self.movable[r] != 0 {
-                    continue;
-                }
-                let w = if moved == 0 {
-                    w + self.to_parent[r] as f64
-                } else {
-                    w
-                };
-                sum += w * self.r[r];
-            }
-            sum
-        };
+        let (cop, block) = (&coarse.op, block(&self.op.shape));
         (coarse.b.par_iter_mut().with_min_len(ROW_GRAIN / 4))
             .zip(&cop.at)
-            .for_each(|(b, &k)| *b = gather(widen(k)));
+            .for_each(|(b, &k)| *b = self.gather(&block, cop, widen(k)));
         // The Dirichlet cells prolongation extrapolates into: `R = E^T P^T`.
         let ghosts = &cop.ghosts;
-        let sums: Vec<f64> = (ghosts.cell.par_iter().with_min_len(ROW_GRAIN / 4))
-            .map(|&cell| gather(coords(&cop.shape.dims, cell as usize)))
+        let sums: Vec<f64> = (ghosts.at.par_iter().with_min_len(ROW_GRAIN / 4))
+            .map(|&k| self.gather(&block, cop, widen(k)))
             .collect();
         ghosts.hand_back(&sums, &mut coarse.b);
+    }
+
+    /// `(P^T r)` at cell `k` of the coarse level `cop`, from this level's residual as
+    /// [`Level::restrict`] spread it: the full-weighting sum over the [`block`] where it is
+    /// interior and not [`Level::loose`], else row by row with each row's corners.
+    fn gather(&self, block: &[(isize, f64, u8)], cop: &Operator<D>, k: [usize; D]) -> f64 {
+        let (fine, dense) = (&self.op.shape, &self.dense);
+        let base = fine.index(k.map(|v| 2 * v));
+        let interior = (0..D).all(|a| k[a] > 0 && 2 * k[a] + 2 < fine.dims[a]);
+        if interior && !self.loose[cop.shape.index(k)] {
+            return full_weighting(dense, base, &fine.stride);
+        }
+        let inside = |code: usize| {
+            (0..D).all(|a| (2 * k[a] + (code >> (2 * a) & 3)).wrapping_sub(1) < fine.dims[a])
+        };
+        let mut sum = 0.0;
+        for (code, &(offset, w, moved)) in block.iter().enumerate() {
+            if !interior && !inside(code) {
+                continue;
+            }
+            // A zero residual (a black row's, or no row's) adds nothing.
+            if dense[base.wrapping_add_signed(offset)] == 0.0 {
+                continue;
+            }
+            let r = self.op.row[base.wrapping_add_signed(offset)] as usize;
+            let Some(r) = r.checked_sub(1) else { continue };
+            if moved & !self.movable[r] != 0 {
+                continue;
+            }
+            let w = if moved == 0 {
+                w + self.to_parent[r] as f64
+            } else {
+                w
+            };
+            sum += w * self.r[r];
+        }
+        sum
     }
 
     /// `x += P coarse.x` (prolongation of the coarse correction), reading the corners'
