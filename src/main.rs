@@ -10,7 +10,7 @@ use std::io::Write;
 /// Exit status: 0, 1 on an error, 128 + the signal's number after a run stopped by a signal
 /// (its recording and summary finished first).
 fn main() {
-    one_malloc_arena();
+    tune_malloc();
     file_size_limit_as_write_error();
     // A usage error (an unknown flag or value) exits 1 as every other error; --help and
     // --version print and exit 0.
@@ -37,23 +37,46 @@ fn main() {
     }
 }
 
-/// Serves every thread from one malloc arena (glibc's `M_ARENA_MAX`), before any thread starts.
+/// Tunes glibc's allocator before any thread starts: one arena (`M_ARENA_MAX`), and a heap that
+/// keeps what is freed for the next step (`M_MMAP_THRESHOLD`, `M_TRIM_THRESHOLD`).
 ///
-/// By default glibc gives each thread its own arena, and an arena keeps the memory its thread
-/// freed for that thread's next allocations. The flow solver's halves are allocated by
-/// whichever thread runs them, a different one from step to step, so each arena came to hold
-/// the high-water mark of the other's, and the resident peak was that of the live memory plus
-/// an unpredictable share of it (ccp without the band on deep-pool-3d at 48^3, 0.3 s: 286-316
-/// MiB over five runs, 341 in a 1 s run, against 256-272 with one arena; wall time 0.98x,
-/// `farm-bench`, docs/benchmarks/memory.md, "One malloc arena"). The memory estimate is fitted to
-/// peaks measured this way.
-fn one_malloc_arena() {
+/// **One arena.** By default glibc gives each thread its own arena, and an arena keeps the
+/// memory its thread freed for that thread's next allocations. The flow solver's halves are
+/// allocated by whichever thread runs them, a different one from step to step, so each arena
+/// came to hold the high-water mark of the other's, and the resident peak was that of the live
+/// memory plus an unpredictable share of it (ccp without the band on deep-pool-3d at 48^3, 0.3
+/// s: 286-316 MiB over five runs, 341 in a 1 s run, against 256-272 with one arena; wall time
+/// 0.98x, `farm-bench`, docs/benchmarks/memory.md, "One malloc arena"). The memory estimate is
+/// fitted to peaks measured this way.
+///
+/// **A heap that is not handed back.** glibc returns the top of its heap to the kernel once
+/// [`TRIM_BYTES`] of it are free (by default twice the mmap threshold, at most 64 MiB), so the
+/// blocks a step frees at its end (the flow solver's network, the correction's problem) are
+/// asked for again as fresh pages the next step, zeroed and faulted in one by one, and fresh
+/// pages are dear on these virtual machines. Keeping the heap took the correction stage of
+/// drop-3d at 300^3 (ccp) to 0.61-0.72x in two rounds, the step to 0.78-0.86x, and its peak up
+/// by 10-14%; the falling obstacle's step, the pressure solve's, is unchanged
+/// (docs/benchmarks/pressure.md, "Fresh pages"). The mmap threshold is set to the value
+/// glibc's own rule would reach (setting the trim threshold stops that rule), so blocks larger
+/// than 32 MiB still come from fresh mappings, resident only where a step writes them (the
+/// memory estimate's sparse per-cell arrays, `methods::cost::HEAP_CELLS`).
+fn tune_malloc() {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     // SAFETY: `mallopt` only sets an allocator parameter; no other thread exists yet.
     unsafe {
         libc::mallopt(libc::M_ARENA_MAX, 1);
+        libc::mallopt(libc::M_MMAP_THRESHOLD, MMAP_BYTES);
+        libc::mallopt(libc::M_TRIM_THRESHOLD, TRIM_BYTES);
     }
 }
+
+/// Blocks from this size up are mapped afresh: glibc's largest dynamic mmap threshold.
+const MMAP_BYTES: i32 = 32 << 20;
+
+/// Free heap top returned to the kernel once this much of it is free: the largest value
+/// `mallopt` takes, so in practice only when a run ends (`machine::reset_peak_memory` trims it
+/// between the runs of a report).
+const TRIM_BYTES: i32 = i32::MAX;
 
 /// Makes a file size limit (`ulimit -f`, as batch systems set) a write error, as a full disk
 /// is: by default the kernel kills a process that writes past it with SIGXFSZ, before any
