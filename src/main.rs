@@ -50,7 +50,8 @@ fn main() {
 /// fitted to peaks measured this way.
 ///
 /// **A heap that is not handed back.** glibc returns the top of its heap to the kernel once
-/// [`TRIM_BYTES`] of it are free (by default twice the mmap threshold, at most 64 MiB), so the
+/// `M_TRIM_THRESHOLD` bytes of it are free (by default twice its mmap threshold, which rises
+/// with the blocks freed to at most 32 MiB: at most 64 MiB), so the
 /// blocks a step frees at its end (the flow solver's network, the correction's problem) are
 /// asked for again as fresh pages the next step, zeroed and faulted in one by one, and fresh
 /// pages are dear on these virtual machines. Keeping the heap took the correction stage of
