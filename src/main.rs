@@ -51,16 +51,16 @@ fn main() {
 ///
 /// **A heap that is not handed back.** glibc returns the top of its heap to the kernel once
 /// `M_TRIM_THRESHOLD` bytes of it are free (by default twice its mmap threshold, which rises
-/// with the blocks freed to at most 32 MiB: at most 64 MiB), so the
-/// blocks a step frees at its end (the flow solver's network, the correction's problem) are
-/// asked for again as fresh pages the next step, zeroed and faulted in one by one, and fresh
-/// pages are dear on these virtual machines. Keeping the heap took the correction stage of
-/// drop-3d at 300^3 (ccp) to 0.61-0.72x in two rounds, the step to 0.78-0.86x, and its peak up
-/// by 10-14%; the falling obstacle's step, the pressure solve's, is unchanged
-/// (docs/benchmarks/pressure.md, "Fresh pages"). The mmap threshold is set to the value
-/// glibc's own rule would reach (setting the trim threshold stops that rule), so blocks larger
-/// than 32 MiB still come from fresh mappings, resident only where a step writes them (the
-/// memory estimate's sparse per-cell arrays, `methods::cost::HEAP_CELLS`).
+/// with the blocks freed to at most 32 MiB: at most 64 MiB), so the blocks a step frees at its
+/// end (the flow solver's network, the correction's problem) are asked for again as fresh
+/// pages the next step, zeroed and faulted in one by one, and fresh pages are dear on these
+/// virtual machines. Keeping the heap took the correction stage of drop-3d at 300^3 (ccp) to
+/// 0.61-0.72x in two rounds, the step to 0.78-0.86x, and its peak up by 10-14%; the falling
+/// obstacle's step, the pressure solve's, is unchanged (docs/benchmarks/pressure.md, "Fresh
+/// pages"). The mmap threshold is set to the value glibc's own rule would reach (setting the
+/// trim threshold stops that rule), so blocks of 32 MiB and more still come from fresh
+/// mappings, resident only where a step writes them (the memory estimate's sparse per-cell
+/// arrays, `methods::cost::HEAP_CELLS`).
 fn tune_malloc() {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     // SAFETY: `mallopt` only sets an allocator parameter; no other thread exists yet.
