@@ -50,18 +50,18 @@ fn main() {
 /// fitted to peaks measured this way.
 ///
 /// **A heap that is not handed back.** glibc returns the top of its heap to the kernel once
-/// `M_TRIM_THRESHOLD` bytes of it are free (by default twice its mmap threshold, which rises
-/// with the blocks freed to at most 32 MiB: at most 64 MiB), so every step shrank the heap
-/// where the blocks it freed had been (the flow solver's networks, the correction's problem,
-/// row-sized vectors) and grew it again the next step, the kernel handing the pages back and
-/// then clearing and mapping them afresh, which is dear on these virtual machines. Keeping the
-/// heap took drop-3d at 300^3 (ccp) from 11.8-15.0 s of kernel time a run to 8.9-9.4 s, its
-/// correction stage to 0.61-0.72x in two rounds, the step to 0.78-0.86x, and its peak up by
-/// 10-14%; the falling obstacle's step, the pressure solve's, is unchanged
-/// (docs/benchmarks/pressure.md, "Fresh pages"). The mmap threshold is set to the value glibc's own rule would reach (setting the
-/// trim threshold stops that rule), so blocks of 32 MiB and more still come from fresh
-/// mappings, resident only where a step writes them (the memory estimate's sparse per-cell
-/// arrays, `methods::cost::HEAP_CELLS`).
+/// `M_TRIM_THRESHOLD` bytes of it are free (by default twice its mmap threshold, which rises with
+/// the blocks freed to at most 32 MiB: at most 64 MiB), so every step shrank the heap where the
+/// blocks it freed had been (the flow solver's networks, the correction's problem, row-sized
+/// vectors) and grew it again the next step, the kernel handing the pages back and then clearing
+/// and mapping them afresh, which is dear on these virtual machines. Keeping the heap took drop-3d
+/// at 300^3 (ccp) from 11.8-15.0 s of kernel time a run to 8.9-9.4 s, its correction stage to
+/// 0.61-0.72x in two rounds, the step to 0.78-0.86x, and its peak up by 10-14%; the falling
+/// obstacle's step, the pressure solve's, is unchanged (docs/benchmarks/pressure.md, "Fresh
+/// pages"). The mmap threshold is set to the value glibc's own rule would reach (setting the trim
+/// threshold stops that rule), so blocks of 32 MiB and more still come from fresh mappings,
+/// resident only where a step writes them (the memory estimate's sparse per-cell arrays,
+/// `methods::cost::HEAP_CELLS`).
 fn tune_malloc() {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     // SAFETY: `mallopt` only sets an allocator parameter; no other thread exists yet.

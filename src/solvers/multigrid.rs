@@ -91,15 +91,15 @@
 //! the 4 M rows of falling-obstacle-3d `--res 200`; the separable sum took restriction from 301
 //! to 187 ms per solve at drop-3d 300^3.
 //!
-//! **Smoother**: red-black Gauss-Seidel rather than McAdams' damped Jacobi: it smooths
-//! better per sweep, needs no damping factor, and each half-sweep is just as parallel, since
-//! a colour couples only to the other. Each level stores its red rows first, then its black
-//! rows, so a half-sweep writes one slice while reading the other ([`SWEEPS`] each way). Pre-smoothing runs red then black, post-smoothing black then
-//! red: the post-smoother is the pre-smoother's transpose. A row with no coupling at all (a
-//! single cell among Neumann cells, zero diagonal) is smoothed with the level's scale in
-//! place of its diagonal, as a correction `x_i += r_i / scale`: overwriting it instead would
-//! drop the coarse correction there on the way up but not on the way down, and break the
-//! symmetry.
+//! **Smoother**: red-black Gauss-Seidel rather than McAdams' damped Jacobi: it smooths better per
+//! sweep, needs no damping factor, and each half-sweep is just as parallel, since a colour couples
+//! only to the other. Each level stores its red rows first, then its black rows, so a half-sweep
+//! writes one slice while reading the other ([`SWEEPS`] each way). Pre-smoothing runs red then
+//! black, post-smoothing black then red: the post-smoother is the pre-smoother's transpose. A row
+//! with no coupling at all (a single cell among Neumann cells, zero diagonal) is smoothed with the
+//! level's scale in place of its diagonal, as a correction `x_i += r_i / scale`: overwriting it
+//! instead would drop the coarse correction there on the way up but not on the way down, and break
+//! the symmetry.
 //!
 //! **Work skipped** (exact in exact arithmetic, so the operator and the argument below are
 //! unchanged): after pre-smoothing ends with a black half-sweep, each coupled black row's
