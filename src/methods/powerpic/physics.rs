@@ -296,6 +296,7 @@ impl<const D: usize> FluidMethod<D> for PowerPicSim<D> {
             iterations: plan.iterations,
             marginal_error: plan.error,
             converged: plan.converged,
+            out_of_range: plan.out_of_range,
             air_volume: self.air_volume,
             fraction: fraction_image(&self.tg, plan, &self.fill),
         })

@@ -15,8 +15,11 @@ pub struct PowerPicReport {
     pub iterations: u32,
     /// The largest relative column error when it stopped.
     pub marginal_error: f64,
-    /// Whether it met `delta` (otherwise it stopped at its cap).
+    /// Whether it met `delta` (otherwise it stopped at its cap, or out of range).
     pub converged: bool,
+    /// Whether it stopped before its scalings left their range: marginals it cannot meet
+    /// (`crate::solvers::sinkhorn::Transport::out_of_range`).
+    pub out_of_range: bool,
     /// Empty volume of the transport cells in the liquid's cells, cells.
     pub air_volume: f64,
     /// The transport grid's fluid fraction (2D; the mid slice in 3D).
@@ -54,7 +57,13 @@ impl<const D: usize> MethodReport<D> for PowerPicReport {
         log.scalar("metrics/powerpic/iterations", self.iterations as f64);
         log.scalar("metrics/powerpic/marginal_error", self.marginal_error);
         log.scalar("metrics/powerpic/air_volume", self.air_volume);
-        if !self.converged {
+        if self.out_of_range {
+            log.warn(&format!(
+                "powerpic: Sinkhorn stopped at iteration {} with marginal error {:.3e}, its \
+                 scalings running out of range: marginals it cannot meet",
+                self.iterations, self.marginal_error
+            ));
+        } else if !self.converged {
             log.warn(&format!(
                 "powerpic: Sinkhorn stopped at its cap of {} iterations with marginal error \
                  {:.3e}",
@@ -88,6 +97,7 @@ pub(super) struct Totals {
     iterations: u64,
     most_iterations: u32,
     at_cap: u64,
+    out_of_range: u64,
 }
 
 impl Totals {
@@ -109,7 +119,8 @@ impl<const D: usize> MethodSummary<D> for Totals {
         self.steps += 1;
         self.iterations += rep.iterations as u64;
         self.most_iterations = self.most_iterations.max(rep.iterations);
-        self.at_cap += u64::from(!rep.converged);
+        self.at_cap += u64::from(!rep.converged && !rep.out_of_range);
+        self.out_of_range += u64::from(rep.out_of_range);
     }
 
     fn lines(&self) -> Vec<String> {
@@ -127,6 +138,13 @@ impl<const D: usize> MethodSummary<D> for Totals {
                 "Sinkhorn reached its cap of {} iterations in {} of {} steps \
                  (simulation.powerpic.max_iterations)",
                 t.max_iterations, t.at_cap, t.steps
+            ));
+        }
+        if t.out_of_range > 0 {
+            lines.push(format!(
+                "Sinkhorn stopped short of its cap in {} of {} steps, its scalings running out of \
+                 range (marginals it cannot meet; their error is in the marginal error)",
+                t.out_of_range, t.steps
             ));
         }
         lines

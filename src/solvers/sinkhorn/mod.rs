@@ -54,8 +54,12 @@
 //! solve and keeps them (in single precision), and every iteration rebuilds its row from them, a sparse
 //! matrix-vector product each way ([`kernel`]; Qu et al.'s "localized Gaussian
 //! convolutions"). The scalings are kept as `u`, `v` rather than their logs: with the
-//! cut, every kept `K_pj` is at least `1e-12`, far inside the range of `f64`, and a scaling
-//! that leaves it is reported ([`SinkhornError::Diverged`]). Columns are summed by scattering
+//! cut, every kept `K_pj` is at least `1e-12`, far inside the range of `f64`. Where the marginals
+//! cannot both be met (points whose balls reach less free volume than they hold), the scalings
+//! run off geometrically, some towards zero and some towards infinity; the iteration stops,
+//! as at its cap, before a column scaling leaves [`SCALING_RANGE`], returning the plan of exact
+//! rows it has ([`Transport::out_of_range`]), so that the logs need not be kept. A scaling
+//! that is not finite for other reasons is reported ([`SinkhornError::Diverged`]). Columns are summed by scattering
 //! chunks of spatially sorted points (their size set by the point count) into their own
 //! windows of cells, added in chunk order: results are the same whatever the thread count. A
 //! wave of chunks at a time holds its windows, so that the windows held do not grow with the
@@ -84,6 +88,20 @@ pub const KERNEL_CUTOFF: f64 = 27.631_021_115_928_547;
 /// Iterations over which the column error may grow under over-relaxation (it overshoots
 /// before it settles); after them a growing error falls back to plain Sinkhorn.
 const RELAXED_START: u32 = 10;
+
+/// A column scaling `v_j` outside `[1 / SCALING_RANGE, SCALING_RANGE]` ends the iteration
+/// ([`Transport::out_of_range`]): far beyond any scaling of a problem that can be solved (its
+/// `K_pj` are at least `1e-12`), and far enough inside `f64`'s range that the row scalings,
+/// which go as their inverse, stay normal too. Found on spiral-2d at 64^2 with the rows
+/// relaxed by 27/16 instead of [`ROW_OMEGA`] (2026-11-30, issue 73; not kept): at step 244 a
+/// solve with the lid pressing on the liquid ran its scalings off by a factor of about 4.5 an
+/// iteration at a column error of 0.32, and overflowed at iteration 408, ending the run.
+const SCALING_RANGE: f64 = 1e280;
+
+/// Whether a column scaling is within [`SCALING_RANGE`] (false for NaN).
+fn in_range(v: f64) -> bool {
+    (1.0 / SCALING_RANGE..=SCALING_RANGE).contains(&v)
+}
 
 /// Slots per task of the column updates.
 const SLOTS_PER_TASK: usize = 2048;
@@ -240,7 +258,8 @@ pub enum SinkhornError {
          transport grid"
     )]
     Overfull { volume: f64, capacity: f64 },
-    /// A scaling became infinite, zero or NaN.
+    /// A row scaling became infinite, zero or NaN, or a warm start's column scaling left
+    /// [`SCALING_RANGE`].
     #[error("the scalings left the finite range at iteration {iteration}")]
     Diverged { iteration: u32 },
 }
@@ -256,8 +275,13 @@ pub struct Transport<const D: usize> {
     pub iterations: u32,
     /// The largest relative column error after the last row update.
     pub error: f64,
-    /// Whether `error <= delta` (otherwise the iteration cap was reached).
+    /// Whether `error <= delta` (otherwise the iteration cap was reached, or see
+    /// [`Self::out_of_range`]).
     pub converged: bool,
+    /// Whether the iteration stopped because the next column scalings would have left
+    /// [`SCALING_RANGE`]: marginals it cannot meet. The plan is the last one with exact rows
+    /// (every point holds its volume), its column error `error`.
+    pub out_of_range: bool,
     /// The points' volume `V_p`.
     pub volume: f64,
     /// `V_j` of a free cell.
@@ -289,6 +313,7 @@ impl<const D: usize> Transport<D> {
             iterations: 0,
             error: 0.0,
             converged: false,
+            out_of_range: false,
             volume: 0.0,
             cell_volume: 0.0,
             air: Air::Capacity,
@@ -334,13 +359,14 @@ impl<const D: usize> Transport<D> {
             // The columns follow the row scalings taken; the stopping test is on the plan
             // whose rows are exact.
             let taken = rows.relaxed.as_ref().map_or(&rows.sums, |r| &r.1);
-            let (last, normal);
-            (last, (t.error, normal)) = (
+            let (last, in_range);
+            (last, (t.error, in_range)) = (
                 t.error,
                 t.column_update(taken, &rows.sums, &mut next, relax),
             );
             t.converged = t.error <= s.delta;
-            if t.converged || t.iterations >= s.max_iterations {
+            t.out_of_range = !in_range;
+            if t.converged || t.out_of_range || t.iterations >= s.max_iterations {
                 t.u = rows.exact;
                 break;
             }
@@ -348,7 +374,7 @@ impl<const D: usize> Transport<D> {
             // Past the first steps, an error that grows ends the over-relaxation: plain
             // Sinkhorn from there on, which converges from any start (Sinkhorn 1967).
             relax &= t.iterations <= RELAXED_START || t.error <= last;
-            t.adopt(&mut next, normal)?;
+            t.adopt(&mut next, in_range)?;
         }
         Ok(t)
     }
@@ -379,8 +405,8 @@ impl<const D: usize> Transport<D> {
             .collect();
         let c = self.kernel.columns(0.0, |p| self.u[p]);
         let mut next = vec![];
-        let (_, normal) = self.column_update(&c, &c, &mut next, false);
-        self.adopt(&mut next, normal)
+        let (_, in_range) = self.column_update(&c, &c, &mut next, false);
+        self.adopt(&mut next, in_range)
     }
 
     /// A plan on `kernel`, every scaling 1: its slots' centres and baselines.
@@ -397,6 +423,7 @@ impl<const D: usize> Transport<D> {
             iterations: 0,
             error: f64::INFINITY,
             converged: false,
+            out_of_range: false,
             volume,
             cell_volume: tg.cell_volume(),
             air,
@@ -436,8 +463,8 @@ impl<const D: usize> Transport<D> {
 
     /// The column update, every cell's marginal met, from `C_j` (per slot in `c`), into
     /// `next`; returns the largest relative column error of the current scalings with the
-    /// column sums `tested` (those of exact rows) and whether the new scalings are all finite
-    /// and positive (one pass for both).
+    /// column sums `tested` (those of exact rows) and whether the new scalings are all within
+    /// [`SCALING_RANGE`] (one pass for both).
     fn column_update(
         &self,
         c: &[f64],
@@ -458,7 +485,7 @@ impl<const D: usize> Transport<D> {
                 true => self.overrelaxed(v, exact),
                 false => exact,
             };
-            (self.column_error(k, v * tested, v), next.is_normal())
+            (self.column_error(k, v * tested, v), in_range(*next))
         })
         .reduce(|| (0.0, true), |(a, p), (b, q)| (a.max(b), p && q))
     }
@@ -511,9 +538,9 @@ impl<const D: usize> Transport<D> {
         }
     }
 
-    /// Takes the scalings [`Self::column_update`] put in `next`, if `normal`.
-    fn adopt(&mut self, next: &mut Vec<f64>, normal: bool) -> Result<(), SinkhornError> {
-        if !normal {
+    /// Takes the scalings [`Self::column_update`] put in `next`, if `in_range`.
+    fn adopt(&mut self, next: &mut Vec<f64>, in_range: bool) -> Result<(), SinkhornError> {
+        if !in_range {
             return Err(SinkhornError::Diverged {
                 iteration: self.iterations,
             });
@@ -703,6 +730,59 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// Points crowded into a pocket of free cells that holds less than they do, walled off by
+    /// blocked cells wider than a ball: the rows and columns cannot both be met.
+    fn pocket<const D: usize>(
+        cells: [usize; D],
+        n: usize,
+    ) -> (TransportGrid<D>, Vec<Vector<D>>, f64) {
+        let mut tg = TransportGrid::new(Grid::new(cells), 0.5);
+        let wall = 2..2 + (S.radius() / tg.h).ceil() as usize + 2;
+        for j in 0..tg.grid.num_cells() {
+            tg.set_free(j, !wall.contains(&tg.grid.cell_coords(j)[0]));
+        }
+        let mut rng = StdRng::seed_from_u64(D as u64);
+        let points = (0..n)
+            .map(|_| {
+                Vector::<D>::from_fn(|k, _| {
+                    rng.random::<f64>() * tg.h * if k == 0 { 2.0 } else { cells[k] as f64 }
+                })
+            })
+            .collect();
+        let volume = tg.cell_volume() / 2.0;
+        (tg, points, volume)
+    }
+
+    #[test]
+    fn marginals_that_cannot_be_met_stop_the_iteration_in_range_in_2d_and_3d() {
+        fn check<const D: usize>(cells: [usize; D]) {
+            let room = 2 * cells[1..].iter().product::<usize>();
+            let (tg, pts, volume) = pocket(cells, 4 * room);
+            let held = volume * pts.len() as f64;
+            assert!(held > room as f64 * tg.cell_volume() && held <= tg.free_volume());
+            let s = SinkhornSettings {
+                max_iterations: 1_000_000,
+                ..S
+            };
+            let t = Transport::solve(&tg, &Air::Capacity, &pts, volume, &s, None).unwrap();
+            assert!(
+                t.out_of_range && !t.converged,
+                "{} iterations",
+                t.iterations
+            );
+            assert!(t.iterations < s.max_iterations && t.error > s.delta);
+            let (_, u, v) = t.warm_parts();
+            assert!(u.iter().chain(v).all(|x| x.is_normal() && *x > 0.0));
+            for p in 0..pts.len() {
+                let mut row = 0.0;
+                t.for_each_in_row(p, |_, _, t| row += t);
+                assert!((row / volume - 1.0).abs() < 1e-12, "row {p}: {row}");
+            }
+        }
+        check([24, 6]);
+        check([20, 4, 3]);
     }
 
     #[test]
