@@ -504,25 +504,6 @@ struct Ball<'a, const D: usize> {
     reach: usize,
 }
 
-/// `f[i] = e^(-d_i^2 / eps)` at the offsets `d_i = first + i h` along one axis, rounded to single
-/// precision, by three exponentials rather than one a cell: each factor is the last times
-/// `g_i = e^(-(2 d_i h + h^2) / eps)`, and each `g` the last times `e^(-2 h^2 / eps)`. The
-/// products drift from the exponentials by a few units of `f64`'s last place over a box's side,
-/// a billion times less than the rounding to `f32`. The exponentials were 4% of dam-2d's step
-/// (2026-11-30, issue 73).
-fn gaussian_by_steps(first: f64, h: f64, epsilon: f64, f: &mut [f32]) {
-    let (mut value, mut ratio) = (
-        (-first * first / epsilon).exp(),
-        (-(2.0 * first * h + h * h) / epsilon).exp(),
-    );
-    let step = (-2.0 * h * h / epsilon).exp();
-    for f in f {
-        *f = value as f32;
-        value *= ratio;
-        ratio *= step;
-    }
-}
-
 impl<'a, const D: usize> Ball<'a, D> {
     fn new(tg: &'a TransportGrid<D>, points: &[Vector<D>], s: &SinkhornSettings) -> Self {
         let (r, reach) = (s.radius(), (s.radius() / tg.h).ceil() as usize);
@@ -576,10 +557,7 @@ impl<'a, const D: usize> Ball<'a, D> {
             for l in self.lines(lo, len, &d2) {
                 self.line_runs(&l, reached, &mut r.run);
             }
-            for (k, f) in f.chunks_mut(self.side()).enumerate() {
-                let first = (lo[k] as f64 + 0.5) * self.tg.h - x[k];
-                gaussian_by_steps(first, self.tg.h, epsilon, f);
-            }
+            (f.iter_mut().zip(&d2)).for_each(|(f, d2)| *f = (-d2 / epsilon).exp() as f32);
             r.first.push(r.run.len() as u32);
         }
     }
@@ -842,26 +820,6 @@ mod tests {
             });
         }
         assert!(entries > 20 * points.len(), "{entries} entries");
-    }
-
-    #[test]
-    fn factors_by_steps_are_the_exponentials_to_single_precision() {
-        let mut rng = StdRng::seed_from_u64(73);
-        for _ in 0..1_000 {
-            let (h, epsilon) = (rng.random_range(0.005..0.05), rng.random_range(0.001..0.02));
-            let side = 2 * ((KERNEL_CUTOFF * epsilon).sqrt() / h).ceil() as usize + 1;
-            let first = -((side / 2) as f64 + rng.random::<f64>()) * h;
-            let mut f = vec![0.0f32; side];
-            gaussian_by_steps(first, h, epsilon, &mut f);
-            for (i, &f) in f.iter().enumerate() {
-                let d = first + i as f64 * h;
-                let exact = (-d * d / epsilon).exp();
-                assert!(
-                    ((f as f64) - exact).abs() <= exact * f32::EPSILON as f64,
-                    "{i}: {f} {exact}"
-                );
-            }
-        }
     }
 
     #[test]
