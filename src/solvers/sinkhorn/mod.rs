@@ -54,12 +54,13 @@
 //! solve and keeps them (in single precision), and every iteration rebuilds its row from them, a sparse
 //! matrix-vector product each way ([`kernel`]; Qu et al.'s "localized Gaussian
 //! convolutions"). The scalings are kept as `u`, `v` rather than their logs: with the
-//! cut, every kept `K_pj` is at least `1e-12`, far inside the range of `f64`. Where the marginals
-//! cannot both be met (points whose balls reach less free volume than they hold), the scalings
-//! run off geometrically, some towards zero and some towards infinity; the iteration stops,
-//! as at its cap, before a column scaling leaves [`SCALING_RANGE`], returning the plan of exact
-//! rows it has ([`Transport::out_of_range`]), so that the logs need not be kept. A scaling
-//! that is not finite for other reasons is reported ([`SinkhornError::Diverged`]). Columns are summed by scattering
+//! cut, every kept `K_pj` is at least `1e-12`, far inside the range of `f64`. Where the
+//! marginals cannot both be met (points whose balls reach less free volume than they hold), the
+//! scalings run off geometrically, some towards zero and some towards infinity; the iteration
+//! stops, as at its cap, before a column scaling leaves [`SCALING_RANGE`], returning the plan
+//! of exact rows it has ([`Transport::out_of_range`]), so that the logs need not be kept (a
+//! warm start from such a plan starts cold). A row scaling that is not finite for other
+//! reasons is reported ([`SinkhornError::Diverged`]). Columns are summed by scattering
 //! chunks of spatially sorted points (their size set by the point count) into their own
 //! windows of cells, added in chunk order: results are the same whatever the thread count. A
 //! wave of chunks at a time holds its windows, so that the windows held do not grow with the
@@ -258,8 +259,7 @@ pub enum SinkhornError {
          transport grid"
     )]
     Overfull { volume: f64, capacity: f64 },
-    /// A row scaling became infinite, zero or NaN, or a warm start's column scaling left
-    /// [`SCALING_RANGE`].
+    /// A row scaling became infinite, zero or NaN.
     #[error("the scalings left the finite range at iteration {iteration}")]
     Diverged { iteration: u32 },
 }
@@ -350,7 +350,7 @@ impl<const D: usize> Transport<D> {
         let kernel = Kernel::new(tg, points, s, storage.unwrap_or_else(Kernel::empty))?;
         let mut t = Self::new(tg, air, kernel, volume);
         if let Some(w) = warm {
-            t.start_from(w)?;
+            t.start_from(w);
         }
         let (mut next, mut relax) = (vec![], true);
         loop {
@@ -365,7 +365,7 @@ impl<const D: usize> Transport<D> {
                 t.column_update(taken, &rows.sums, &mut next, relax),
             );
             t.converged = t.error <= s.delta;
-            t.out_of_range = !in_range;
+            t.out_of_range = !in_range && !t.converged;
             if t.converged || t.out_of_range || t.iterations >= s.max_iterations {
                 t.u = rows.exact;
                 break;
@@ -374,7 +374,7 @@ impl<const D: usize> Transport<D> {
             // Past the first steps, an error that grows ends the over-relaxation: plain
             // Sinkhorn from there on, which converges from any start (Sinkhorn 1967).
             relax &= t.iterations <= RELAXED_START || t.error <= last;
-            t.adopt(&mut next, in_range)?;
+            std::mem::swap(&mut t.v, &mut next);
         }
         Ok(t)
     }
@@ -386,7 +386,9 @@ impl<const D: usize> Transport<D> {
     /// point's `u_p` moves with the point, so where a cell that few kernels reach moves with
     /// the liquid (a deep cell that must be full), the carried `u_p` already hold it (our
     /// choice; Qu et al. and Levi say nothing of warm starts).
-    fn start_from(&mut self, w: Self) -> Result<(), SinkhornError> {
+    /// Where the carried scalings would leave [`SCALING_RANGE`] at once (a plan that stopped
+    /// out of range), it starts cold instead.
+    fn start_from(&mut self, w: Self) {
         let mut at = 0;
         for (&j, v) in self.active.iter().zip(&mut self.v) {
             while w.active.get(at).is_some_and(|&i| i < j) {
@@ -397,7 +399,7 @@ impl<const D: usize> Transport<D> {
             }
         }
         if w.u.len() > self.u.len() {
-            return Ok(());
+            return;
         }
         self.u = (0..self.u.len())
             .into_par_iter()
@@ -405,8 +407,13 @@ impl<const D: usize> Transport<D> {
             .collect();
         let c = self.kernel.columns(0.0, |p| self.u[p]);
         let mut next = vec![];
-        let (_, in_range) = self.column_update(&c, &c, &mut next, false);
-        self.adopt(&mut next, in_range)
+        match self.column_update(&c, &c, &mut next, false) {
+            (_, true) => std::mem::swap(&mut self.v, &mut next),
+            (_, false) => {
+                self.v.fill(1.0);
+                self.u.fill(0.0);
+            }
+        }
     }
 
     /// A plan on `kernel`, every scaling 1: its slots' centres and baselines.
@@ -536,17 +543,6 @@ impl<const D: usize> Transport<D> {
                 (ratio + air / self.cell_volume - 1.0).abs()
             }
         }
-    }
-
-    /// Takes the scalings [`Self::column_update`] put in `next`, if `in_range`.
-    fn adopt(&mut self, next: &mut Vec<f64>, in_range: bool) -> Result<(), SinkhornError> {
-        if !in_range {
-            return Err(SinkhornError::Diverged {
-                iteration: self.iterations,
-            });
-        }
-        std::mem::swap(&mut self.v, next);
-        Ok(())
     }
 
     /// `sum_p T_pj w(p)` for every slot (e.g. `w = 1`: the volume the kernels put in each
@@ -780,6 +776,9 @@ mod tests {
                 t.for_each_in_row(p, |_, _, t| row += t);
                 assert!((row / volume - 1.0).abs() < 1e-12, "row {p}: {row}");
             }
+            // A warm start from it does not carry the scalings out of range.
+            let again = Transport::solve(&tg, &Air::Capacity, &pts, volume, &s, Some(t)).unwrap();
+            assert!(again.out_of_range && !again.converged);
         }
         check([24, 6]);
         check([20, 4, 3]);
