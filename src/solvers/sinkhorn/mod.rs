@@ -51,8 +51,8 @@
 //! [`KERNEL_CUTOFF`], so every point sees only the cells of a ball of radius
 //! `sqrt(KERNEL_CUTOFF eps)`. On the regular grid `K_pj` is a product of per-axis factors
 //! `e^(-(x_p,k - x_j,k)^2 / eps)`: each point computes `d (2 r + 1)` exponentials once per
-//! solve and keeps them (in single precision), and every iteration rebuilds its row from them, a sparse
-//! matrix-vector product each way ([`kernel`]; Qu et al.'s "localized Gaussian
+//! solve and keeps them (in single precision), and every iteration rebuilds its row from them,
+//! a sparse matrix-vector product each way ([`kernel`]; Qu et al.'s "localized Gaussian
 //! convolutions"). The scalings are kept as `u`, `v` rather than their logs: with the
 //! cut, every kept `K_pj` is at least `1e-12`, far inside the range of `f64`. Where the
 //! marginals cannot both be met (points whose balls reach less free volume than they hold), the
@@ -100,7 +100,7 @@ const RELAXED_START: u32 = 10;
 const SCALING_RANGE: f64 = 1e280;
 
 /// Whether a column scaling is within [`SCALING_RANGE`] (false for NaN).
-fn in_range(v: f64) -> bool {
+fn scaling_in_range(v: f64) -> bool {
     (1.0 / SCALING_RANGE..=SCALING_RANGE).contains(&v)
 }
 
@@ -386,6 +386,7 @@ impl<const D: usize> Transport<D> {
     /// point's `u_p` moves with the point, so where a cell that few kernels reach moves with
     /// the liquid (a deep cell that must be full), the carried `u_p` already hold it (our
     /// choice; Qu et al. and Levi say nothing of warm starts).
+    ///
     /// Where the carried scalings would leave [`SCALING_RANGE`] at once (a plan that stopped
     /// out of range), it starts cold instead.
     fn start_from(&mut self, w: Self) {
@@ -448,8 +449,9 @@ impl<const D: usize> Transport<D> {
     }
 
     /// Row update: every point's exact row scaling and, with `relax`, each over-relaxed from
-    /// its current one by [`ROW_OMEGA`] (as the columns are, [`Self::overrelaxed`]), with the column sums
-    /// `C_j = sum_p K_pj u_p` of both (one pass over the rows); the caller takes the scalings.
+    /// its current one by [`ROW_OMEGA`] (as the columns are, [`Self::overrelaxed`]), with the
+    /// column sums `C_j = sum_p K_pj u_p` of both (one pass over the rows); the caller takes the
+    /// scalings.
     fn update_rows(&mut self, relax: bool) -> Result<RowUpdate, SinkhornError> {
         let u = &self.u;
         let relaxed = |p: usize, exact: f64| u[p] * (exact / u[p]).powf(ROW_OMEGA);
@@ -492,7 +494,7 @@ impl<const D: usize> Transport<D> {
                 true => self.overrelaxed(v, exact),
                 false => exact,
             };
-            (self.column_error(k, v * tested, v), in_range(*next))
+            (self.column_error(k, v * tested, v), scaling_in_range(*next))
         })
         .reduce(|| (0.0, true), |(a, p), (b, q)| (a.max(b), p && q))
     }
