@@ -178,27 +178,24 @@ impl<const D: usize> FluidMethod<D> for PowerPicSim<D> {
     fn particles_to_grid(&mut self, s: &State<D>) -> Result<(MacField<D>, Known<D>), StepError> {
         self.update_cells(s);
         let plan = self.solve(s)?;
-        let tg = &self.tg;
         let vel = &s.particles.vel;
         let sums = plan.columns(MassMomentum(0.0, Vector::zeros()), |p| {
             MassMomentum(1.0, vel[p])
         });
-        let (mut centres, mut velocities, mut masses) = (vec![], vec![], vec![]);
-        for (&j, &MassMomentum(m, mv)) in plan.active_cells().iter().zip(&sums) {
-            if m > 0.0 {
-                centres.push(tg.center(j as usize));
-                velocities.push(mv / m);
-                masses.push(m);
-            }
-        }
         self.fill = sums.iter().map(|s| s.0).collect();
+        // A slot the kernels put no mass in (an underflow) weighs nothing in the splat.
+        let velocities: Vec<Vector<D>> = (sums.iter())
+            .map(|&MassMomentum(m, mv)| if m > 0.0 { mv / m } else { Vector::zeros() })
+            .collect();
+        drop(sums);
         self.plan = Some(plan);
         self.air_volume = self.air_in_liquid(s);
+        let centres = self.plan().centres();
         Ok(transfer::weighted_to_grid(
             &s.grid,
-            &centres,
+            centres,
             &velocities,
-            &masses,
+            &self.fill,
         ))
     }
 
@@ -222,7 +219,7 @@ impl<const D: usize> FluidMethod<D> for PowerPicSim<D> {
         let flip = s.config.flip_ratio;
         let solid = &s.solids.solid;
         let pos = &s.particles.pos;
-        let moved: Vec<(Vector<D>, Vector<D>, f64)> = plan.by_rows(|p| {
+        let moved = plan.by_rows(|p| {
             let (mut mass, mut centre) = (0.0, Vector::<D>::zeros());
             let (mut un, mut du) = (Vector::<D>::zeros(), Vector::<D>::zeros());
             plan.for_each_in_row(p, |k, xj, t| {
@@ -238,12 +235,13 @@ impl<const D: usize> FluidMethod<D> for PowerPicSim<D> {
             (x, v, (mass / self.volume - 1.0).abs())
         });
         assert_eq!(moved.len(), pos.len(), "one row per particle of the solve");
-        self.row_error = 0.0;
-        for (p, (x, v, e)) in moved.into_iter().enumerate() {
+        let mut row_error = 0.0f64;
+        for (p, (x, v, e)) in moved {
             s.particles.pos[p] = x;
             s.particles.vel[p] = v;
-            self.row_error = self.row_error.max(e);
+            row_error = row_error.max(e);
         }
+        self.row_error = row_error;
         transfer::limit_speeds(&mut s.particles.vel, s.config.max_speed);
         // The particles moved to their barycentres: advection interpolates there.
         false

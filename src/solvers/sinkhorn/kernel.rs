@@ -43,8 +43,10 @@ use crate::grid::lanes::cpu_has_lanes;
 use crate::grid::{strides, Vector};
 use crate::solvers::NONE;
 use rayon::prelude::*;
+use std::iter::{Map, Zip};
 use std::ops::{AddAssign, Mul, Range};
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::{slice, vec};
 
 /// Points per chunk of the column sums: a `1 / MIN_CHUNKS` share of the points, within
 /// these bounds. It depends on the point count only, so that the summation order does not
@@ -87,6 +89,9 @@ struct Chunk {
     points: Range<usize>,
     window: Range<usize>,
 }
+
+/// What [`Kernel::by_rows`] gives: `(p, f(p))` in the sorted order.
+pub type ByRows<'a, T> = Zip<Map<slice::Iter<'a, u32>, fn(&u32) -> usize>, vec::IntoIter<T>>;
 
 /// What [`Kernel::rows_then_columns`] gives: each point's exact row scaling and their column
 /// sums, and, when the rows are relaxed, the scalings taken and their column sums.
@@ -277,18 +282,16 @@ impl<const D: usize> Kernel<D> {
         }
     }
 
-    /// `f(p)` of every point `p`, by point: computed in the sorted order, so that the rows
-    /// that follow one another read neighbouring slots (a walk by point would jump across the
-    /// grid from row to row).
-    pub(super) fn by_rows<T>(&self, f: impl Fn(usize) -> T + Sync) -> Vec<T>
-    where
-        T: Copy + Send + Sync,
-    {
+    /// `(p, f(p))` of every point `p`, in the sorted order, so that the rows that follow one
+    /// another read neighbouring slots (a walk by point would jump across the grid from row to
+    /// row). Not put back in the points' order: that would hold a second copy of the values.
+    pub(super) fn by_rows<T: Send>(&self, f: impl Fn(usize) -> T + Sync) -> ByRows<'_, T> {
         let sorted: Vec<T> = (self.order.par_iter())
             .with_min_len(ROW_GRAIN)
             .map(|&p| f(p as usize))
             .collect();
-        self.by_point(&sorted)
+        let point: fn(&u32) -> usize = |&p| p as usize;
+        self.order.iter().map(point).zip(sorted)
     }
 
     /// Values given in the sorted order, `sorted`, by point.
@@ -767,10 +770,12 @@ mod tests {
         let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * b.abs();
         let sums: Vec<f64> = (0..points.len()).map(|p| kernel.row_sum(p, &v)).collect();
         assert!(sums.iter().zip(&rows).all(|(&a, &b)| close(a, b)));
-        // Walked in the sorted order, given back by point.
-        let by_rows = kernel.by_rows(|p| (p, kernel.row_sum(p, &v)));
+        // Walked in the sorted order, each value with its point.
+        let mut by_rows: Vec<_> = kernel.by_rows(|p| (p, kernel.row_sum(p, &v))).collect();
+        assert!(by_rows.iter().all(|(p, (q, _))| p == q));
+        by_rows.sort_by_key(|r| r.0);
         assert_eq!(
-            by_rows,
+            by_rows.into_iter().map(|r| r.1).collect::<Vec<_>>(),
             sums.iter().copied().enumerate().collect::<Vec<_>>()
         );
         let cols = kernel.columns(0.0, |p| w[p]);

@@ -79,7 +79,7 @@ mod kernel;
 
 use crate::grid::{Grid, Vector};
 pub use kernel::Summand;
-use kernel::{Kernel, RowUpdate};
+use kernel::{ByRows, Kernel, RowUpdate};
 use rayon::prelude::*;
 
 /// The kernel is cut where `|x_p - x_j|^2 / eps` exceeds this: `exp(-27.63) = 1e-12`, far
@@ -566,19 +566,21 @@ impl<const D: usize> Transport<D> {
         (self.kernel).for_each_in_row(p, |k, kpj| f(k, self.centre[k], u * kpj * self.v[k]));
     }
 
-    /// `f(p)` of every point `p` of the solve, by point, computed in the order that keeps the
-    /// rows' cells in cache (the points sorted by cell); `f` may read rows with
+    /// `(p, f(p))` of every point `p` of the solve, computed and given in the order that keeps
+    /// the rows' cells in cache (the points sorted by cell); `f` may read rows with
     /// [`Self::for_each_in_row`].
-    pub fn by_rows<T>(&self, f: impl Fn(usize) -> T + Sync) -> Vec<T>
-    where
-        T: Copy + Send + Sync,
-    {
+    pub fn by_rows<T: Send>(&self, f: impl Fn(usize) -> T + Sync) -> ByRows<'_, T> {
         self.kernel.by_rows(f)
     }
 
     /// Each slot's cell: the cells with capacity within the reach of some point.
     pub fn active_cells(&self) -> &[u32] {
         &self.active
+    }
+
+    /// Each slot's centre.
+    pub fn centres(&self) -> &[Vector<D>] {
+        &self.centre
     }
 
     /// `v_j` of every slot.
