@@ -14,6 +14,11 @@ use crate::stages::transfer::{self, Known};
 use crate::stages::{ParticlesMut, State, StepError};
 use rayon::prelude::*;
 
+/// Particles per piece of grid to particles ([`FluidMethod::grid_to_particles`]): enough
+/// that each piece keeps both threads busy, few enough that the piece's new states weigh a
+/// few MB.
+const ROWS_PER_PIECE: usize = 1 << 16;
+
 /// Power PIC in a running simulation.
 pub struct PowerPicSim<const D: usize> {
     settings: PowerPicSettings,
@@ -216,30 +221,33 @@ impl<const D: usize> FluidMethod<D> for PowerPicSim<D> {
                 (un, un - u_old.interpolate(g, &x))
             })
             .collect();
-        let flip = s.config.flip_ratio;
-        let solid = &s.solids.solid;
-        let pos = &s.particles.pos;
-        let moved = plan.by_rows(|p| {
-            let (mut mass, mut centre) = (0.0, Vector::<D>::zeros());
-            let (mut un, mut du) = (Vector::<D>::zeros(), Vector::<D>::zeros());
-            plan.for_each_in_row(p, |k, xj, t| {
-                let (a, b) = at_cells[k];
-                mass += t;
-                centre += t * xj;
-                un += t * a;
-                du += t * b;
-            });
-            let (un, du) = (un / mass, du / mass);
-            let v = flip * (s.particles.vel[p] + du) + (1.0 - flip) * un;
-            let x = displace(g, solid, &pos[p], centre / mass - pos[p]);
-            (x, v, (mass / self.volume - 1.0).abs())
-        });
-        assert_eq!(moved.len(), pos.len(), "one row per particle of the solve");
+        let (flip, solid, n) = (s.config.flip_ratio, &s.solids.solid, plan.points());
+        assert_eq!(n, s.particles.len(), "one row per particle of the solve");
         let mut row_error = 0.0f64;
-        for (p, (x, v, e)) in moved {
-            s.particles.pos[p] = x;
-            s.particles.vel[p] = v;
-            row_error = row_error.max(e);
+        // A piece of rows at a time: each piece's particles are written before the next is
+        // computed, so the new states are not all held at once (56 bytes a particle in 3D).
+        for start in (0..n).step_by(ROWS_PER_PIECE) {
+            let (pos, vel) = (&s.particles.pos, &s.particles.vel);
+            let moved = plan.by_rows(start..(start + ROWS_PER_PIECE).min(n), |p| {
+                let (mut mass, mut centre) = (0.0, Vector::<D>::zeros());
+                let (mut un, mut du) = (Vector::<D>::zeros(), Vector::<D>::zeros());
+                plan.for_each_in_row(p, |k, xj, t| {
+                    let (a, b) = at_cells[k];
+                    mass += t;
+                    centre += t * xj;
+                    un += t * a;
+                    du += t * b;
+                });
+                let (un, du) = (un / mass, du / mass);
+                let v = flip * (vel[p] + du) + (1.0 - flip) * un;
+                let x = displace(g, solid, &pos[p], centre / mass - pos[p]);
+                (x, v, (mass / self.volume - 1.0).abs())
+            });
+            for (p, (x, v, e)) in moved {
+                s.particles.pos[p] = x;
+                s.particles.vel[p] = v;
+                row_error = row_error.max(e);
+            }
         }
         self.row_error = row_error;
         transfer::limit_speeds(&mut s.particles.vel, s.config.max_speed);

@@ -282,16 +282,22 @@ impl<const D: usize> Kernel<D> {
         }
     }
 
-    /// `(p, f(p))` of every point `p`, in the sorted order, so that the rows that follow one
-    /// another read neighbouring slots (a walk by point would jump across the grid from row to
-    /// row). Not put back in the points' order: that would hold a second copy of the values.
-    pub(super) fn by_rows<T: Send>(&self, f: impl Fn(usize) -> T + Sync) -> ByRows<'_, T> {
-        let sorted: Vec<T> = (self.order.par_iter())
+    /// `(p, f(p))` of the points `p` at the sorted places `sorted`, in that order, so that the
+    /// rows that follow one another read neighbouring slots (a walk by point would jump across
+    /// the grid from row to row). Not put back in the points' order: that would hold a second
+    /// copy of the values.
+    pub(super) fn by_rows<T: Send>(
+        &self,
+        sorted: Range<usize>,
+        f: impl Fn(usize) -> T + Sync,
+    ) -> ByRows<'_, T> {
+        let order = &self.order[sorted];
+        let values: Vec<T> = (order.par_iter())
             .with_min_len(ROW_GRAIN)
             .map(|&p| f(p as usize))
             .collect();
         let point: fn(&u32) -> usize = |&p| p as usize;
-        self.order.iter().map(point).zip(sorted)
+        order.iter().map(point).zip(values)
     }
 
     /// Values given in the sorted order, `sorted`, by point.
@@ -771,7 +777,9 @@ mod tests {
         let sums: Vec<f64> = (0..points.len()).map(|p| kernel.row_sum(p, &v)).collect();
         assert!(sums.iter().zip(&rows).all(|(&a, &b)| close(a, b)));
         // Walked in the sorted order, each value with its point.
-        let mut by_rows: Vec<_> = kernel.by_rows(|p| (p, kernel.row_sum(p, &v))).collect();
+        let n = points.len();
+        let by_rows = |r| kernel.by_rows(r, |p| (p, kernel.row_sum(p, &v)));
+        let mut by_rows: Vec<_> = by_rows(0..n / 3).chain(by_rows(n / 3..n)).collect();
         assert!(by_rows.iter().all(|(p, (q, _))| p == q));
         by_rows.sort_by_key(|r| r.0);
         assert_eq!(

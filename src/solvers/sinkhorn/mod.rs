@@ -81,6 +81,7 @@ use crate::grid::{Grid, Vector};
 pub use kernel::Summand;
 use kernel::{ByRows, Kernel, RowUpdate};
 use rayon::prelude::*;
+use std::ops::Range;
 
 /// The kernel is cut where `|x_p - x_j|^2 / eps` exceeds this: `exp(-27.63) = 1e-12`, far
 /// below the tolerances `delta` the iteration is run to.
@@ -566,11 +567,21 @@ impl<const D: usize> Transport<D> {
         (self.kernel).for_each_in_row(p, |k, kpj| f(k, self.centre[k], u * kpj * self.v[k]));
     }
 
-    /// `(p, f(p))` of every point `p` of the solve, computed and given in the order that keeps
-    /// the rows' cells in cache (the points sorted by cell); `f` may read rows with
-    /// [`Self::for_each_in_row`].
-    pub fn by_rows<T: Send>(&self, f: impl Fn(usize) -> T + Sync) -> ByRows<'_, T> {
-        self.kernel.by_rows(f)
+    /// `(p, f(p))` of the points `p` at the places `sorted` of the order that keeps the rows'
+    /// cells in cache (the points sorted by cell), computed and given in that order; `f` may
+    /// read rows with [`Self::for_each_in_row`]. The places run over `0..self.points()`, all
+    /// at once or a piece at a time.
+    pub fn by_rows<T: Send>(
+        &self,
+        sorted: Range<usize>,
+        f: impl Fn(usize) -> T + Sync,
+    ) -> ByRows<'_, T> {
+        self.kernel.by_rows(sorted, f)
+    }
+
+    /// The points' count.
+    pub fn points(&self) -> usize {
+        self.kernel.points()
     }
 
     /// Each slot's cell: the cells with capacity within the reach of some point.
