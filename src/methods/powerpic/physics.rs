@@ -195,10 +195,13 @@ impl<const D: usize> FluidMethod<D> for PowerPicSim<D> {
         drop(sums);
         self.plan = Some(plan);
         self.air_volume = self.air_in_liquid(s);
-        let centres = self.plan().centres();
+        let tg = &self.tg;
+        let centres: Vec<Vector<D>> = (self.plan().active_cells().par_iter())
+            .map(|&j| tg.center(j as usize))
+            .collect();
         Ok(transfer::weighted_to_grid(
             &s.grid,
-            centres,
+            &centres,
             &velocities,
             &self.fill,
         ))
@@ -214,11 +217,12 @@ impl<const D: usize> FluidMethod<D> for PowerPicSim<D> {
     ) -> bool {
         let plan = self.plan();
         let (tg, g) = (&self.tg, s.grid);
-        let at_cells: Vec<(Vector<D>, Vector<D>)> = (plan.active_cells().par_iter())
+        // Each slot's centre and the new velocity and its change there.
+        let at_cells: Vec<[Vector<D>; 3]> = (plan.active_cells().par_iter())
             .map(|&j| {
                 let x = tg.center(j as usize);
                 let un = u.interpolate(g, &x);
-                (un, un - u_old.interpolate(g, &x))
+                [x, un, un - u_old.interpolate(g, &x)]
             })
             .collect();
         let (flip, solid, n) = (s.config.flip_ratio, &s.solids.solid, plan.points());
@@ -231,8 +235,8 @@ impl<const D: usize> FluidMethod<D> for PowerPicSim<D> {
             let moved = plan.by_rows(start..(start + ROWS_PER_PIECE).min(n), |p| {
                 let (mut mass, mut centre) = (0.0, Vector::<D>::zeros());
                 let (mut un, mut du) = (Vector::<D>::zeros(), Vector::<D>::zeros());
-                plan.for_each_in_row(p, |k, xj, t| {
-                    let (a, b) = at_cells[k];
+                plan.for_each_in_row(p, |k, t| {
+                    let [xj, a, b] = at_cells[k];
                     mass += t;
                     centre += t * xj;
                     un += t * a;

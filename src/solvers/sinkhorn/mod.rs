@@ -294,10 +294,8 @@ pub struct Transport<const D: usize> {
     v: Vec<f64>,
     /// The kernel `K_pj`, which numbers the slots.
     kernel: Kernel<D>,
-    /// Each slot's cell (as in the kernel; alone in a plan from [`Self::from_warm_parts`])
-    /// and centre.
+    /// Each slot's cell (as in the kernel; alone in a plan from [`Self::from_warm_parts`]).
     active: Vec<u32>,
-    centre: Vec<Vector<D>>,
 }
 
 impl<const D: usize> Transport<D> {
@@ -322,7 +320,6 @@ impl<const D: usize> Transport<D> {
             v,
             kernel: Kernel::empty(),
             active,
-            centre: vec![],
         }
     }
 
@@ -438,7 +435,6 @@ impl<const D: usize> Transport<D> {
             air,
             u: vec![0.0; kernel.points()],
             v: vec![1.0; active.len()],
-            centre: active.iter().map(|&j| tg.center(j as usize)).collect(),
             active,
             kernel,
         }
@@ -559,12 +555,11 @@ impl<const D: usize> Transport<D> {
         c
     }
 
-    /// Calls `f(k, x_j, T_pj)` for every cell of point `p`'s row (`k` its slot, `x_j` its
-    /// centre).
+    /// Calls `f(k, T_pj)` for every cell of point `p`'s row (`k` its slot).
     #[inline]
-    pub fn for_each_in_row(&self, p: usize, mut f: impl FnMut(usize, Vector<D>, f64)) {
+    pub fn for_each_in_row(&self, p: usize, mut f: impl FnMut(usize, f64)) {
         let u = self.u[p];
-        (self.kernel).for_each_in_row(p, |k, kpj| f(k, self.centre[k], u * kpj * self.v[k]));
+        (self.kernel).for_each_in_row(p, |k, kpj| f(k, u * kpj * self.v[k]));
     }
 
     /// `(p, f(p))` of the points `p` at the places `sorted` of the order that keeps the rows'
@@ -587,11 +582,6 @@ impl<const D: usize> Transport<D> {
     /// Each slot's cell: the cells with capacity within the reach of some point.
     pub fn active_cells(&self) -> &[u32] {
         &self.active
-    }
-
-    /// Each slot's centre.
-    pub fn centres(&self) -> &[Vector<D>] {
-        &self.centre
     }
 
     /// `v_j` of every slot.
@@ -714,7 +704,7 @@ mod tests {
         let mut by_rows = vec![0.0; cols.len()];
         for p in 0..n {
             let mut row = 0.0;
-            t.for_each_in_row(p, |k, _, v| {
+            t.for_each_in_row(p, |k, v| {
                 row += v;
                 by_rows[k] += v;
             });
@@ -788,7 +778,7 @@ mod tests {
             assert!(u.iter().chain(v).all(|x| x.is_normal() && *x > 0.0));
             for p in 0..pts.len() {
                 let mut row = 0.0;
-                t.for_each_in_row(p, |_, _, t| row += t);
+                t.for_each_in_row(p, |_, t| row += t);
                 assert!((row / volume - 1.0).abs() < 1e-12, "row {p}: {row}");
             }
             // A warm start from it does not carry the scalings out of range.
@@ -930,9 +920,9 @@ mod tests {
         let t = Transport::solve(tg, air, &[x], v, &s, None).unwrap();
         check_marginals(tg, air, &t, 1, 1e-10);
         let (mut mass, mut centre, mut peak) = (0.0, Vector::<D>::zeros(), 0.0f64);
-        t.for_each_in_row(0, |_, xj, v| {
+        t.for_each_in_row(0, |k, v| {
             mass += v;
-            centre += v * xj;
+            centre += v * tg.center(t.active_cells()[k] as usize);
             peak = peak.max(v);
         });
         (mass, centre / mass, peak)
