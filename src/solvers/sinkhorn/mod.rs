@@ -415,7 +415,7 @@ impl<const D: usize> Transport<D> {
         }
     }
 
-    /// A plan on `kernel`, every scaling 1: its slots' centres and baselines.
+    /// A plan on `kernel`, every scaling 1, with its slots' baselines.
     fn new(tg: &TransportGrid<D>, air: &AirCost, kernel: Kernel<D>, volume: f64) -> Self {
         let active = kernel.active().to_vec();
         let air = match air {
