@@ -270,7 +270,7 @@ impl<const D: usize> Kernel<D> {
     }
 
     /// Calls `f(k, K_pj)` for every cell of point `p`'s row, `k` its slot, in grid order.
-    #[inline]
+    #[inline(always)]
     pub(super) fn for_each_in_row(&self, p: usize, mut f: impl FnMut(usize, f64)) {
         let (runs, factor) = self.runs_at(self.rank[p] as usize);
         for run in runs {

@@ -556,7 +556,7 @@ impl<const D: usize> Transport<D> {
     }
 
     /// Calls `f(k, T_pj)` for every cell of point `p`'s row (`k` its slot).
-    #[inline]
+    #[inline(always)]
     pub fn for_each_in_row(&self, p: usize, mut f: impl FnMut(usize, f64)) {
         let u = self.u[p];
         (self.kernel).for_each_in_row(p, |k, kpj| f(k, u * kpj * self.v[k]));
