@@ -12,7 +12,7 @@
 
 use std::arch::x86_64::*;
 
-use super::{Grid, LayerRange, Vector};
+use super::{Grid, LayerRange, MacField, Vector};
 
 /// Whether this CPU has AVX2, checked at run time (cached by `std`).
 pub fn cpu_has_lanes() -> bool {
@@ -205,6 +205,35 @@ impl<const D: usize> FaceStencil4<D> {
         }
         (va, vb)
     }
+}
+
+/// [`MacField::interpolate_pairs`] of the points of whole groups of four; returns how many it
+/// did (the caller does the rest one by one).
+///
+/// # Safety
+/// Only on a CPU with AVX2, on a grid where [`available`].
+#[target_feature(enable = "avx2")]
+pub fn interpolate_pairs<const D: usize>(
+    grid: &Grid<D>,
+    a: &MacField<D>,
+    b: &MacField<D>,
+    xs: &[Vector<D>],
+    out: &mut [[Vector<D>; 2]],
+) -> usize {
+    let n = xs.len() / 4 * 4;
+    for (x, out) in xs[..n].chunks_exact(4).zip(out.chunks_exact_mut(4)) {
+        let point = FacePoint4::new(grid, x.try_into().expect("groups of four"));
+        let mut v = [[[0.0; 4]; D]; 2];
+        for k in 0..D {
+            let st = FaceStencil4::at(grid, &point, k);
+            let (va, vb) = st.apply_pair(&a.comp[k], &b.comp[k]);
+            (v[0][k], v[1][k]) = (lanes(va), lanes(vb));
+        }
+        for (i, out) in out.iter_mut().enumerate() {
+            *out = [0, 1].map(|f| Vector::<D>::from_fn(|k, _| v[f][k][i]));
+        }
+    }
+    n
 }
 
 /// `values[base[l] + off]` and `values[base[l] + off + 1]` of the four points `l`, as two

@@ -218,10 +218,13 @@ impl<const D: usize> FluidMethod<D> for PowerPicSim<D> {
     ) -> bool {
         let plan = self.plan();
         let (tg, g) = (&self.tg, s.grid);
-        let slots = SlotMoments::new(plan, |j| {
-            let x = tg.center(j);
-            let un = u.interpolate(g, &x);
-            [x, un, un - u_old.interpolate(g, &x)]
+        let slots = SlotMoments::new(plan, |cells, values| {
+            let x: Vec<Vector<D>> = cells.iter().map(|&j| tg.center(j as usize)).collect();
+            let mut at = vec![[Vector::<D>::zeros(); 2]; x.len()];
+            u.interpolate_pairs(u_old, g, &x, &mut at);
+            for ((value, x), [un, uo]) in values.iter_mut().zip(x).zip(at) {
+                *value = [x, un, un - uo].map(Into::into);
+            }
         });
         let (flip, solid, n) = (s.config.flip_ratio, &s.solids.solid, plan.points());
         assert_eq!(n, s.particles.len(), "one row per particle of the solve");
@@ -359,13 +362,20 @@ struct SlotMoments<const D: usize> {
 /// The most values of a slot: `3 D` in 3D.
 const MOST_SLOT_VALUES: usize = 9;
 
+/// Slots a task of [`SlotMoments::new`].
+const SLOTS_PER_PIECE: usize = 4096;
+
 impl<const D: usize> SlotMoments<D> {
-    /// The values of every slot of `plan`, from `at(j) = [x_j, u(x_j), du(x_j)]` of its cell.
-    fn new(plan: &Transport<D>, at: impl Fn(usize) -> [Vector<D>; 3] + Sync) -> Self {
+    /// The values of every slot of `plan`: `at(cells, values)` writes `[x_j, u(x_j), du(x_j)]`
+    /// of each of a run of its cells (so that the velocities are interpolated in bulk,
+    /// [`MacField::interpolate_pairs`]).
+    fn new(plan: &Transport<D>, at: impl Fn(&[u32], &mut [[[f64; D]; 3]]) + Sync) -> Self {
         const { assert!(3 * D <= MOST_SLOT_VALUES) };
-        let values = (plan.active_cells().par_iter())
-            .map(|&j| at(j as usize).map(Into::into))
-            .collect();
+        let cells = plan.active_cells();
+        let mut values = vec![[[0.0; D]; 3]; cells.len()];
+        (values.par_chunks_mut(SLOTS_PER_PIECE))
+            .zip(cells.par_chunks(SLOTS_PER_PIECE))
+            .for_each(|(values, cells)| at(cells, values));
         Self { values }
     }
 
@@ -442,7 +452,11 @@ mod tests {
                 (plan.active_cells().iter().enumerate())
                     .map(|(k, &j)| (j, k))
                     .collect();
-            let slots = SlotMoments::new(&plan, |j| per_slot[slot_of[&(j as u32)]]);
+            let slots = SlotMoments::new(&plan, |cells, values| {
+                for (value, j) in values.iter_mut().zip(cells) {
+                    *value = per_slot[slot_of[j]].map(Into::into);
+                }
+            });
             for p in 0..n {
                 let (mut mass, mut sums) = (0.0, [Vector::<D>::zeros(); 3]);
                 plan.for_each_in_row(p, |k, t| {
