@@ -46,8 +46,8 @@ fn main() {
 /// came to hold the high-water mark of the other's, and the resident peak was that of the live
 /// memory plus an unpredictable share of it (ccp without the band on deep-pool-3d at 48^3, 0.3
 /// s: 286-316 MiB over five runs, 341 in a 1 s run, against 256-272 with one arena; wall time
-/// 0.98x, whole processes timed in turn, docs/benchmarks/memory.md, "One malloc arena"). The memory estimate is
-/// fitted to peaks measured this way.
+/// 0.98x, whole processes timed in turn, docs/benchmarks/memory.md, "One malloc arena"). The
+/// memory estimate is fitted to peaks measured this way.
 ///
 /// **A heap that is not handed back.** glibc returns the top of its heap to the kernel once
 /// `M_TRIM_THRESHOLD` bytes of it are free (by default twice its mmap threshold, which rises with
