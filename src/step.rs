@@ -165,7 +165,7 @@ impl<const D: usize> Simulation<D> {
             .time(Stage::Forces, || forces::apply(s, &mut u, dt));
         rep.pcg = rep
             .times
-            .time(Stage::Pressure, || pressure::project_stage(s, &mut u));
+            .time(Stage::Pressure, || pressure::project_stage(s, &mut u, dt));
         let air = forces::air_velocity(&s.config, dt);
         rep.max_speed = timestep::finite_speed(&s.grid, &u, &s.active, air, &rep.pcg)?;
         (dt, rep.dt_shortened) = timestep::shortened(dt, rep.max_speed, s.config.cfl);

@@ -427,6 +427,7 @@ impl Scene {
             max_speed: s.max_speed / h,
             pressure_tolerance: s.pressure_tolerance,
             pressure_preconditioner: s.pressure_preconditioner,
+            pressure_warm_start: s.pressure_warm_start,
             seed: s.seed,
             fluid: self.file.fluid.iter().map(region).collect(),
             solids: self.file.solid.iter().map(region).collect(),

@@ -40,6 +40,10 @@ macro_rules! simulation_file {
             /// Sifakis and Teran 2010: an iteration count nearly independent of the grid, and
             /// parallel). All stop at `pressure_tolerance`; results differ within it.
             pub pressure_preconditioner: Preconditioner,
+            /// Whether each pressure solve starts CG from the last step's pressure (the
+            /// default) rather than from zero. Both stop at `pressure_tolerance`; results
+            /// differ within it.
+            pub pressure_warm_start: bool,
             pub seed: u64,
             /// How obstacles get through particles: couple (method ccp, sec. 7), or for the
             /// other methods naive (wait until the way is free) or ignore (move regardless).
@@ -80,6 +84,7 @@ macro_rules! simulation_file {
                     max_speed: 10.0,
                     pressure_tolerance: 1e-9,
                     pressure_preconditioner: Preconditioner::Auto,
+                    pressure_warm_start: true,
                     seed: 1,
                     obstacle: None,
                     solver: None,

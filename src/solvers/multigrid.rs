@@ -143,6 +143,7 @@ use crate::solvers::pcg::{self, PcgSettings, PcgStats, Preconditioned, StencilMa
 use crate::solvers::NONE;
 use crate::PAR_GRAIN;
 use rayon::prelude::*;
+use std::borrow::Cow;
 use std::ops::Range;
 
 /// What a cell is to the system.
@@ -1506,26 +1507,34 @@ impl<const D: usize> Preconditioned for Multigrid<D> {
 }
 
 /// Solves the system of `finest` (`b` and `x` in its row order) by CG preconditioned with
-/// the V-cycle (MGPCG, McAdams sec. 3), from `x = 0`; the hierarchy is built only if CG has to
-/// iterate ([`pcg::settled`]). CG runs in the finest level's row order: `b` is taken into it
-/// and `x` out of it once per solve, not once per iteration.
+/// the V-cycle (MGPCG, McAdams sec. 3), from the guess `x` holds (zeros for a cold start); the
+/// hierarchy is built only if CG has to iterate ([`pcg::settled`]: a warm start may already be
+/// within the tolerance). CG runs in the finest level's row order: `b`, `x` and the start's
+/// residual are taken into it and `x` out of it once per solve, not once per iteration.
 pub fn solve<const D: usize>(
     finest: &Finest<D>,
     b: &[f64],
     x: &mut [f64],
     settings: &PcgSettings,
 ) -> PcgStats {
-    if let Some(stats) = pcg::settled(b, settings) {
-        x.fill(0.0);
+    let r = pcg::start_residual(b, x, |i| finest.matrix.row(i, x));
+    if let Some(stats) = pcg::settled(b, &r, settings) {
         return stats;
     }
     let mut mg = Multigrid::new(finest);
-    let mut level_b = vec![0.0; b.len()];
-    for (&j, &v) in mg.level_row.iter().zip(b) {
-        level_b[j as usize] = v;
-    }
-    let mut level_x = vec![0.0; b.len()];
-    let stats = pcg::solve_with(&mut mg, &level_b, &mut level_x, settings);
+    let to_level = |v: &[f64]| {
+        let mut level = vec![0.0; v.len()];
+        for (&j, &v) in mg.level_row.iter().zip(v) {
+            level[j as usize] = v;
+        }
+        level
+    };
+    let (level_b, mut level_x) = (to_level(b), to_level(x));
+    let level_r = match r {
+        Cow::Borrowed(_) => level_b.clone(),
+        Cow::Owned(r) => to_level(&r),
+    };
+    let stats = pcg::solve_with(&mut mg, &level_b, &mut level_x, level_r, settings);
     (x.par_iter_mut().with_min_len(PAR_GRAIN))
         .zip(&mg.level_row)
         .for_each(|(x, &j)| *x = level_x[j as usize]);

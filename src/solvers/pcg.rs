@@ -10,6 +10,7 @@
 use crate::grid::{max_abs, nan_max};
 use crate::PAR_GRAIN;
 use rayon::prelude::*;
+use std::borrow::Cow;
 
 use super::NONE;
 
@@ -49,7 +50,7 @@ impl<const D: usize> StencilMatrix<D> {
 
     /// `(A x)_r`.
     #[inline]
-    fn row(&self, r: usize, x: &[f64]) -> f64 {
+    pub fn row(&self, r: usize, x: &[f64]) -> f64 {
         let mut s = self.diag[r] * x[r];
         for a in 0..D {
             let p = self.plus[r][a];
@@ -294,12 +295,30 @@ fn step(alpha: f64, s: &[f64], a_s: &[f64], x: &mut [f64], r: &mut [f64]) -> f64
         .reduce(|| 0.0, nan_max)
 }
 
-/// What a solve from `x = 0` reports when it needs no iteration: the right-hand side is
-/// within the tolerance already or empty (converged), or not finite (not converged, with the
-/// non-finite residual). `None` when CG has to iterate.
-pub fn settled(b: &[f64], settings: &PcgSettings) -> Option<PcgStats> {
-    let res = max_abs(b);
-    let converged = res <= settings.tolerance * res || b.is_empty();
+/// The residual `b - A x` CG starts from: `b` itself, borrowed, for `x = 0` (a cold start:
+/// bit for bit the residual of a solve from zero), else computed with the row product `row`
+/// of `A`.
+pub fn start_residual<'b>(
+    b: &'b [f64],
+    x: &[f64],
+    row: impl Fn(usize) -> f64 + Sync,
+) -> Cow<'b, [f64]> {
+    if x.par_iter().all(|&v| v == 0.0) {
+        return Cow::Borrowed(b);
+    }
+    (b.par_iter().with_min_len(PAR_GRAIN).enumerate())
+        .map(|(i, &bi)| bi - row(i))
+        .collect::<Vec<f64>>()
+        .into()
+}
+
+/// What a solve reports when it needs no iteration: the start's residual `r` (`b - A x`,
+/// [`start_residual`]) is within the tolerance of `max|b|` already, or the system is empty
+/// (converged), or `r` is not finite (not converged, with the non-finite residual). `None`
+/// when CG has to iterate.
+pub fn settled(b: &[f64], r: &[f64], settings: &PcgSettings) -> Option<PcgStats> {
+    let res = max_abs(r);
+    let converged = res <= settings.tolerance * max_abs(b) || b.is_empty();
     (converged || !res.is_finite()).then_some(PcgStats {
         iterations: 0,
         residual: res,
@@ -307,8 +326,8 @@ pub fn settled(b: &[f64], settings: &PcgSettings) -> Option<PcgStats> {
     })
 }
 
-/// Solves `A x = b` by MIC(0)-PCG starting from `x = 0`; `x` receives the solution. The
-/// factor is built only if CG has to iterate ([`settled`]).
+/// Solves `A x = b` by MIC(0)-PCG from the guess `x` holds (zeros for a cold start); `x`
+/// receives the solution. The factor is built only if CG has to iterate ([`settled`]).
 pub fn solve<const D: usize>(
     a: &StencilMatrix<D>,
     b: &[f64],
@@ -316,31 +335,31 @@ pub fn solve<const D: usize>(
     settings: &PcgSettings,
 ) -> PcgStats {
     assert_eq!(a.len(), b.len());
-    if let Some(stats) = settled(b, settings) {
-        x.fill(0.0);
+    let r = start_residual(b, x, |i| a.row(i, x));
+    if let Some(stats) = settled(b, &r, settings) {
         return stats;
     }
-    solve_with(&mut Mic0::new(a, settings), b, x, settings)
+    solve_with(&mut Mic0::new(a, settings), b, x, r.into_owned(), settings)
 }
 
-/// Solves `A x = b` by PCG on `system` starting from `x = 0`; `x` receives the solution.
-/// It stops when `max|b - A x| <= tolerance max|b|` (the recursively updated residual).
-/// CG needs `M^-1` symmetric positive definite.
+/// Solves `A x = b` by PCG on `system` from the guess `x` holds, whose residual `b - A x` is
+/// `r` ([`start_residual`]); `x` receives the solution. It stops when
+/// `max|b - A x| <= tolerance max|b|` (the recursively updated residual), so a start near the
+/// solution saves iterations but not accuracy. CG needs `M^-1` symmetric positive definite.
 pub fn solve_with<P: Preconditioned>(
     system: &mut P,
     b: &[f64],
     x: &mut [f64],
+    mut r: Vec<f64>,
     settings: &PcgSettings,
 ) -> PcgStats {
     let n = b.len();
-    assert_eq!(x.len(), n);
-    x.fill(0.0);
-    if let Some(stats) = settled(b, settings) {
+    assert_eq!((x.len(), r.len()), (n, n));
+    if let Some(stats) = settled(b, &r, settings) {
         return stats;
     }
-    let mut res = max_abs(b);
-    let target = settings.tolerance * res;
-    let mut r = b.to_vec();
+    let target = settings.tolerance * max_abs(b);
+    let mut res = max_abs(&r);
     let mut z = vec![0.0; n];
     system.precondition(&r, &mut z);
     let mut s = z.clone();

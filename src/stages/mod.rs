@@ -50,6 +50,9 @@ pub struct SimConfig<const D: usize> {
     pub pressure_tolerance: f64,
     /// CG's preconditioner in the pressure solve (and idp's second solve).
     pub pressure_preconditioner: Preconditioner,
+    /// Whether the pressure solve starts from the last step's pressure
+    /// ([`pressure::WarmStart`]) rather than from zero.
+    pub pressure_warm_start: bool,
     pub seed: u64,
     pub fluid: Vec<Region<D>>,
     pub solids: Vec<Region<D>>,
@@ -89,6 +92,9 @@ pub struct State<const D: usize> {
     /// `V*`: initial volume plus emitted volume, in cells.
     pub target_volume: f64,
     pub rng: SimRng,
+    /// The last pressure solve's result, where the next one starts
+    /// ([`SimConfig::pressure_warm_start`]).
+    pub pressure: pressure::WarmStart,
 }
 
 /// The cells within [`ACTIVE_MARGIN`] of a fluid cell of `markings` or a moving obstacle's
@@ -189,6 +195,7 @@ impl<const D: usize> State<D> {
             solids,
             config,
             rng,
+            pressure: Default::default(),
         }
     }
 

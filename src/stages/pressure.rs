@@ -16,10 +16,12 @@ use crate::stages::{transfer, State};
 use crate::PAR_GRAIN;
 use rayon::prelude::*;
 
-/// The projection stage (alg. flip line 3): `u` made divergence-free on the fluid cells of
-/// the current markings to the scene's tolerance, then extrapolated two rings into the air and
-/// each component bounded by `max_speed`.
-pub fn project_stage<const D: usize>(s: &State<D>, u: &mut MacField<D>) -> PcgStats {
+/// The projection stage (alg. flip line 3) of a step of `dt` seconds (the step the forces
+/// were applied for): `u` made divergence-free on the fluid cells of the current markings to
+/// the scene's tolerance, CG starting from the last step's pressure ([`WarmStart`]) unless the
+/// scene turns that off, then extrapolated two rings into the air and each component bounded
+/// by `max_speed`.
+pub fn project_stage<const D: usize>(s: &mut State<D>, u: &mut MacField<D>, dt: f64) -> PcgStats {
     let c = &s.config;
     let settings = PcgSettings {
         tolerance: c.pressure_tolerance,
@@ -27,6 +29,7 @@ pub fn project_stage<const D: usize>(s: &State<D>, u: &mut MacField<D>) -> PcgSt
         ..Default::default()
     };
     let (grid, kind, solids, active) = (&s.grid, &s.markings.kind, &s.solids, &s.active);
+    let warm = c.pressure_warm_start.then_some((&mut s.pressure, dt));
     let stats = project(
         grid,
         kind,
@@ -35,6 +38,7 @@ pub fn project_stage<const D: usize>(s: &State<D>, u: &mut MacField<D>) -> PcgSt
         u,
         &settings,
         active,
+        warm,
     );
     let mut known = known_after_projection(grid, kind, &solids.solid, active);
     transfer::extrapolate(grid, u, &mut known, 2, active);
@@ -107,8 +111,11 @@ pub fn divergence<const D: usize>(grid: &Grid<D>, u: &MacField<D>, c: usize) -> 
 }
 
 /// Makes `u` divergence-free on fluid cells, which must be `active`. Solid faces must already
-/// hold the solid velocity ([`apply_solid_boundary`]). Returns the solver statistics; the
-/// residual is the largest remaining `|div u|` over fluid cells.
+/// hold the solid velocity ([`apply_solid_boundary`]). With `warm` (the last solve's pressure
+/// and this step's `dt`), CG starts from that pressure and it then holds this solve's; else
+/// from zero. Returns the solver statistics; the residual is the largest remaining `|div u|`
+/// over fluid cells.
+#[allow(clippy::too_many_arguments)]
 pub fn project<const D: usize>(
     grid: &Grid<D>,
     kind: &[CellKind],
@@ -117,12 +124,21 @@ pub fn project<const D: usize>(
     u: &mut MacField<D>,
     settings: &PcgSettings,
     active: &Active<D>,
+    warm: Option<(&mut WarmStart, f64)>,
 ) -> PcgStats {
     let system = Poisson::new(grid, |c| kind[c] == CellKind::Fluid, solid, active);
     let rhs = (system.cells().par_iter().with_min_len(PAR_GRAIN / 8))
         .map(|&c| -divergence(grid, u, c))
         .collect();
-    let (p, stats) = system.solve(rhs, settings);
+    let guess = match &warm {
+        Some((last, dt)) => last.guess(system.cells(), *dt),
+        None => vec![0.0; system.cells().len()],
+    };
+    let (x, stats) = system.solve(rhs, guess, settings);
+    let p = system.per_cell(&x);
+    if let Some((last, dt)) = warm {
+        last.keep(system.cells(), x, dt);
+    }
     for (ax, comp) in u.comp.iter_mut().enumerate() {
         active.par_for_each_face(grid, ax, comp, |_, f, v| {
             if let FaceKind::Open { left, right } = face_kind(grid, ax, f, solid, solid_vel) {
@@ -254,14 +270,20 @@ impl<'a, const D: usize> Poisson<'a, D> {
         &self.cells
     }
 
-    /// Solves `A x = rhs` (`rhs` in row order) by PCG from zero, with the preconditioner
-    /// `settings` names (`auto` resolved by the number of rows,
-    /// [`Preconditioner::for_size`]). A connected part of the set with no Dirichlet neighbour has a
-    /// singular system: the mean of `rhs` over it is removed first
-    /// ([`remove_mean_of_closed_components`]). Returns `x` per cell (0 outside the set).
-    pub fn solve(&self, mut rhs: Vec<f64>, settings: &PcgSettings) -> (Vec<f64>, PcgStats) {
+    /// Solves `A x = rhs` (`rhs` in row order) by PCG from the guess `x` (row order; zeros
+    /// for a cold start), with the preconditioner `settings` names (`auto` resolved by the
+    /// number of rows, [`Preconditioner::for_size`]). A connected part of the set with no
+    /// Dirichlet neighbour has a singular system: the mean of `rhs` over it is removed first
+    /// ([`remove_mean_of_closed_components`]). Returns `x` in row order ([`Poisson::per_cell`]
+    /// spreads it over the grid).
+    pub fn solve(
+        &self,
+        mut rhs: Vec<f64>,
+        mut x: Vec<f64>,
+        settings: &PcgSettings,
+    ) -> (Vec<f64>, PcgStats) {
         remove_mean_of_closed_components(&self.a, &self.dirichlet, &mut rhs);
-        let mut x = vec![0.0; self.a.len()];
+        assert_eq!(x.len(), self.a.len());
         let stats = match settings.preconditioner.for_size(D, self.a.len()) {
             Preconditioner::Auto | Preconditioner::Mic0 => {
                 pcg::solve(&self.a, &rhs, &mut x, settings)
@@ -276,11 +298,67 @@ impl<'a, const D: usize> Poisson<'a, D> {
                 multigrid::solve(&finest, &rhs, &mut x, settings)
             }
         };
+        (x, stats)
+    }
+
+    /// `x` (row order) per cell: 0 outside the set.
+    pub fn per_cell(&self, x: &[f64]) -> Vec<f64> {
         let mut per_cell = vec![0.0; self.row.len()];
-        for (&c, x) in self.cells.iter().zip(x) {
+        for (&c, &x) in self.cells.iter().zip(x) {
             per_cell[c] = x;
         }
-        (per_cell, stats)
+        per_cell
+    }
+}
+
+/// The last projection's pressure (its unknown `p dt / rho`, grid units) on the fluid cells
+/// it was solved over, and the time step it was solved for: the next projection starts CG
+/// there ([`project_stage`]). Where the liquid has not moved much, the pressure has not either
+/// (a pool at rest keeps its hydrostatic pressure from step to step), so CG starts within its
+/// tolerance or near it; it still stops only at the same `max|div u| <= tolerance max|b|`.
+/// Part of the state a checkpoint saves, so that a resumed run starts each solve as the
+/// uninterrupted one did.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct WarmStart {
+    /// The fluid cells of the last solve, ascending.
+    pub cells: Vec<u32>,
+    /// The pressure on each of `cells`.
+    pub x: Vec<f64>,
+    /// The time step it was solved for, seconds (0 before the first solve).
+    pub dt: f64,
+}
+
+impl WarmStart {
+    /// CG's start for a solve over `cells` (ascending) in a step of `dt`: the kept pressure
+    /// where a cell was fluid then, scaled by `dt / self.dt` (the hydrostatic part balances
+    /// the gravity impulse `g dt`, so it grows with the step), and zero on new fluid cells.
+    pub fn guess(&self, cells: &[usize], dt: f64) -> Vec<f64> {
+        let scale = if self.dt > 0.0 { dt / self.dt } else { 0.0 };
+        let mut out = vec![0.0; cells.len()];
+        (out.par_chunks_mut(PAR_GRAIN)
+            .zip(cells.par_chunks(PAR_GRAIN)))
+        .for_each(|(out, cells)| {
+            let first = self.cells.partition_point(|&k| (k as usize) < cells[0]);
+            let (mut k, kept) = (first, &self.cells[..]);
+            for (o, &c) in out.iter_mut().zip(cells) {
+                while k < kept.len() && (kept[k] as usize) < c {
+                    k += 1;
+                }
+                if k < kept.len() && kept[k] as usize == c {
+                    *o = self.x[k] * scale;
+                }
+            }
+        });
+        out
+    }
+
+    /// Keeps the solution `x` of a solve over `cells` (ascending) in a step of `dt`.
+    pub fn keep(&mut self, cells: &[usize], x: Vec<f64>, dt: f64) {
+        self.cells.clear();
+        let cell = |&c: &usize| u32::try_from(c).expect("a grid of fewer than 2^32 cells");
+        self.cells.extend(cells.iter().map(cell));
+        self.x = x;
+        self.dt = dt;
     }
 }
 
@@ -371,10 +449,11 @@ mod tests {
     use super::*;
     use rand::{Rng, SeedableRng};
 
-    /// Projects `u` with `preconditioner` and checks that the solve converged, met its stated
-    /// residual (the reported one and the true one, the largest `|div u|` left on a fluid
-    /// cell, within 1.01 times the tolerance times the largest `|div u|` before), and that
-    /// every fluid cell is divergence-free to 1e-6 max|u| / h. Returns max|u|.
+    /// Projects `u` with `preconditioner` (from `warm`'s pressure, [`project`]) and checks that
+    /// the solve converged, met its stated residual (the reported one and the true one, the
+    /// largest `|div u|` left on a fluid cell, within 1.01 times the tolerance times the largest
+    /// `|div u|` before), and that every fluid cell is divergence-free to 1e-6 max|u| / h.
+    /// Returns max|u| and the solve's statistics.
     fn project_and_check<const D: usize>(
         g: &Grid<D>,
         kind: &[CellKind],
@@ -382,7 +461,8 @@ mod tests {
         solid_vel: &[Vector<D>],
         u: &mut MacField<D>,
         preconditioner: Preconditioner,
-    ) -> f64 {
+        warm: Option<(&mut WarmStart, f64)>,
+    ) -> (f64, PcgStats) {
         let settings = PcgSettings {
             preconditioner,
             ..Default::default()
@@ -394,7 +474,16 @@ mod tests {
                 .fold(0.0, f64::max)
         };
         let stated = settings.tolerance * largest_divergence(u);
-        let stats = project(g, kind, solid, solid_vel, u, &settings, &Active::all(g));
+        let stats = project(
+            g,
+            kind,
+            solid,
+            solid_vel,
+            u,
+            &settings,
+            &Active::all(g),
+            warm,
+        );
         assert!(stats.converged, "{stats:?}");
         let umax = u.max_abs();
         let worst = largest_divergence(u);
@@ -410,7 +499,7 @@ mod tests {
             worst <= 1e-6 * umax,
             "max |div u| = {worst}, max |u| = {umax}"
         );
-        umax
+        (umax, stats)
     }
 
     /// Random fluid/empty/solid layout and random velocities; after projection every fluid cell
@@ -445,7 +534,7 @@ mod tests {
         }
         apply_solid_boundary(&g, &solid, &solid_vel, &mut u, &Active::all(&g));
         let before = u.clone();
-        project_and_check(&g, &kind, &solid, &solid_vel, &mut u, preconditioner);
+        project_and_check(&g, &kind, &solid, &solid_vel, &mut u, preconditioner, None);
         let mut bc = before.clone();
         apply_solid_boundary(&g, &solid, &solid_vel, &mut bc, &Active::all(&g));
         for a in 0..D {
@@ -495,7 +584,8 @@ mod tests {
             .collect();
         let mut u = MacField::zeros(&g);
         apply_solid_boundary(&g, &solid, &solid_vel, &mut u, &Active::all(&g));
-        let umax = project_and_check(&g, &kind, &solid, &solid_vel, &mut u, Preconditioner::Mic0);
+        let p = Preconditioner::Mic0;
+        let (umax, _) = project_and_check(&g, &kind, &solid, &solid_vel, &mut u, p, None);
         assert!(umax >= 2.0);
         // The fluid right below the block moves down with it.
         let mut below = [0; D];
@@ -509,6 +599,67 @@ mod tests {
     fn moving_block_2d_and_3d() {
         moving_block([24, 24]);
         moving_block([12, 12, 12]);
+    }
+
+    /// A pool at rest: the gravity impulse `g dt` on every face but the walls'. Projected
+    /// cold, it takes iterations; again from the kept pressure, at the same step or a longer
+    /// one (the guess scaled by the steps' ratio), it starts within the tolerance and takes
+    /// none; with two layers of liquid added on top, it starts from the old pressure where the
+    /// cells were fluid, takes no more iterations than a cold start, and meets the same stated
+    /// residual ([`project_and_check`]).
+    fn warm_pool<const D: usize>(dims: [usize; D], preconditioner: Preconditioner) {
+        let g = Grid::new(dims);
+        let n = g.num_cells();
+        let (solid, sv) = (vec![false; n], vec![Vector::<D>::zeros(); n]);
+        let pool = |depth: usize| -> Vec<CellKind> {
+            let fluid = |c| g.cell_coords(c)[D - 1] < depth;
+            (0..n)
+                .map(|c| [CellKind::Empty, CellKind::Fluid][fluid(c) as usize])
+                .collect()
+        };
+        let impulse = |dt: f64| {
+            let mut u = MacField::zeros(&g);
+            u.comp[D - 1].fill(-9.81 * dt);
+            apply_solid_boundary(&g, &solid, &sv, &mut u, &Active::all(&g));
+            u
+        };
+        let project = |kind: &[CellKind], dt: f64, warm: Option<&mut WarmStart>| {
+            let warm = warm.map(|w| (w, dt));
+            project_and_check(
+                &g,
+                kind,
+                &solid,
+                &sv,
+                &mut impulse(dt),
+                preconditioner,
+                warm,
+            )
+            .1
+        };
+        let (depth, mut warm) = (dims[D - 1] / 2, WarmStart::default());
+        let cold = project(&pool(depth), 0.01, Some(&mut warm));
+        assert!(cold.iterations > 0, "{cold:?}");
+        for dt in [0.01, 0.015] {
+            let again = project(&pool(depth), dt, Some(&mut warm));
+            assert_eq!(again.iterations, 0, "dt {dt}: {again:?}");
+        }
+        let deeper = pool(depth + 2);
+        let (cold, warm) = (
+            project(&deeper, 0.015, None),
+            project(&deeper, 0.015, Some(&mut warm)),
+        );
+        assert!(
+            warm.iterations <= cold.iterations,
+            "{warm:?} from {cold:?} cold"
+        );
+    }
+
+    #[test]
+    fn a_warm_start_from_a_pool_at_rest_needs_no_iteration_2d_and_3d() {
+        for p in [Preconditioner::Mic0, Preconditioner::Multigrid] {
+            warm_pool([40, 32], p);
+            warm_pool([16, 14, 12], p);
+        }
     }
 
     #[test]
@@ -535,7 +686,16 @@ mod tests {
             preconditioner,
             ..Default::default()
         };
-        let stats = project(&g, &kind, &solid, &sv, &mut u, &settings, &Active::all(&g));
+        let stats = project(
+            &g,
+            &kind,
+            &solid,
+            &sv,
+            &mut u,
+            &settings,
+            &Active::all(&g),
+            None,
+        );
         assert!(stats.converged, "{stats:?}");
         let worst = (0..n)
             .map(|c| divergence(&g, &u, c).abs())
@@ -579,6 +739,7 @@ mod tests {
                     &mut u0.clone(),
                     &settings,
                     &Active::all(&g),
+                    None,
                 )
             };
             let auto = solve(Auto);

@@ -1,9 +1,11 @@
 //! What the state every method shares carries from one step to the next, written to and read
 //! from a checkpoint ([`crate::snapshot`]): the particles, the grid velocity the next step
-//! starts from, the markings, the obstacles, the clocks and counts, and the random generator.
+//! starts from, the markings, the obstacles, the clocks and counts, the random generator, and
+//! the last pressure solve (where the next one starts).
 //! The rest (the grid, the static solids, the configuration) is rebuilt from the scene.
 
 use super::markings::{CellKind, Markings};
+use super::pressure::WarmStart;
 use super::{SimConfig, SimRng, State};
 use crate::grid::{Grid, MacField, Vector};
 use crate::snapshot::{
@@ -48,6 +50,10 @@ impl<const D: usize> State<D> {
         w.owned("rng.seed", &[32], self.rng.get_seed().to_vec());
         w.scalar("rng.stream", self.rng.get_stream());
         w.owned("rng.word_pos", &[2], vec![word as u64, (word >> 64) as u64]);
+        let p = &self.pressure;
+        w.slice("pressure.cells", &p.cells);
+        w.slice("pressure.x", &p.x);
+        w.scalar("pressure.dt", p.dt);
     }
 
     /// The state a checkpoint holds, for `config` (the scene it was written from).
@@ -102,6 +108,7 @@ impl<const D: usize> State<D> {
                 )
             })?,
             rng: restore_rng(r)?,
+            pressure: restore_pressure(r, grid.num_cells())?,
             particles: crate::particles::Particles { pos, vel },
             velocity,
             solids,
@@ -165,6 +172,31 @@ fn restore_markings<const D: usize>(
     })?;
     let surface = r.bools("markings.surface", Some(n))?;
     Ok(Markings::from_cells(grid, kind, count, surface, depth))
+}
+
+/// The last pressure solve ([`super::pressure::WarmStart`]): its cells ascending within the
+/// grid's `cells`, a finite pressure on each, a time step finite and not negative.
+fn restore_pressure(r: &Reader, cells: usize) -> Result<WarmStart, SnapshotError> {
+    let at = r.slice::<u32>("pressure.cells", None)?;
+    check_indices("pressure.cells", at.len(), |i| {
+        let c = at[i];
+        if c as usize >= cells {
+            return Some(format!("{c} is outside the grid's {cells} cells"));
+        }
+        let before = i.checked_sub(1).map(|j| at[j]).filter(|&b| b >= c);
+        before.map(|b| format!("{c} follows {b}: not ascending"))
+    })?;
+    let x = r.slice::<f64>("pressure.x", Some(at.len()))?;
+    check_elements("pressure.x", &x, not_finite)?;
+    let dt = r.scalar("pressure.dt").and_then(|t| {
+        check_scalar(
+            "pressure.dt",
+            t,
+            t.is_finite() && t >= 0.0,
+            "finite, at least 0",
+        )
+    })?;
+    Ok(WarmStart { cells: at, x, dt })
 }
 
 /// The generator at the word of its stream where it was saved.

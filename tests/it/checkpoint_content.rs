@@ -164,6 +164,30 @@ fn edited_checkpoints_are_refused_naming_the_array_and_its_element() {
             "held",
         ),
         (
+            &flip,
+            set("pressure.cells", "0", "10**9"),
+            "pressure.cells",
+            "outside the grid",
+        ),
+        (
+            &flip,
+            set("pressure.cells", "1", "x.flat[0]"),
+            "pressure.cells",
+            "not ascending",
+        ),
+        (
+            &flip,
+            set("pressure.x", "2", "np.nan"),
+            "pressure.x",
+            "element 2",
+        ),
+        (
+            &flip,
+            set("pressure.dt", "0", "-1"),
+            "pressure.dt",
+            "at least 0",
+        ),
+        (
             &ccp,
             set("ccp.n_deep", "0", "2**62"),
             "ccp.n_deep",

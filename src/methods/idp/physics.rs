@@ -136,7 +136,9 @@ pub fn project_density<const D: usize, R: Rng>(
     });
     let system = Poisson::new(grid, |c| in_solve[c], inp.solid, &near);
     let rhs = system.cells().iter().map(|&c| s[c]).collect();
-    let (phi, pcg) = system.solve(rhs, inp.pcg);
+    let cold = vec![0.0; system.cells().len()];
+    let (phi, pcg) = system.solve(rhs, cold, inp.pcg);
+    let phi = system.per_cell(&phi);
     rep.pcg = pcg;
     let d = displacement(grid, inp.solid, &phi, push, &near);
     rep.class = vec![ErrorClass::NotFluid as u8; s.len()];
