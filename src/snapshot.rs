@@ -37,10 +37,8 @@ pub const MAGIC: &[u8; 8] = b"\x89CFCKPT\n";
 pub const END: &[u8; 8] = b"CFCKEND\n";
 /// The format's version: a reader refuses any other. 2 (2026-11-27): a checkpoint's scene holds
 /// every method's table (ccp's `cross_check` among them) and no `cross_check` meta key; a version
-/// 1 checkpoint would resume without the cross-check it was started with. 3 (2026-12-01): the
-/// state holds the last pressure solve, where the next starts (`pressure.*`); a version 2
-/// checkpoint would resume from a cold pressure solve, not as the run it continues.
-pub const VERSION: u32 = 3;
+/// 1 checkpoint would resume without the cross-check it was started with.
+pub const VERSION: u32 = 2;
 /// Arrays start at multiples of this many bytes (a cache line; numpy's `frombuffer` needs
 /// only the item size).
 pub const ALIGN: usize = 64;

@@ -42,7 +42,9 @@ macro_rules! simulation_file {
             pub pressure_preconditioner: Preconditioner,
             /// Whether each pressure solve starts CG from the last step's pressure (the
             /// default) rather than from zero. Both stop at `pressure_tolerance`; results
-            /// differ within it.
+            /// differ within it. Written out only when off, so that a scene written before the
+            /// key existed keeps its text (and `report`'s job names, which digest it).
+            #[serde(skip_serializing_if = "is_true")]
             pub pressure_warm_start: bool,
             pub seed: u64,
             /// How obstacles get through particles: couple (method ccp, sec. 7), or for the
@@ -175,6 +177,11 @@ impl SimulationFile {
 pub struct BadValue {
     pub key: &'static str,
     pub reason: String,
+}
+
+/// Whether a flag is on (for `skip_serializing_if`: a key that is on by default).
+fn is_true(flag: &bool) -> bool {
+    *flag
 }
 
 /// A method's default settings with the scene keys its table has set.

@@ -175,8 +175,14 @@ fn restore_markings<const D: usize>(
 }
 
 /// The last pressure solve ([`super::pressure::WarmStart`]): its cells ascending within the
-/// grid's `cells`, a finite pressure on each, a time step finite and not negative.
+/// grid's `cells`, a finite pressure on each, a time step finite and not negative. A checkpoint
+/// written before the warm start (2026-12-01) has none: its next solve starts from zero. (The
+/// format's version stays: the report's result files share it, and a binary from before the
+/// warm start computes other bits anyway, so no resume across that change is bit for bit.)
 fn restore_pressure(r: &Reader, cells: usize) -> Result<WarmStart, SnapshotError> {
+    if !r.has("pressure.cells") {
+        return Ok(WarmStart::default());
+    }
     let at = r.slice::<u32>("pressure.cells", None)?;
     check_indices("pressure.cells", at.len(), |i| {
         let c = at[i];
