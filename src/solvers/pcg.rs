@@ -343,7 +343,8 @@ pub fn solve<const D: usize>(
 }
 
 /// Solves `A x = b` by PCG on `system` from the guess `x` holds, whose residual `b - A x` is
-/// `r` ([`start_residual`]); `x` receives the solution. It stops when
+/// `r` ([`start_residual`]), which the caller found not [`settled`] (before building the
+/// preconditioner); `x` receives the solution. It stops when
 /// `max|b - A x| <= tolerance max|b|` (the recursively updated residual), so a start near the
 /// solution saves iterations but not accuracy. CG needs `M^-1` symmetric positive definite.
 pub fn solve_with<P: Preconditioned>(
@@ -355,9 +356,6 @@ pub fn solve_with<P: Preconditioned>(
 ) -> PcgStats {
     let n = b.len();
     assert_eq!((x.len(), r.len()), (n, n));
-    if let Some(stats) = settled(b, &r, settings) {
-        return stats;
-    }
     let target = settings.tolerance * max_abs(b);
     let mut res = max_abs(&r);
     let mut z = vec![0.0; n];
