@@ -176,12 +176,17 @@ fn restore_markings<const D: usize>(
 
 /// The last pressure solve ([`super::pressure::WarmStart`]): its cells ascending within the
 /// grid's `cells`, a finite pressure on each, a time step finite and not negative. A checkpoint
-/// written before the warm start (2026-12-01) has none: its next solve starts from zero. (The
-/// format's version stays: the report's result files share it, and a binary from before the
-/// warm start computes other bits anyway, so no resume across that change is bit for bit.)
+/// written before the warm start (2026-12-01) has none and is refused: its run could not go on
+/// as it would have. (The format's version stays 2: the report's result files share it, and a
+/// new version would have made every kept result unreadable.)
 fn restore_pressure(r: &Reader, cells: usize) -> Result<WarmStart, SnapshotError> {
     if !r.has("pressure.cells") {
-        return Ok(WarmStart::default());
+        return Err(SnapshotError::Array {
+            name: "pressure.cells".into(),
+            reason: "absent: written before the pressure solve's warm start (2026-12-01), the \
+                run cannot resume bit for bit; start it again"
+                .into(),
+        });
     }
     let at = r.slice::<u32>("pressure.cells", None)?;
     check_indices("pressure.cells", at.len(), |i| {
