@@ -246,6 +246,43 @@ fn edited_checkpoints_are_refused_naming_the_array_and_its_element() {
     }
 }
 
+/// A checkpoint written before the pressure solve kept its last solution (2026-12-01) has no
+/// `pressure.*` arrays (made here from today's by renaming them in its header, their bytes
+/// untouched, the checksum made valid again): refused with exit 1, naming the checkpoint and
+/// `pressure.cells`, rather than resumed with a first solve its run never had.
+#[test]
+fn a_checkpoint_from_before_the_warm_start_is_refused() {
+    let dir = scratch_dir("ckpt-before-warm-start");
+    let ckpt = checkpoint_of(&dir, "flip", "dam-2d", &["--method", "flip"]);
+    let mut bytes = std::fs::read(&ckpt).unwrap();
+    let header_len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+    let (from, to) = (b"\"pressure.", b"\"pressurx.");
+    let header = &mut bytes[16..16 + header_len];
+    let at: Vec<usize> = (0..=header.len() - from.len())
+        .filter(|&i| &header[i..i + from.len()] == from)
+        .collect();
+    assert_eq!(at.len(), 3, "pressure.cells, .x and .dt in the header");
+    for i in at {
+        header[i..i + to.len()].copy_from_slice(to);
+    }
+    reseal(&mut bytes);
+    assert!(arrays_of(&bytes)
+        .iter()
+        .all(|a| !a.name.starts_with("pressure.")));
+    let old = dir.join("before-warm-start.ckpt");
+    std::fs::write(&old, &bytes).unwrap();
+    let o = resume(&dir, &old);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    let named = format!("'{}'", old.display());
+    assert!(
+        err.contains(&named)
+            && err.contains("pressure.cells: absent")
+            && err.contains("start it again"),
+        "{err}"
+    );
+}
+
 /// An array of a checkpoint: where its bytes are and what they hold.
 struct Located {
     name: String,
