@@ -504,3 +504,32 @@ fn a_run_larger_than_the_process_limits_is_refused_naming_the_limit() {
         );
     }
 }
+
+/// The pressure solve's warm start keeps a cell index and a pressure, 12 bytes, per fluid
+/// cell between steps; the estimate counts them only when the scene keeps it on.
+#[test]
+fn the_memory_estimate_counts_the_warm_starts_kept_pressure() {
+    use crate::common::{load, with};
+    use cellflip::methods::MethodKind;
+    for (scene, res) in [("dam-3d", 32), ("drop-2d", 64)] {
+        let o = Overrides {
+            cells: Some(res),
+            ..with(MethodKind::Flip, None)
+        };
+        let warm = load(scene, &o);
+        assert!(
+            warm.file.simulation.pressure_warm_start,
+            "{scene}: on by default"
+        );
+        let mut cold = warm.clone();
+        cold.file.simulation.pressure_warm_start = false;
+        let (warm, cold) = (warm.memory_estimate(false), cold.memory_estimate(false));
+        assert!(warm.fluid_cells > 0, "{scene}");
+        assert_eq!(
+            warm.cell_bytes - cold.cell_bytes,
+            12.0 * warm.fluid_cells as f64,
+            "{scene}"
+        );
+        assert_eq!(warm.particle_bytes, cold.particle_bytes, "{scene}");
+    }
+}
