@@ -343,7 +343,7 @@ impl<const D: usize> Kernel<D> {
     where
         T: Summand + Send + Sync,
     {
-        let scatter = |c: &Chunk, acc: &mut [T]| match lanes {
+        let scatter = |c: &Chunk, (acc, _): (&mut [T], &mut [()])| match lanes {
             // SAFETY: `lanes` only where the CPU has AVX2.
             true => unsafe { self.chunk_columns_in_lanes(c, &w, acc) },
             false => {
@@ -352,7 +352,8 @@ impl<const D: usize> Kernel<D> {
                 }
             }
         };
-        self.in_waves(zero, scatter, |()| {})
+        // Nothing a point: `()` takes no memory.
+        self.in_waves(zero, &mut vec![(); self.order.len()], scatter)
     }
 
     /// A Sinkhorn row update and the column sums of its result in one pass over the rows
@@ -403,52 +404,48 @@ impl<const D: usize> Kernel<D> {
     where
         T: Summand + Send + Sync,
     {
-        let mut sorted = Vec::with_capacity(self.order.len());
-        let sums = self.in_waves(
-            zero,
-            |c, acc| match lanes {
-                // SAFETY: `lanes` only where the CPU has AVX2 (`cpu_has_lanes`).
-                true => unsafe { self.chunk_rows_in_lanes(c, v, volume, &w, acc) },
-                false => (c.points.clone())
-                    .map(|i| {
-                        let u = w(self.order[i] as usize, volume / self.row_sum_at(i, v));
-                        self.scatter_row(i, u, c, acc);
-                        u
-                    })
-                    .collect::<Vec<T>>(),
-            },
-            |u| sorted.extend(u),
-        );
+        let mut sorted = vec![zero; self.order.len()];
+        let sums = self.in_waves(zero, &mut sorted, |c, (acc, out)| match lanes {
+            // SAFETY: `lanes` only where the CPU has AVX2 (`cpu_has_lanes`).
+            true => unsafe { self.chunk_rows_in_lanes(c, v, volume, &w, (acc, out)) },
+            false => {
+                for (i, out) in c.points.clone().zip(out) {
+                    *out = w(self.order[i] as usize, volume / self.row_sum_at(i, v));
+                    self.scatter_row(i, *out, c, acc);
+                }
+            }
+        });
         (self.by_point(&sorted), sums)
     }
 
     /// Column sums a wave of chunks at a time ([`wave_len`]): each chunk's `scatter` adds its
     /// points' rows into its window of slots (which has [`lanes::PAD`] spare at its end) and
-    /// gives what else it computes, which `keep` takes in chunk order; the windows are added
-    /// into one value per slot in chunk order.
-    fn in_waves<T, U: Send>(
+    /// writes what else it computes of its points into its part of `out` (one value a sorted
+    /// point); the windows are added into one value per slot in chunk order. The windows are
+    /// allocated before the chunks are shared out and `out` is the caller's, so that the
+    /// threads allocate nothing while they scatter: they would wait on each other for the one
+    /// malloc arena (`main.rs`). A window is allocated zeroed, not written zero: its slots that
+    /// no point of the chunk reaches stay untouched pages.
+    fn in_waves<T, O: Send>(
         &self,
         zero: T,
-        scatter: impl Fn(&Chunk, &mut [T]) -> U + Sync,
-        mut keep: impl FnMut(U),
+        mut out: &mut [O],
+        scatter: impl Fn(&Chunk, (&mut [T], &mut [O])) + Sync,
     ) -> Vec<T>
     where
         T: Copy + Send + Sync + AddAssign,
     {
+        assert_eq!(out.len(), self.order.len(), "a value a point");
         let mut sums = vec![zero; self.active.len()];
         for wave in self.chunks.chunks(wave_len()) {
-            let parts: Vec<(U, Vec<T>)> = (wave.par_iter())
-                .map(|c| {
-                    let mut acc = vec![zero; c.window.len() + lanes::PAD];
-                    (scatter(c, &mut acc), acc)
-                })
-                .collect();
-            let windows: Vec<Vec<T>> = (parts.into_iter())
-                .map(|(u, acc)| {
-                    keep(u);
-                    acc
-                })
-                .collect();
+            let mut parts = Vec::with_capacity(wave.len());
+            for c in wave {
+                let (o, rest) = std::mem::take(&mut out).split_at_mut(c.points.len());
+                out = rest;
+                parts.push((c, vec![zero; c.window.len() + lanes::PAD], o));
+            }
+            (parts.par_iter_mut()).for_each(|(c, acc, o)| scatter(c, (acc, o)));
+            let windows: Vec<&[T]> = parts.iter().map(|(_, acc, _)| &acc[..]).collect();
             add_windows(&mut sums, wave, &windows);
         }
         sums
@@ -485,7 +482,7 @@ fn wave_len() -> usize {
 
 /// Adds the windows `parts` of the chunks `wave` into `out`, one value per slot, in chunk
 /// order.
-fn add_windows<T>(out: &mut [T], wave: &[Chunk], parts: &[Vec<T>])
+fn add_windows<T>(out: &mut [T], wave: &[Chunk], parts: &[&[T]])
 where
     T: Copy + Send + Sync + AddAssign,
 {

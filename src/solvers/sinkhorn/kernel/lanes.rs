@@ -20,11 +20,19 @@
 use super::{Chunk, Kernel};
 use crate::grid::Vector;
 use std::arch::x86_64::*;
+use std::cell::Cell;
 use std::ops::{AddAssign, Mul};
 
 /// Spare slots at the end of a chunk's window: a run's last group may store up to three past
 /// it.
 pub(super) const PAD: usize = 3;
+
+thread_local! {
+    /// A row's groups of `K_pj`, kept by each thread from one row, chunk and solve to the
+    /// next: a buffer allocated a chunk would make the threads wait on each other for the one
+    /// malloc arena (`main.rs`) in every Sinkhorn iteration.
+    static GROUPS: Cell<Vec<__m256d>> = const { Cell::new(Vec::new()) };
+}
 
 /// A value the column sums add: a scaling or a pair of them (relaxed, exact) in lanes, or any
 /// other (a cell's mass and momentum) a cell at a time, as the one-cell code does.
@@ -73,7 +81,8 @@ impl Summand for Vector<2> {
 
 impl<const D: usize> Kernel<D> {
     /// [`Kernel::rows_and_sums`]' work on the chunk `c`: each point's `w(p, u*_p)`, in the
-    /// sorted order, added as `w K_pj` into the chunk's window `acc` (with its [`PAD`]).
+    /// sorted order, into `out` (one a point of the chunk), added as `w K_pj` into the
+    /// chunk's window `acc` (with its [`PAD`]).
     ///
     /// # Safety
     /// Only on a CPU with AVX2.
@@ -84,16 +93,16 @@ impl<const D: usize> Kernel<D> {
         v: &[f64],
         volume: f64,
         w: &impl Fn(usize, f64) -> T,
-        acc: &mut [T],
-    ) -> Vec<T> {
+        (acc, out): (&mut [T], &mut [T]),
+    ) {
         assert_eq!(
             acc.len(),
             c.window.len() + PAD,
             "a window with its spare slots"
         );
-        let mut out = Vec::with_capacity(c.points.len());
-        let mut kernel = Vec::new();
-        for i in c.points.clone() {
+        assert_eq!(out.len(), c.points.len(), "a value a point of the chunk");
+        let mut kernel = GROUPS.take();
+        for (i, out) in c.points.clone().zip(out) {
             kernel.clear();
             let u = w(
                 self.order[i] as usize,
@@ -108,9 +117,9 @@ impl<const D: usize> Kernel<D> {
                     T::add_scaled(acc.as_mut_ptr().add(g), u, k);
                 }
             }
-            out.push(u);
+            *out = u;
         }
-        out
+        GROUPS.set(kernel);
     }
 
     /// [`Kernel::columns`]' work on the chunk `c`: `w(p) K_pj` of its points added into its
