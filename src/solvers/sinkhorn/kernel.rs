@@ -424,8 +424,10 @@ impl<const D: usize> Kernel<D> {
     /// point); the windows are added into one value per slot in chunk order. The windows are
     /// allocated before the chunks are shared out and `out` is the caller's, so that the
     /// threads allocate nothing while they scatter: they would wait on each other for the one
-    /// malloc arena (`main.rs`). A window is allocated zeroed, not written zero: its slots that
-    /// no point of the chunk reaches stay untouched pages.
+    /// malloc arena (`main.rs`). Each window is allocated on its own: a large window of `f64`
+    /// sums comes zeroed from fresh pages, and its slots that no point of the chunk reaches
+    /// stay untouched (one buffer written zero for a wave took more memory and time,
+    /// docs/benchmarks/powerpic.md).
     fn in_waves<T, O: Send>(
         &self,
         zero: T,
