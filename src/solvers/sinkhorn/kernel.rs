@@ -343,7 +343,7 @@ impl<const D: usize> Kernel<D> {
     where
         T: Summand + Send + Sync,
     {
-        let scatter = |c: &Chunk, (acc, _): (&mut [T], &mut [()])| match lanes {
+        let scatter = |c: &Chunk, acc: &mut [T], _: &mut [()]| match lanes {
             // SAFETY: `lanes` only where the CPU has AVX2.
             true => unsafe { self.chunk_columns_in_lanes(c, &w, acc) },
             false => {
@@ -405,9 +405,9 @@ impl<const D: usize> Kernel<D> {
         T: Summand + Send + Sync,
     {
         let mut sorted = vec![zero; self.order.len()];
-        let sums = self.in_waves(zero, &mut sorted, |c, (acc, out)| match lanes {
+        let sums = self.in_waves(zero, &mut sorted, |c, acc, out| match lanes {
             // SAFETY: `lanes` only where the CPU has AVX2 (`cpu_has_lanes`).
-            true => unsafe { self.chunk_rows_in_lanes(c, v, volume, &w, (acc, out)) },
+            true => unsafe { self.chunk_rows_in_lanes(c, v, volume, &w, acc, out) },
             false => {
                 for (i, out) in c.points.clone().zip(out) {
                     *out = w(self.order[i] as usize, volume / self.row_sum_at(i, v));
@@ -432,7 +432,7 @@ impl<const D: usize> Kernel<D> {
         &self,
         zero: T,
         mut out: &mut [O],
-        scatter: impl Fn(&Chunk, (&mut [T], &mut [O])) + Sync,
+        scatter: impl Fn(&Chunk, &mut [T], &mut [O]) + Sync,
     ) -> Vec<T>
     where
         T: Copy + Send + Sync + AddAssign,
@@ -446,7 +446,7 @@ impl<const D: usize> Kernel<D> {
                 out = rest;
                 parts.push((c, vec![zero; c.window.len() + lanes::PAD], o));
             }
-            (parts.par_iter_mut()).for_each(|(c, acc, o)| scatter(c, (acc, o)));
+            (parts.par_iter_mut()).for_each(|(c, acc, o)| scatter(c, acc, o));
             let windows: Vec<&[T]> = parts.iter().map(|(_, acc, _)| &acc[..]).collect();
             add_windows(&mut sums, wave, &windows);
         }

@@ -93,7 +93,8 @@ impl<const D: usize> Kernel<D> {
         v: &[f64],
         volume: f64,
         w: &impl Fn(usize, f64) -> T,
-        (acc, out): (&mut [T], &mut [T]),
+        acc: &mut [T],
+        out: &mut [T],
     ) {
         assert_eq!(
             acc.len(),
