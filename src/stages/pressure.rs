@@ -30,16 +30,11 @@ pub fn project_stage<const D: usize>(s: &mut State<D>, u: &mut MacField<D>, dt: 
     };
     let (grid, kind, solids, active) = (&s.grid, &s.markings.kind, &s.solids, &s.active);
     let warm = c.pressure_warm_start.then_some((&mut s.pressure, dt));
-    let stats = project(
-        grid,
-        kind,
-        &solids.solid,
-        &solids.velocity,
-        u,
-        &settings,
-        active,
-        warm,
-    );
+    let boundary = SolidBoundary {
+        solid: &solids.solid,
+        velocity: &solids.velocity,
+    };
+    let stats = project(grid, kind, boundary, u, &settings, active, warm);
     let mut known = known_after_projection(grid, kind, &solids.solid, active);
     transfer::extrapolate(grid, u, &mut known, 2, active);
     for (a, comp) in u.comp.iter_mut().enumerate() {
@@ -60,22 +55,30 @@ enum FaceKind {
     Open { left: usize, right: usize },
 }
 
-fn face_kind<const D: usize>(
-    grid: &Grid<D>,
-    axis: usize,
-    f: [usize; D],
-    solid: &[bool],
-    solid_vel: &[Vector<D>],
-) -> FaceKind {
-    if f[axis] == 0 || f[axis] == grid.dims[axis] {
-        return FaceKind::Solid(0.0);
-    }
-    let right = grid.cell_index(f);
-    let left = right - grid.cell_stride(axis);
-    match (solid[left], solid[right]) {
-        (false, false) => FaceKind::Open { left, right },
-        (true, _) => FaceKind::Solid(solid_vel[left][axis]),
-        (false, true) => FaceKind::Solid(solid_vel[right][axis]),
+/// The solid cells and each one's velocity: what the boundary condition on solid faces reads
+/// (eq. solid_boundary).
+#[derive(Clone, Copy)]
+pub struct SolidBoundary<'a, const D: usize> {
+    /// Cells of static solids and of obstacles where they are now.
+    pub solid: &'a [bool],
+    /// Zero for walls and static solids.
+    pub velocity: &'a [Vector<D>],
+}
+
+impl<const D: usize> SolidBoundary<'_, D> {
+    /// How face `f` along `axis` is constrained: a domain wall or a face of a solid cell
+    /// takes its normal velocity.
+    fn face(&self, grid: &Grid<D>, axis: usize, f: [usize; D]) -> FaceKind {
+        if f[axis] == 0 || f[axis] == grid.dims[axis] {
+            return FaceKind::Solid(0.0);
+        }
+        let right = grid.cell_index(f);
+        let left = right - grid.cell_stride(axis);
+        match (self.solid[left], self.solid[right]) {
+            (false, false) => FaceKind::Open { left, right },
+            (true, _) => FaceKind::Solid(self.velocity[left][axis]),
+            (false, true) => FaceKind::Solid(self.velocity[right][axis]),
+        }
     }
 }
 
@@ -83,14 +86,13 @@ fn face_kind<const D: usize>(
 /// solid's velocity: `u . n = u_solid . n` (eq. solid_boundary).
 pub fn apply_solid_boundary<const D: usize>(
     grid: &Grid<D>,
-    solid: &[bool],
-    solid_vel: &[Vector<D>],
+    boundary: SolidBoundary<D>,
     u: &mut MacField<D>,
     active: &Active<D>,
 ) {
     for (a, comp) in u.comp.iter_mut().enumerate() {
         active.par_for_each_face(grid, a, comp, |_, f, v| {
-            if let FaceKind::Solid(s) = face_kind(grid, a, f, solid, solid_vel) {
+            if let FaceKind::Solid(s) = boundary.face(grid, a, f) {
                 *v = s;
             }
         });
@@ -115,18 +117,16 @@ pub fn divergence<const D: usize>(grid: &Grid<D>, u: &MacField<D>, c: usize) -> 
 /// and this step's `dt`), CG starts from that pressure and it then holds this solve's; else
 /// from zero. Returns the solver statistics; the residual is the largest remaining `|div u|`
 /// over fluid cells.
-#[allow(clippy::too_many_arguments)]
 pub fn project<const D: usize>(
     grid: &Grid<D>,
     kind: &[CellKind],
-    solid: &[bool],
-    solid_vel: &[Vector<D>],
+    boundary: SolidBoundary<D>,
     u: &mut MacField<D>,
     settings: &PcgSettings,
     active: &Active<D>,
     warm: Option<(&mut WarmStart, f64)>,
 ) -> PcgStats {
-    let system = Poisson::new(grid, |c| kind[c] == CellKind::Fluid, solid, active);
+    let system = Poisson::new(grid, |c| kind[c] == CellKind::Fluid, boundary.solid, active);
     let rhs = (system.cells().par_iter().with_min_len(PAR_GRAIN / 8))
         .map(|&c| -divergence(grid, u, c))
         .collect();
@@ -141,7 +141,7 @@ pub fn project<const D: usize>(
     }
     for (ax, comp) in u.comp.iter_mut().enumerate() {
         active.par_for_each_face(grid, ax, comp, |_, f, v| {
-            if let FaceKind::Open { left, right } = face_kind(grid, ax, f, solid, solid_vel) {
+            if let FaceKind::Open { left, right } = boundary.face(grid, ax, f) {
                 if system.has(left) || system.has(right) {
                     *v -= p[right] - p[left];
                 }
@@ -457,8 +457,7 @@ mod tests {
     fn project_and_check<const D: usize>(
         g: &Grid<D>,
         kind: &[CellKind],
-        solid: &[bool],
-        solid_vel: &[Vector<D>],
+        boundary: SolidBoundary<D>,
         u: &mut MacField<D>,
         preconditioner: Preconditioner,
         warm: Option<(&mut WarmStart, f64)>,
@@ -474,16 +473,7 @@ mod tests {
                 .fold(0.0, f64::max)
         };
         let stated = settings.tolerance * largest_divergence(u);
-        let stats = project(
-            g,
-            kind,
-            solid,
-            solid_vel,
-            u,
-            &settings,
-            &Active::all(g),
-            warm,
-        );
+        let stats = project(g, kind, boundary, u, &settings, &Active::all(g), warm);
         assert!(stats.converged, "{stats:?}");
         let umax = u.max_abs();
         let worst = largest_divergence(u);
@@ -515,6 +505,10 @@ mod tests {
         let solid: Vec<bool> = (0..n).map(|_| rng.random::<f64>() < 0.1).collect();
         // Static solids: random pockets closed by solids and walls stay consistent.
         let solid_vel = vec![Vector::<D>::zeros(); n];
+        let boundary = SolidBoundary {
+            solid: &solid,
+            velocity: &solid_vel,
+        };
         let kind: Vec<CellKind> = (0..n)
             .map(|c| {
                 if solid[c] {
@@ -532,15 +526,15 @@ mod tests {
             comp.iter_mut()
                 .for_each(|v| *v = rng.random_range(-3.0..3.0));
         }
-        apply_solid_boundary(&g, &solid, &solid_vel, &mut u, &Active::all(&g));
+        apply_solid_boundary(&g, boundary, &mut u, &Active::all(&g));
         let before = u.clone();
-        project_and_check(&g, &kind, &solid, &solid_vel, &mut u, preconditioner, None);
+        project_and_check(&g, &kind, boundary, &mut u, preconditioner, None);
         let mut bc = before.clone();
-        apply_solid_boundary(&g, &solid, &solid_vel, &mut bc, &Active::all(&g));
+        apply_solid_boundary(&g, boundary, &mut bc, &Active::all(&g));
         for a in 0..D {
             for i in 0..g.num_faces(a) {
                 let f = g.face_coords(a, i);
-                if matches!(face_kind(&g, a, f, &solid, &solid_vel), FaceKind::Solid(_)) {
+                if matches!(boundary.face(&g, a, f), FaceKind::Solid(_)) {
                     assert_eq!(u.comp[a][i], bc.comp[a][i]);
                 }
             }
@@ -575,6 +569,10 @@ mod tests {
             .collect();
         let v = Vector::<D>::from_fn(|k, _| if k == D - 1 { -2.0 } else { 0.5 });
         let solid_vel = vec![v; n];
+        let boundary = SolidBoundary {
+            solid: &solid,
+            velocity: &solid_vel,
+        };
         let kind: Vec<CellKind> = (0..n)
             .map(|c| match (solid[c], g.cell_coords(c)[D - 1] < top) {
                 (true, _) => CellKind::Solid,
@@ -583,9 +581,9 @@ mod tests {
             })
             .collect();
         let mut u = MacField::zeros(&g);
-        apply_solid_boundary(&g, &solid, &solid_vel, &mut u, &Active::all(&g));
+        apply_solid_boundary(&g, boundary, &mut u, &Active::all(&g));
         let p = Preconditioner::Mic0;
-        let (umax, _) = project_and_check(&g, &kind, &solid, &solid_vel, &mut u, p, None);
+        let (umax, _) = project_and_check(&g, &kind, boundary, &mut u, p, None);
         assert!(umax >= 2.0);
         // The fluid right below the block moves down with it.
         let mut below = [0; D];
@@ -611,6 +609,10 @@ mod tests {
         let g = Grid::new(dims);
         let n = g.num_cells();
         let (solid, sv) = (vec![false; n], vec![Vector::<D>::zeros(); n]);
+        let boundary = SolidBoundary {
+            solid: &solid,
+            velocity: &sv,
+        };
         let pool = |depth: usize| -> Vec<CellKind> {
             let fluid = |c| g.cell_coords(c)[D - 1] < depth;
             (0..n)
@@ -620,21 +622,12 @@ mod tests {
         let impulse = |dt: f64| {
             let mut u = MacField::zeros(&g);
             u.comp[D - 1].fill(-9.81 * dt);
-            apply_solid_boundary(&g, &solid, &sv, &mut u, &Active::all(&g));
+            apply_solid_boundary(&g, boundary, &mut u, &Active::all(&g));
             u
         };
         let project = |kind: &[CellKind], dt: f64, warm: Option<&mut WarmStart>| {
             let warm = warm.map(|w| (w, dt));
-            project_and_check(
-                &g,
-                kind,
-                &solid,
-                &sv,
-                &mut impulse(dt),
-                preconditioner,
-                warm,
-            )
-            .1
+            project_and_check(&g, kind, boundary, &mut impulse(dt), preconditioner, warm).1
         };
         let (depth, mut warm) = (dims[D - 1] / 2, WarmStart::default());
         let cold = project(&pool(depth), 0.01, Some(&mut warm));
@@ -675,13 +668,17 @@ mod tests {
         let kind = vec![CellKind::Fluid; n];
         let solid = vec![false; n];
         let sv = vec![Vector::<2>::zeros(); n];
+        let boundary = SolidBoundary {
+            solid: &solid,
+            velocity: &sv,
+        };
         let mut u = MacField::zeros(&g);
         let mut rng = rand::rngs::StdRng::seed_from_u64(5);
         for comp in u.comp.iter_mut() {
             comp.iter_mut()
                 .for_each(|v| *v = rng.random_range(-1.0..1.0));
         }
-        apply_solid_boundary(&g, &solid, &sv, &mut u, &Active::all(&g));
+        apply_solid_boundary(&g, boundary, &mut u, &Active::all(&g));
         let settings = PcgSettings {
             preconditioner,
             ..Default::default()
@@ -689,8 +686,7 @@ mod tests {
         let stats = project(
             &g,
             &kind,
-            &solid,
-            &sv,
+            boundary,
             &mut u,
             &settings,
             &Active::all(&g),
@@ -711,13 +707,17 @@ mod tests {
         let g = Grid::new([100, 101]);
         let n = g.num_cells();
         let (solid, sv) = (vec![false; n], vec![Vector::<2>::zeros(); n]);
+        let boundary = SolidBoundary {
+            solid: &solid,
+            velocity: &sv,
+        };
         let mut u0 = MacField::zeros(&g);
         let mut rng = rand::rngs::StdRng::seed_from_u64(6);
         for comp in u0.comp.iter_mut() {
             comp.iter_mut()
                 .for_each(|v| *v = rng.random_range(-1.0..1.0));
         }
-        apply_solid_boundary(&g, &solid, &sv, &mut u0, &Active::all(&g));
+        apply_solid_boundary(&g, boundary, &mut u0, &Active::all(&g));
         let rows = Preconditioner::AUTO_ROWS[0];
         for (fluid, chosen, other) in [(rows, Multigrid, Mic0), (rows - 1, Mic0, Multigrid)] {
             let kind: Vec<CellKind> = (0..n)
@@ -734,8 +734,7 @@ mod tests {
                 project(
                     &g,
                     &kind,
-                    &solid,
-                    &sv,
+                    boundary,
                     &mut u0.clone(),
                     &settings,
                     &Active::all(&g),
