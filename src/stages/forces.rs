@@ -17,11 +17,7 @@ pub fn apply<const D: usize>(s: &State<D>, u: &mut MacField<D>, dt: f64) {
                 .for_each(|(_, run)| run.iter_mut().for_each(|v| *v += g));
         }
     }
-    let boundary = pressure::SolidBoundary {
-        solid: &s.solids.solid,
-        velocity: &s.solids.velocity,
-    };
-    pressure::apply_solid_boundary(&s.grid, boundary, u, &s.active);
+    pressure::apply_solid_boundary(&s.grid, (&s.solids).into(), u, &s.active);
 }
 
 /// The velocity of the air far from the liquid after a step's forces and projection: zero

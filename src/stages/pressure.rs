@@ -12,6 +12,7 @@ use crate::solvers::multigrid::{self, CellClass, Finest};
 use crate::solvers::pcg::{self, PcgSettings, PcgStats, Preconditioner, StencilMatrix};
 use crate::solvers::NONE;
 use crate::stages::markings::CellKind;
+use crate::stages::solids::Solids;
 use crate::stages::{transfer, State};
 use crate::PAR_GRAIN;
 use rayon::prelude::*;
@@ -30,11 +31,7 @@ pub fn project_stage<const D: usize>(s: &mut State<D>, u: &mut MacField<D>, dt: 
     };
     let (grid, kind, solids, active) = (&s.grid, &s.markings.kind, &s.solids, &s.active);
     let warm = c.pressure_warm_start.then_some((&mut s.pressure, dt));
-    let boundary = SolidBoundary {
-        solid: &solids.solid,
-        velocity: &solids.velocity,
-    };
-    let stats = project(grid, kind, boundary, u, &settings, active, warm);
+    let stats = project(grid, kind, solids.into(), u, &settings, active, warm);
     let mut known = known_after_projection(grid, kind, &solids.solid, active);
     transfer::extrapolate(grid, u, &mut known, 2, active);
     for (a, comp) in u.comp.iter_mut().enumerate() {
@@ -63,6 +60,16 @@ pub struct SolidBoundary<'a, const D: usize> {
     pub solid: &'a [bool],
     /// Zero for walls and static solids.
     pub velocity: &'a [Vector<D>],
+}
+
+impl<'a, const D: usize> From<&'a Solids<D>> for SolidBoundary<'a, D> {
+    /// The simulation's solid cells, obstacles where they are now.
+    fn from(s: &'a Solids<D>) -> Self {
+        SolidBoundary {
+            solid: &s.solid,
+            velocity: &s.velocity,
+        }
+    }
 }
 
 impl<const D: usize> SolidBoundary<'_, D> {
