@@ -456,6 +456,29 @@ mod tests {
     use super::*;
     use rand::{Rng, SeedableRng};
 
+    /// A grid's `n` cells without a solid among them, each at rest: only the domain's walls
+    /// bound the liquid.
+    struct WallsOnly<const D: usize> {
+        solid: Vec<bool>,
+        velocity: Vec<Vector<D>>,
+    }
+
+    impl<const D: usize> WallsOnly<D> {
+        fn new(n: usize) -> Self {
+            Self {
+                solid: vec![false; n],
+                velocity: vec![Vector::zeros(); n],
+            }
+        }
+
+        fn boundary(&self) -> SolidBoundary<'_, D> {
+            SolidBoundary {
+                solid: &self.solid,
+                velocity: &self.velocity,
+            }
+        }
+    }
+
     /// Projects `u` with `preconditioner` (from `warm`'s pressure, [`project`]) and checks that
     /// the solve converged, met its stated residual (the reported one and the true one, the
     /// largest `|div u|` left on a fluid cell, within 1.01 times the tolerance times the largest
@@ -615,11 +638,8 @@ mod tests {
     fn warm_pool<const D: usize>(dims: [usize; D], preconditioner: Preconditioner) {
         let g = Grid::new(dims);
         let n = g.num_cells();
-        let (solid, sv) = (vec![false; n], vec![Vector::<D>::zeros(); n]);
-        let boundary = SolidBoundary {
-            solid: &solid,
-            velocity: &sv,
-        };
+        let walls = WallsOnly::<D>::new(n);
+        let boundary = walls.boundary();
         let pool = |depth: usize| -> Vec<CellKind> {
             let fluid = |c| g.cell_coords(c)[D - 1] < depth;
             (0..n)
@@ -673,12 +693,8 @@ mod tests {
         let g = Grid::new([40, 40]);
         let n = g.num_cells();
         let kind = vec![CellKind::Fluid; n];
-        let solid = vec![false; n];
-        let sv = vec![Vector::<2>::zeros(); n];
-        let boundary = SolidBoundary {
-            solid: &solid,
-            velocity: &sv,
-        };
+        let walls = WallsOnly::<2>::new(n);
+        let boundary = walls.boundary();
         let mut u = MacField::zeros(&g);
         let mut rng = rand::rngs::StdRng::seed_from_u64(5);
         for comp in u.comp.iter_mut() {
@@ -713,11 +729,8 @@ mod tests {
         use Preconditioner::*;
         let g = Grid::new([100, 101]);
         let n = g.num_cells();
-        let (solid, sv) = (vec![false; n], vec![Vector::<2>::zeros(); n]);
-        let boundary = SolidBoundary {
-            solid: &solid,
-            velocity: &sv,
-        };
+        let walls = WallsOnly::<2>::new(n);
+        let boundary = walls.boundary();
         let mut u0 = MacField::zeros(&g);
         let mut rng = rand::rngs::StdRng::seed_from_u64(6);
         for comp in u0.comp.iter_mut() {
