@@ -1,5 +1,6 @@
 //! General numerics with no fluid knowledge.
 
+pub mod awake;
 pub mod cheapest;
 pub mod lp;
 pub mod min_cost_flow;
