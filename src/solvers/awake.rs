@@ -25,7 +25,7 @@ pub struct Awake {
 impl Awake {
     /// Keeps the current pool's other workers awake until the guard is dropped. A pool of one
     /// thread, or a caller outside any pool, spawns nothing.
-    pub fn new() -> Self {
+    pub fn start() -> Self {
         let done = Arc::new(AtomicBool::new(false));
         if let Some(me) = rayon::current_thread_index() {
             for _ in 1..rayon::current_num_threads() {
@@ -97,7 +97,7 @@ mod tests {
             let pool = pool(2);
             for _ in 0..100 {
                 let spinners = pool.install(|| {
-                    let awake = Awake::new();
+                    let awake = Awake::start();
                     let sum: u64 = (0..10_000u32)
                         .into_par_iter()
                         .with_min_len(100)
@@ -133,7 +133,7 @@ mod tests {
                     .expect("one waiter")
                     .recv()
                     .expect("the other worker holds");
-                let _awake = Awake::new();
+                let _awake = Awake::start();
                 while rayon::yield_local() == Some(rayon::Yield::Executed) {}
                 release.send(()).expect("the worker waits");
             });
@@ -143,9 +143,9 @@ mod tests {
     #[test]
     fn outside_a_pool_or_on_one_thread_nothing_spins() {
         within_a_minute(|| {
-            drop(Awake::new());
+            drop(Awake::start());
             pool(1).install(|| {
-                let _awake = Awake::new();
+                let _awake = Awake::start();
                 assert_eq!(rayon::yield_local(), Some(rayon::Yield::Idle));
             });
         });

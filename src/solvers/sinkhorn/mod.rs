@@ -350,7 +350,7 @@ impl<const D: usize> Transport<D> {
             .map(|w| std::mem::replace(&mut w.kernel, Kernel::empty()));
         // A solve is a few dozen short passes, one after another: the other threads wait for
         // them awake.
-        let _awake = Awake::new();
+        let _awake = Awake::start();
         let kernel = Kernel::new(tg, points, s, storage.unwrap_or_else(Kernel::empty))?;
         let mut t = Self::new(tg, air, kernel, volume);
         if let Some(w) = warm {
