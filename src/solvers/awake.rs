@@ -10,8 +10,8 @@
 //! the order of every sum are unchanged; only who waits for it, and how.
 //!
 //! **The cost.** The other cores spin between the passes, so a guard is held where passes
-//! follow one another with little serial work between (a Sinkhorn solve), not over a whole
-//! step: held over FLIP's step on dam-2d it made the step slower, 0.44-0.47 ms against
+//! follow one another with little serial work between (Power PIC's transfers), not over a
+//! whole step: held over FLIP's step on dam-2d it made the step slower, 0.44-0.47 ms against
 //! 0.41-0.43 (docs/benchmarks/powerpic.md).
 
 use std::sync::atomic::{AtomicBool, Ordering};

@@ -8,6 +8,7 @@ use crate::grid::lanes::cpu_has_lanes;
 use crate::grid::{Grid, MacField, Vector};
 use crate::methods::seam::{FluidMethod, MethodRecording, MethodReport};
 use crate::snapshot::{check_elements, check_indices, Reader, SnapshotError, Writer};
+use crate::solvers::awake::Awake;
 use crate::solvers::sinkhorn::{Air, SinkhornError, Summand, Transport, TransportGrid};
 use crate::stages::advect::displace;
 use crate::stages::invariants::InvariantViolation;
@@ -181,7 +182,10 @@ impl<const D: usize> FluidMethod<D> for PowerPicSim<D> {
     }
 
     /// Steps 1 and 2: the plan, then each transport cell's mass and momentum to the faces.
+    /// Both transfers are runs of short parallel passes (the Sinkhorn iterations', the
+    /// columns', the rows'), which rayon's other workers wait for awake ([`Awake`]).
     fn particles_to_grid(&mut self, s: &State<D>) -> Result<(MacField<D>, Known<D>), StepError> {
+        let _awake = Awake::start();
         self.update_cells(s);
         let plan = self.solve(s)?;
         let vel = &s.particles.vel;
@@ -216,6 +220,7 @@ impl<const D: usize> FluidMethod<D> for PowerPicSim<D> {
         u_old: &MacField<D>,
         _at: &mut Vec<Vector<D>>,
     ) -> bool {
+        let _awake = Awake::start();
         let plan = self.plan();
         let (tg, g) = (&self.tg, s.grid);
         let slots = SlotMoments::new(plan, |cells, values| {

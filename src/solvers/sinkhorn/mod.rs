@@ -64,9 +64,9 @@
 //! chunks of spatially sorted points (their size set by the point count) into their own
 //! windows of cells, added in chunk order: results are the same whatever the thread count. A
 //! wave of chunks at a time holds its windows, so that the windows held do not grow with the
-//! points times a plane of cells. Through a solve, rayon's other workers wait for the next
-//! pass awake ([`Awake`]): a pass over a 2D problem takes about what a sleeping worker takes
-//! to wake.
+//! points times a plane of cells. A solve is a few dozen such passes one after another, each
+//! over a 2D problem about as long as a sleeping rayon worker takes to wake: its caller may
+//! keep the workers awake through it ([`crate::solvers::awake::Awake`]).
 //! A solve may start from the previous one's plan ([`Transport::solve`]): from its scalings,
 //! the points' carried with them, and into its storage.
 //!
@@ -80,7 +80,6 @@
 mod kernel;
 
 use crate::grid::{Grid, Vector};
-use crate::solvers::awake::Awake;
 pub use kernel::Summand;
 use kernel::{ByRows, Kernel, RowUpdate};
 use rayon::prelude::*;
@@ -348,9 +347,6 @@ impl<const D: usize> Transport<D> {
         let storage = warm
             .as_mut()
             .map(|w| std::mem::replace(&mut w.kernel, Kernel::empty()));
-        // A solve is a few dozen short passes, one after another: the other threads wait for
-        // them awake.
-        let _awake = Awake::start();
         let kernel = Kernel::new(tg, points, s, storage.unwrap_or_else(Kernel::empty))?;
         let mut t = Self::new(tg, air, kernel, volume);
         if let Some(w) = warm {
