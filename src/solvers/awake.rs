@@ -39,7 +39,8 @@ impl Awake {
 
 #[cfg(test)]
 impl Awake {
-    /// The flag the spinners hold while they run: its count of holders less the guard's.
+    /// The guard's flag, which each spinner holds a handle of from its spawning until it
+    /// returns: the spinners alive are its handles but the guard's and this one.
     fn spinners(&self) -> Arc<AtomicBool> {
         self.done.clone()
     }
@@ -143,11 +144,11 @@ mod tests {
     #[test]
     fn outside_a_pool_or_on_one_thread_nothing_spins() {
         within_a_minute(|| {
-            drop(Awake::start());
-            pool(1).install(|| {
-                let _awake = Awake::start();
-                assert_eq!(rayon::yield_local(), Some(rayon::Yield::Idle));
-            });
+            let alive = |a: &Awake| Arc::strong_count(&a.spinners()) - 2;
+            assert_eq!(alive(&Awake::start()), 0, "outside any pool");
+            assert_eq!(pool(1).install(|| alive(&Awake::start())), 0, "one thread");
+            // The count sees a spinner: on two threads there is one.
+            assert_eq!(pool(2).install(|| alive(&Awake::start())), 1, "two threads");
         });
     }
 }
