@@ -530,12 +530,16 @@ impl<'a, const D: usize> Ball<'a, D> {
         2 * self.reach + 1
     }
 
-    /// The box of the point at `x`: its first cell and its cells per axis.
-    fn bounds(&self, x: &Vector<D>) -> ([usize; D], [usize; D]) {
+    /// The box of the point at `x`.
+    fn point_box(&self, x: &Vector<D>) -> PointBox<D> {
         let (c, dims) = (cell_of(self.tg, x), &self.tg.grid.dims);
-        let lo = std::array::from_fn(|k| c[k].saturating_sub(self.reach));
+        let lo: [usize; D] = std::array::from_fn(|k| c[k].saturating_sub(self.reach));
         let len = std::array::from_fn(|k| (c[k] + self.reach).min(dims[k] - 1) + 1 - lo[k]);
-        (lo, len)
+        PointBox {
+            own: c[0] - lo[0],
+            lo,
+            len,
+        }
     }
 
     /// Walks the balls of the sorted points `x`: writes each point's factors
@@ -556,15 +560,15 @@ impl<'a, const D: usize> Ball<'a, D> {
         r.first.push(0);
         let mut d2 = vec![0.0; D * self.side()];
         for (x, f) in x.iter().zip(factor.chunks_mut(D * self.side())) {
-            let (lo, len) = self.bounds(x);
+            let b = self.point_box(x);
             for (k, d2) in d2.chunks_mut(self.side()).enumerate() {
-                for (i, d2) in (lo[k]..lo[k] + len[k]).zip(d2) {
+                for (i, d2) in (b.lo[k]..b.lo[k] + b.len[k]).zip(d2) {
                     *d2 = ((i as f64 + 0.5) * self.tg.h - x[k]).powi(2);
                 }
             }
-            for l in self.lines(lo, len, &d2) {
-                self.line_runs(&l, reached, &mut r.run);
-            }
+            self.lines(&b, &d2, D - 1, 0.0, [0; D], &mut |l| {
+                self.line_runs(&l, reached, &mut r.run)
+            });
             (f.iter_mut().zip(&d2)).for_each(|(f, d2)| *f = (-d2 / epsilon).exp() as f32);
             r.first.push(r.run.len() as u32);
         }
@@ -574,42 +578,77 @@ impl<'a, const D: usize> Ball<'a, D> {
     /// blocked ones, a run's first cell named by its near number; marks the cells reached.
     fn line_runs(&self, l: &Line<D>, reached: &[AtomicBool], runs: &mut Vec<Run>) {
         let at = std::array::from_fn(|k| l.at.get(k + 1).map_or(0, |&a| a as u8));
-        let mut open: Option<Run> = None;
-        for a in l.cells.clone() {
-            if !self.tg.is_free(l.cell + a) {
-                runs.extend(open.take());
-                continue;
-            }
-            let near = l.near + a - l.cells.start;
-            reached[near].store(true, Ordering::Relaxed);
-            match open.as_mut() {
-                Some(run) => run.len += 1,
-                None => {
-                    let (slot, start, len) = (near as u32, a as u8, 1);
-                    open = Some(Run {
-                        slot,
-                        start,
-                        len,
-                        at,
-                    })
-                }
-            }
+        let line = l.cell + l.cells.start..l.cell + l.cells.end;
+        let free = self.tg.free_among(line);
+        let mut a = 0;
+        while let Some(skip) = free[a..].iter().position(|&f| f) {
+            a += skip;
+            let len = free[a..].iter().position(|&f| !f).unwrap_or(free.len() - a);
+            let near = l.near + a;
+            (reached[near..near + len].iter()).for_each(|r| r.store(true, Ordering::Relaxed));
+            runs.push(Run {
+                slot: near as u32,
+                start: (l.cells.start + a) as u8,
+                len: len as u8,
+                at,
+            });
+            a += len;
         }
-        runs.extend(open);
     }
 
-    /// The lines of the kernel's ball in the box `lo`, `len`, in grid order, from the squared
-    /// distances `d2` along each axis over the box (as [`Self::walk`] lays them out).
-    fn lines<'b>(&'b self, lo: [usize; D], len: [usize; D], d2: &'b [f64]) -> Lines<'b, D> {
-        Lines {
-            ball: self,
-            d2,
-            lo,
-            len,
-            at: [0; D],
-            done: false,
+    /// Calls `f` with each line of the ball in the box `b` whose place along the axes above `k`
+    /// is `at`'s, in grid order (axis 1 fastest), from the squared distances `d2` along each
+    /// axis over the box (as [`Self::walk`] lays them out), `outer` the sum of those along the
+    /// axes above `k` at `at`. The ball test is on the sum of the per-axis squares, the last
+    /// axis first, as [`Kernel::outer`] multiplies the factors; a sum over the ball's reach
+    /// stays over it as the axes below add their squares, so its lines are not looked at.
+    fn lines(
+        &self,
+        b: &PointBox<D>,
+        d2: &[f64],
+        k: usize,
+        outer: f64,
+        mut at: [usize; D],
+        f: &mut impl FnMut(Line<D>),
+    ) {
+        for a in 0..b.len[k] {
+            at[k] = a;
+            let outer = outer + d2[k * self.side() + a];
+            if outer > self.r2 {
+                continue;
+            }
+            if k > 1 {
+                self.lines(b, d2, k - 1, outer, at, f);
+                continue;
+            }
+            // The ball's cells of the line are those around the point's own, the squared
+            // distance growing away from it (rounding included): counted, not searched for, so
+            // that where the line leaves the ball costs no branch.
+            let line = &d2[..b.len[0]];
+            let outside = |d: &f64| (outer + d > self.r2) as usize;
+            let inside = line.len() - line.iter().map(outside).sum::<usize>();
+            if inside == 0 {
+                continue;
+            }
+            let start: usize = line[..b.own].iter().map(outside).sum();
+            let first: [usize; D] = std::array::from_fn(|k| b.lo[k] + at[k]);
+            let near = (self.near.at(first)).expect("the near cells hold the ball's box");
+            f(Line {
+                near: near + start,
+                cell: (0..D).map(|k| first[k] * self.strides[k]).sum(),
+                cells: start..start + inside,
+                at,
+            });
         }
     }
+}
+
+/// A point's box: its first cell and its cells per axis, and the place in it of the point's
+/// own cell along axis 0, the nearest to the point.
+struct PointBox<const D: usize> {
+    lo: [usize; D],
+    len: [usize; D],
+    own: usize,
 }
 
 /// A line of cells along axis 0 in a point's ball: the cells `cells` of its box along that
@@ -620,69 +659,6 @@ struct Line<const D: usize> {
     cell: usize,
     cells: Range<usize>,
     at: [usize; D],
-}
-
-/// The lines of a point's ball ([`Ball::lines`]): an odometer over the outer axes' cells of
-/// its box (axis 1 fastest), keeping the lines the ball reaches. The ball test is on the sum
-/// of the per-axis squares, the last axis first, as [`Kernel::outer`] multiplies the factors.
-struct Lines<'a, const D: usize> {
-    ball: &'a Ball<'a, D>,
-    /// `(x_j,k - x_k)^2` at the `a`-th cell of the box along axis `k`: `d2[k side + a]`.
-    d2: &'a [f64],
-    /// The box: its first cell and its cells per axis.
-    lo: [usize; D],
-    len: [usize; D],
-    at: [usize; D],
-    done: bool,
-}
-
-impl<const D: usize> Lines<'_, D> {
-    /// `(x_j,k - x_k)^2` at the `a`-th cell of the box along axis `k`.
-    fn d2(&self, k: usize, a: usize) -> f64 {
-        self.d2[k * self.ball.side() + a]
-    }
-
-    /// The odometer's next position; false after the last.
-    fn advance(&mut self) -> bool {
-        let mut k = 1;
-        while k < D && self.at[k] + 1 == self.len[k] {
-            self.at[k] = 0;
-            k += 1;
-        }
-        if k < D {
-            self.at[k] += 1;
-        }
-        k < D
-    }
-}
-
-impl<const D: usize> Iterator for Lines<'_, D> {
-    type Item = Line<D>;
-
-    fn next(&mut self) -> Option<Line<D>> {
-        while !self.done {
-            let at = self.at;
-            let d2 = (1..D).rev().fold(0.0, |d2, k| d2 + self.d2(k, at[k]));
-            self.done = !self.advance();
-            if d2 > self.ball.r2 {
-                continue;
-            }
-            let inside = |a: &usize| d2 + self.d2(0, *a) <= self.ball.r2;
-            let Some(start) = (0..self.len[0]).find(inside) else {
-                continue;
-            };
-            let end = (start..self.len[0]).rfind(inside).expect("start is inside") + 1;
-            let first: [usize; D] = std::array::from_fn(|k| self.lo[k] + at[k]);
-            let near = (self.ball.near.at(first)).expect("the near cells hold the ball's box");
-            return Some(Line {
-                near: near + start,
-                cell: (0..D).map(|k| first[k] * self.ball.strides[k]).sum(),
-                cells: start..end,
-                at,
-            });
-        }
-        None
-    }
 }
 
 /// The points' indices sorted by the cell holding them (stably); under [`VALUE_GRAIN`] points

@@ -210,6 +210,11 @@ impl<const D: usize> TransportGrid<D> {
         self.free[j]
     }
 
+    /// Whether each of the cells `cells` is free.
+    fn free_among(&self, cells: Range<usize>) -> &[bool] {
+        &self.free[cells]
+    }
+
     /// Frees or blocks cell `j`.
     pub fn set_free(&mut self, j: usize, free: bool) {
         match (self.free[j], free) {
