@@ -530,16 +530,22 @@ impl<'a, const D: usize> Ball<'a, D> {
         2 * self.reach + 1
     }
 
-    /// The box of the point at `x`.
-    fn point_box(&self, x: &Vector<D>) -> PointBox<D> {
+    /// The box of the point at `x`, with the squared distances `(x_j,k - x_k)^2` along each
+    /// axis `k` over it written into `d2` (at `d2[k side + a]` for its `a`-th cell).
+    fn point_box(&self, x: &Vector<D>, d2: &mut [f64]) -> PointBox<D> {
         let (c, dims) = (cell_of(self.tg, x), &self.tg.grid.dims);
         let lo: [usize; D] = std::array::from_fn(|k| c[k].saturating_sub(self.reach));
-        let len = std::array::from_fn(|k| (c[k] + self.reach).min(dims[k] - 1) + 1 - lo[k]);
-        PointBox {
-            own: c[0] - lo[0],
-            lo,
-            len,
+        let len: [usize; D] =
+            std::array::from_fn(|k| (c[k] + self.reach).min(dims[k] - 1) + 1 - lo[k]);
+        let mut left = 0;
+        for (k, d2) in d2.chunks_mut(self.side()).enumerate() {
+            for (i, d2) in (lo[k]..lo[k] + len[k]).zip(d2) {
+                let dx = (i as f64 + 0.5) * self.tg.h - x[k];
+                left += (k == 0 && dx < 0.0) as usize;
+                *d2 = dx.powi(2);
+            }
         }
+        PointBox { lo, len, left }
     }
 
     /// Walks the balls of the sorted points `x`: writes each point's factors
@@ -560,12 +566,7 @@ impl<'a, const D: usize> Ball<'a, D> {
         r.first.push(0);
         let mut d2 = vec![0.0; D * self.side()];
         for (x, f) in x.iter().zip(factor.chunks_mut(D * self.side())) {
-            let b = self.point_box(x);
-            for (k, d2) in d2.chunks_mut(self.side()).enumerate() {
-                for (i, d2) in (b.lo[k]..b.lo[k] + b.len[k]).zip(d2) {
-                    *d2 = ((i as f64 + 0.5) * self.tg.h - x[k]).powi(2);
-                }
-            }
+            let b = self.point_box(x, &mut d2);
             self.lines(&b, &d2, D - 1, 0.0, [0; D], &mut |l| {
                 self.line_runs(&l, reached, &mut r.run)
             });
@@ -621,16 +622,18 @@ impl<'a, const D: usize> Ball<'a, D> {
                 self.lines(b, d2, k - 1, outer, at, f);
                 continue;
             }
-            // The ball's cells of the line are those around the point's own, the squared
-            // distance growing away from it (rounding included): counted, not searched for, so
-            // that where the line leaves the ball costs no branch.
+            // The line's cells in the ball, counted rather than searched for, so that where
+            // the line leaves the ball costs no branch: they are one span, the squared distance
+            // falling up to the point and growing past it (`x_j,0 - x_0` as computed grows
+            // along the line, rounding included), and the cells before the span are the
+            // outside ones of those left of the point.
             let line = &d2[..b.len[0]];
             let outside = |d: &f64| (outer + d > self.r2) as usize;
             let inside = line.len() - line.iter().map(outside).sum::<usize>();
             if inside == 0 {
                 continue;
             }
-            let start: usize = line[..b.own].iter().map(outside).sum();
+            let start: usize = line[..b.left].iter().map(outside).sum();
             let first: [usize; D] = std::array::from_fn(|k| b.lo[k] + at[k]);
             let near = (self.near.at(first)).expect("the near cells hold the ball's box");
             f(Line {
@@ -643,12 +646,12 @@ impl<'a, const D: usize> Ball<'a, D> {
     }
 }
 
-/// A point's box: its first cell and its cells per axis, and the place in it of the point's
-/// own cell along axis 0, the nearest to the point.
+/// A point's box: its first cell and its cells per axis, and how many of its cells along
+/// axis 0 have their centres left of the point (`x_j,0 - x_0 < 0` as computed).
 struct PointBox<const D: usize> {
     lo: [usize; D],
     len: [usize; D],
-    own: usize,
+    left: usize,
 }
 
 /// A line of cells along axis 0 in a point's ball: the cells `cells` of its box along that
@@ -886,6 +889,63 @@ mod tests {
         lanes_give_the_one_cell_bits([40, 30], 0.4);
         lanes_give_the_one_cell_bits([16, 14, 12], 0.1);
         lanes_give_the_one_cell_bits([16, 14, 12], 0.4);
+    }
+
+    /// Every point's cells against a scan of its box with the walk's own ball test (the same
+    /// squared distances, summed in the same order), as sets: points on the cells' faces, a
+    /// few units in the last place either side of them, and at random, on a grid with blocked
+    /// cells. A face is where the point's own cell and its neighbour are as near, and where a
+    /// line's cells counted from the wrong side of the point would be one off.
+    fn cells_are_the_ball_scanned<const D: usize>(dims: [usize; D], epsilon: f64) {
+        // A side that rounds: the cells' centres are not exact.
+        let mut tg = TransportGrid::new(Grid::new(dims), 1.0 / 3.0);
+        let mut rng = StdRng::seed_from_u64(30 + D as u64);
+        for j in 0..tg.grid.num_cells() {
+            tg.set_free(j, rng.random::<f64>() > 0.1);
+        }
+        let ulps = |x: f64, n: i64| f64::from_bits((x.to_bits() as i64 + n) as u64);
+        let points: Vec<Vector<D>> = (0..400)
+            .map(|p| {
+                Vector::<D>::from_fn(|k, _| {
+                    let face = rng.random_range(1..dims[k]) as f64 * tg.h;
+                    match p % 4 {
+                        0 => face,
+                        1 => ulps(face, -rng.random_range(1..4)),
+                        2 => ulps(face, rng.random_range(1..4)),
+                        _ => rng.random::<f64>() * dims[k] as f64 * tg.h,
+                    }
+                })
+            })
+            .collect();
+        let s = SinkhornSettings {
+            epsilon,
+            delta: 0.1,
+            max_iterations: 1,
+        };
+        let kernel = Kernel::new(&tg, &points, &s, Kernel::empty()).unwrap();
+        let (r2, reach) = (s.radius() * s.radius(), (s.radius() / tg.h).ceil() as usize);
+        for (p, x) in points.iter().enumerate() {
+            let mut listed = vec![];
+            kernel.for_each_in_row(p, |k, _| listed.push(kernel.active()[k] as usize));
+            let c = cell_of(&tg, x);
+            let scanned: Vec<usize> = (0..tg.grid.num_cells())
+                .filter(|&j| tg.is_free(j))
+                .filter(|&j| {
+                    let cj = tg.grid.cell_coords(j);
+                    let near = (0..D).all(|k| cj[k].abs_diff(c[k]) <= reach);
+                    let d2 = |k: usize| ((cj[k] as f64 + 0.5) * tg.h - x[k]).powi(2);
+                    near && (0..D).rev().fold(0.0, |sum, k| sum + d2(k)) <= r2
+                })
+                .collect();
+            assert_eq!(listed, scanned, "point {p} at {x:?}");
+        }
+    }
+
+    #[test]
+    fn cells_are_the_ball_scanned_2d_and_3d() {
+        cells_are_the_ball_scanned([30, 24], 0.05);
+        cells_are_the_ball_scanned([30, 24], 0.2);
+        cells_are_the_ball_scanned([16, 14, 12], 0.05);
     }
 
     #[test]
