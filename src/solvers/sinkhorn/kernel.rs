@@ -894,8 +894,8 @@ mod tests {
     /// Every point's cells against a scan of its box with the walk's own ball test (the same
     /// squared distances, summed in the same order), as sets: points on the cells' faces, a
     /// few units in the last place either side of them, and at random, on a grid with blocked
-    /// cells. A face is where the point's own cell and its neighbour are as near, and where a
-    /// line's cells counted from the wrong side of the point would be one off.
+    /// cells. On a face the point's own cell and its neighbour are about as near, so which
+    /// cells lie left of the point, where a line's span is counted from, is at its finest.
     fn cells_are_the_ball_scanned<const D: usize>(dims: [usize; D], epsilon: f64) {
         // A side that rounds: the cells' centres are not exact.
         let mut tg = TransportGrid::new(Grid::new(dims), 1.0 / 3.0);
