@@ -92,8 +92,19 @@ impl Machine {
     /// range of several machines of this kind): `AMD EPYC 7B13 (2 cores, 2 threads, memory
     /// copy 11.2 GB/s)`.
     pub fn with_bandwidth(&self, gb_s: &str) -> String {
+        self.described(&format!(", memory copy {gb_s} GB/s"))
+    }
+
+    /// The kind of machine, without the bandwidth that moves from run to run: `AMD EPYC 7B13
+    /// (2 cores, 2 threads)`. Timings compare between runs of one kind (report.csv's `machine`).
+    pub fn kind(&self) -> String {
+        self.described("")
+    }
+
+    /// The CPU with its cores and threads in brackets, and `more` within them.
+    fn described(&self, more: &str) -> String {
         let (cores, threads) = (count(self.cores, "core"), count(self.threads, "thread"));
-        format!("{} ({cores}, {threads}, memory copy {gb_s} GB/s)", self.cpu)
+        format!("{} ({cores}, {threads}{more})", self.cpu)
     }
 }
 

@@ -127,6 +127,23 @@ fn the_csv_has_every_documented_column_and_a_row_per_run() {
     assert_eq!(rows(&dir).len(), 3 * 2 * MethodKind::ALL.len());
 }
 
+/// Each row names the kind of machine that ran it (timings compare only within one kind) and
+/// the memory copy bandwidth its process measured: this machine's, for a report run here.
+#[test]
+fn each_row_names_the_machine_that_ran_it() {
+    let here = cellflip::machine::Machine::here(1);
+    let (cpu, cores) = (here.cpu, cellflip::machine::count(here.cores, "core"));
+    for r in rows(&tiny_report()) {
+        let (machine, gb_s) = (&r["machine"], &r["copy_gb_s"]);
+        let threads = machine.strip_prefix(&format!("{cpu} ({cores}, "));
+        assert!(
+            threads.is_some_and(|t| t.ends_with(" threads)") || t == "1 thread)"),
+            "{machine}"
+        );
+        assert!(gb_s.parse::<f64>().unwrap() > 0.0, "{gb_s}");
+    }
+}
+
 #[test]
 fn failing_runs_are_rows_that_say_why() {
     let rows = rows(&tiny_report());

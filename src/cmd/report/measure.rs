@@ -30,6 +30,8 @@ pub const COLUMNS: &[(&str, &str)] = &[
     ("tables", "accuracy, stability or both"),
     ("status", "ok, interrupted, failed: step N: why, or not run: why"),
     ("build", "the build of cellflip that ran it: its version and a CRC-32 of its executable"),
+    ("machine", "the kind of machine that ran it (that finished it, when resumed): CPU model, cores and worker threads; empty for a run kept before runs recorded it. Compare timings between runs of one kind"),
+    ("copy_gb_s", "that machine's memory copy bandwidth as the process that ran it measured it (once, before its first run), GB/s"),
     ("dim", "2 or 3"),
     ("particles", "particles held at the end"),
     ("grid_cells", "cells of the grid, every axis's count multiplied"),

@@ -48,6 +48,8 @@ pub fn csv(results: &[Measured]) -> String {
                 "tables" => tables(&m.spec).into(),
                 "status" => field(&m.status),
                 "build" => field(&m.build),
+                "machine" => field(&m.machine.as_ref().map_or(String::new(), |x| x.kind())),
+                "copy_gb_s" => number(m.machine.as_ref().map_or(f64::NAN, |x| x.copy_gb_s)),
                 "dim" => m.dim.to_string(),
                 c => number(m.get(c)),
             })
