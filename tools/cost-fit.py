@@ -18,7 +18,10 @@ prints the fitted pairs (to paste into each method's `step_cost`) and a markdown
 job's estimate against its measurement (docs/cluster.md). The measured wall time of a run is its
 stages' time per simulated second times the plan's duration, as tests/it/sweep.rs takes it (a
 run stopped over its budget is extrapolated). Run it from the repository's root after `cargo
-build --release`; `--bin PATH` names another binary (the one that ran the jobs).
+build --release`; `--bin PATH` names another binary (the one that ran the jobs). The constants
+are one machine's: where a page holds runs of several kinds (report.csv's `machine`), `--speed
+KIND=F` counts the runs of KIND at F times their measured time, F being how much faster that
+kind ran the jobs that ran on both (docs/cluster.md, "The cost model").
 """
 
 import argparse
@@ -94,6 +97,7 @@ def pair(jobs, rows, path):
                     source=path,
                     res=r["res"],
                     run_steps=float(r["steps"]),
+                    machine=r.get("machine", ""),
                     status=r["status"],
                 )
             )
@@ -148,11 +152,27 @@ def main():
     ap.add_argument("csvs", nargs="+", metavar="MATRIX=REPORT.CSV")
     ap.add_argument("--bin", default="target/release/cellflip")
     ap.add_argument("--cap", type=float, default=1.9, help="the default matrix's bound either way (1.9)")
+    ap.add_argument(
+        "--speed",
+        action="append",
+        default=[],
+        metavar="KIND=F",
+        help="the runs of this kind of machine (report.csv's `machine` begins with KIND) took 1/F of "
+        "the time they would have taken on the machine fitted: their measured times count F times "
+        "(repeatable; the constants are one machine's, and a page may hold runs of several)",
+    )
     a = ap.parse_args()
     points = []
     for arg in a.csvs:
         matrix, _, path = arg.partition("=")
         points += [dict(p, matrix=matrix) for p in pair(plan(a.bin, matrix), runs(path), path)]
+    for arg in a.speed:
+        kind, _, f = arg.partition("=")
+        on = [p for p in points if p["machine"].startswith(kind)]
+        if not on:
+            sys.exit(f"--speed {arg}: no run on a machine {kind!r}")
+        for p in on:
+            p["measured"] *= float(f)
     groups = defaultdict(list)
     for p in points:
         groups[(p["method"], p["dim"])].append(p)

@@ -182,6 +182,29 @@ pub struct StepCost {
     /// counts twice: the methods whose per-step solve iterates on the liquid (ccp's correction,
     /// Power PIC's Sinkhorn, narrow-band FLIP's level set) do more where it is thrown about.
     pub driven_twice: bool,
+    /// The share of the liquid's units that counts when nothing moves it ([`Rest::Still`]):
+    /// from its second step on, the warm-started pressure solve starts within its tolerance
+    /// and takes no iteration (docs/cluster.md, "The cost model"). 1 for a method whose step
+    /// costs the same whatever the liquid does.
+    pub at_rest: f64,
+    /// Whether its step moves particles out of solids that the pressure sees at rest
+    /// ([`Rest::Entered`]: ccp's correction), so that such a liquid is not at rest to it.
+    pub clears_solids: bool,
+}
+
+/// Whether anything moves a run's liquid, as its scene says before it runs: for the cost
+/// model, which cannot see what the liquid does, the one case it can tell from the scene.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Rest {
+    /// An emitter, a lid, an obstacle falling into it that the pressure sees, or its own fall
+    /// to its level, moves it; or the pressure solve starts cold each step.
+    Moving,
+    /// Nothing moves it, and the pressure solve starts warm (hydrostatic-2d).
+    Still,
+    /// As [`Rest::Still`] to the pressure, but an obstacle falls into it with zero-velocity
+    /// boundary conditions (falling-obstacle-zero-bc-2d): only a method that clears solids
+    /// of particles moves it.
+    Entered,
 }
 
 /// What a method's cost counts of the liquid, on average over the run
@@ -209,6 +232,33 @@ impl StepCost {
             ns_per_cell,
             unit: Unit::Particle,
             driven_twice: false,
+            at_rest: 1.0,
+            clears_solids: false,
+        }
+    }
+
+    /// This cost with `share` of the liquid's units counting on a liquid at rest.
+    pub fn at_rest(self, share: f64) -> Self {
+        Self {
+            at_rest: share,
+            ..self
+        }
+    }
+
+    /// This cost for a method that clears solids of particles ([`Rest::Entered`]).
+    pub fn clearing_solids(self) -> Self {
+        Self {
+            clears_solids: true,
+            ..self
+        }
+    }
+
+    /// The share of the liquid's units that counts at `rest`: [`StepCost::at_rest`] where
+    /// nothing moves the liquid as far as this method goes, else all of them.
+    pub fn rest_share(&self, rest: Rest) -> f64 {
+        match (rest, self.clears_solids) {
+            (Rest::Still, _) | (Rest::Entered, false) => self.at_rest,
+            _ => 1.0,
         }
     }
 
@@ -235,6 +285,26 @@ fn in_dim<T: Copy>(dim: usize, measured: [T; 2]) -> T {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A still liquid counts its share for every method; one that a solid enters with
+    /// zero-velocity boundary conditions only for a method that leaves the solid's particles.
+    #[test]
+    fn a_liquid_at_rest_counts_its_share_where_nothing_moves_it() {
+        let flip = StepCost::of(2, [(1.0, 0.0), (1.0, 0.0)]).at_rest(0.5);
+        let ccp = flip.clearing_solids();
+        assert_eq!(
+            StepCost::of(2, [(1.0, 0.0); 2]).rest_share(Rest::Still),
+            1.0
+        );
+        for (rest, flip_share, ccp_share) in [
+            (Rest::Moving, 1.0, 1.0),
+            (Rest::Still, 0.5, 0.5),
+            (Rest::Entered, 0.5, 1.0),
+        ] {
+            assert_eq!(flip.rest_share(rest), flip_share, "{rest:?}");
+            assert_eq!(ccp.rest_share(rest), ccp_share, "{rest:?}");
+        }
+    }
 
     #[test]
     fn a_large_problem_counts_from_its_size_on() {

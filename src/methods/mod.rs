@@ -53,7 +53,7 @@ pub mod options;
 pub mod powerpic;
 mod seam;
 
-pub use cost::{Footprint, Holds, StartPeak, StepCost, Unit};
+pub use cost::{Footprint, Holds, Rest, StartPeak, StepCost, Unit};
 pub use options::{Flag, FlagValue, MethodFlags};
 pub use seam::{
     BandChoice, Export, FluidMethod, MethodInfo, MethodRecording, MethodReport, MethodSummary,

@@ -19,10 +19,10 @@
 use super::Scene;
 use super::{ErrorKind, SceneError};
 use crate::grid::{Grid, NearCells};
-use crate::methods::Holds;
+use crate::methods::{Holds, Rest};
 use crate::particles::Region;
 use crate::stages::markings::Markings;
-use crate::stages::solids::{Motion, Solids};
+use crate::stages::solids::{Motion, Obstacle, Solids};
 use crate::stages::SimConfig;
 
 /// The process before any simulation: code, the thread pool, the scene.
@@ -68,9 +68,11 @@ pub struct MemoryEstimate {
     /// nonzero velocity) keeps pushing into it.
     pub driven_share: f64,
     /// How far the seeded liquid's top, or a falling obstacle's bottom, falls to the liquid's
-    /// level at rest over the tank's floor, metres ([`fall_cells`]): the cost model's speed of
+    /// level at rest over the tank's floor, metres ([`falls`]): the cost model's speed of
     /// the liquid (`cellflip report --plan`, docs/cluster.md).
     pub fall_m: f64,
+    /// Whether anything moves the liquid ([`rest`]): the cost model's liquid at rest.
+    pub rest: Rest,
     /// The simulation's share once it runs: the cells' and the particles' bytes.
     pub cell_bytes: f64,
     pub particle_bytes: f64,
@@ -179,7 +181,8 @@ impl Scene {
             held_mean: band + share * emitted_mean,
             liquid_cells_mean: seeded.cells as f64 + emitted_mean / mu,
             driven_share: driven_share(&config, emitted_mean, mu * seeded.cells as f64),
-            fall_m: seeded.fall_cells * config.cell_size_m,
+            fall_m: seeded.fall.liquid.max(seeded.fall.dropped) * config.cell_size_m,
+            rest: rest(&config, seeded.fall.liquid),
             cell_bytes: footprint.cell_bytes(
                 cells as f64,
                 seeded.cells as f64,
@@ -309,8 +312,8 @@ struct SeededLiquid {
     rest_cells: usize,
     /// With a band, the active cells of the first markings.
     active_cells: Option<usize>,
-    /// Cells the liquid (or an obstacle dropped into it) falls ([`fall_cells`]).
-    fall_cells: f64,
+    /// Cells the liquid, and an obstacle dropped into it, fall ([`falls`]).
+    fall: Falls,
 }
 
 impl SeededLiquid {
@@ -333,7 +336,7 @@ impl SeededLiquid {
                 .for_each(|c| liquid[c] |= !solids.solid[c]);
         }
         let cells = liquid.iter().filter(|&&l| l).count();
-        let fall = fall_cells(config, grid, &liquid);
+        let fall = falls(config, grid, &liquid);
         let (held_cells, active_cells) = match holds {
             Holds::All => (cells, None),
             Holds::Band { layers, .. } => {
@@ -355,7 +358,7 @@ impl SeededLiquid {
             held_cells,
             rest_cells,
             active_cells,
-            fall_cells: fall,
+            fall,
         }
     }
 }
@@ -415,17 +418,27 @@ fn driven_share<const D: usize>(config: &SimConfig<D>, emitted: f64, seeded: f64
     }
 }
 
-/// How many cells the liquid falls, or a falling obstacle before it enters it: the larger of
-/// the top of the seeded `liquid` (its highest cell's top above the floor, along gravity's
-/// largest component) and a falling obstacle's bottom, above the level the liquid's cells make
-/// spread over the floor, the whole tank's section (0 without gravity, or for a liquid already
-/// flat with nothing dropped into it). An obstacle enters the liquid at the speed of its fall
-/// and throws it about as fast; solids are not counted (a liquid on a shelf is taken to fall to
-/// the floor).
-fn fall_cells<const D: usize>(config: &SimConfig<D>, grid: &Grid<D>, liquid: &[bool]) -> f64 {
+/// How many cells the liquid falls, and a falling obstacle before it enters it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Falls {
+    liquid: f64,
+    dropped: f64,
+}
+
+/// How many cells the liquid falls and a falling obstacle before it enters it: the top of the
+/// seeded `liquid` (its highest cell's top above the floor, along gravity's largest component)
+/// and the highest falling obstacle's bottom, each above the level the liquid's cells make
+/// spread over the floor, the whole tank's section (0 without gravity, for a liquid already
+/// flat, or with nothing dropped into it). An obstacle enters the liquid at the speed of its
+/// fall and throws it about as fast; solids are not counted (a liquid on a shelf is taken to
+/// fall to the floor).
+fn falls<const D: usize>(config: &SimConfig<D>, grid: &Grid<D>, liquid: &[bool]) -> Falls {
     let (axis, g) = config.gravity.map(f64::abs).argmax();
     if g <= 0.0 {
-        return 0.0;
+        return Falls {
+            liquid: 0.0,
+            dropped: 0.0,
+        };
     }
     let n = grid.dims[axis];
     let height = |c: usize| match config.gravity[axis] < 0.0 {
@@ -438,9 +451,29 @@ fn fall_cells<const D: usize>(config: &SimConfig<D>, grid: &Grid<D>, liquid: &[b
     let dropped = (config.obstacles.iter())
         .filter(|o| matches!(o.motion, Motion::Falling { .. }))
         .map(|o| o.bottom());
-    (top.map(|t| t as f64).into_iter().chain(dropped))
-        .map(|t| t - level)
-        .fold(0.0, f64::max)
+    let above = |t: f64| (t - level).max(0.0);
+    Falls {
+        liquid: top.map_or(0.0, |t| above(t as f64)),
+        dropped: dropped.map(above).fold(0.0, f64::max),
+    }
+}
+
+/// Whether anything moves the liquid that falls `liquid_fall` cells to its level ([`Rest`]):
+/// an emitter, a lid or a falling obstacle that the pressure sees (one with zero-velocity
+/// boundary conditions it sees at rest: [`Rest::Entered`]), its own fall, or a pressure solve
+/// started cold every step.
+fn rest<const D: usize>(config: &SimConfig<D>, liquid_fall: f64) -> Rest {
+    let moving: Vec<&Obstacle<D>> = (config.obstacles.iter())
+        .filter(|o| matches!(o.motion, Motion::Falling { .. }) || o.velocity.norm() > 0.0)
+        .collect();
+    let seen = moving.iter().any(|o| !o.zero_velocity_bc);
+    let entering = moving.iter().any(|o| o.zero_velocity_bc);
+    let still = config.emitters.is_empty() && !seen && liquid_fall == 0.0;
+    match (still && config.pressure_warm_start, entering) {
+        (false, _) => Rest::Moving,
+        (true, false) => Rest::Still,
+        (true, true) => Rest::Entered,
+    }
 }
 
 /// The cells of one layer of the grid across gravity's largest component (0 without gravity):

@@ -533,3 +533,33 @@ fn the_memory_estimate_counts_the_warm_starts_kept_pressure() {
         assert_eq!(warm.particle_bytes, cold.particle_bytes, "{scene}");
     }
 }
+
+/// The cost model's liquid at rest, told from the scene alone: of the built-in scenes only the
+/// tank at rest is still, and the falling obstacle whose pressure sees it at rest only entered;
+/// every other one moves its liquid (an emitter, a lid, a fall, a dropped ball or obstacle).
+/// The same tank with its pressure solve started cold each step is not at rest.
+#[test]
+fn the_plan_tells_a_liquid_at_rest_from_the_scene() {
+    use cellflip::methods::Rest;
+    for (name, _) in cellflip::scene::BUILT_IN {
+        let rest = crate::common::load(name, &Overrides::default())
+            .memory_estimate(false)
+            .rest;
+        let expected = match *name {
+            "hydrostatic-2d" => Rest::Still,
+            "falling-obstacle-zero-bc-2d" => Rest::Entered,
+            _ => Rest::Moving,
+        };
+        assert_eq!(rest, expected, "{name}");
+    }
+    let dir = scratch_dir("cold_tank");
+    let toml = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/hydrostatic-2d.toml"),
+    )
+    .unwrap();
+    let cold = toml.replace("[simulation]", "[simulation]\npressure_warm_start = false");
+    let path = dir.join("cold.toml");
+    std::fs::write(&path, cold).unwrap();
+    let scene = crate::common::load(path.to_str().unwrap(), &Overrides::default());
+    assert_eq!(scene.memory_estimate(false).rest, Rest::Moving);
+}

@@ -27,7 +27,8 @@ pub struct Job<'a> {
     pub spec: &'a RunSpec,
     pub cells: usize,
     /// What the cost model counts of the liquid on average over the run ([`cost`]): the
-    /// particles the method holds, or the liquid's cells, its driven share twice for some.
+    /// particles the method holds, or the liquid's cells, its driven share twice for some, a
+    /// share of them at rest.
     pub particles: f64,
     pub seed: u64,
     /// The up-front memory estimate the run is admitted on, MiB.
@@ -67,19 +68,20 @@ pub fn plan(specs: &[RunSpec]) -> Result<Vec<Job<'_>>> {
 /// `estimate` sizes: the method's [`crate::methods::StepCost`] for the units it counts on
 /// average over the run (the particles it holds or the liquid's cells, [`Unit`]; the average,
 /// not the memory estimate's most, `held_most`, which counts an emitter's particles from the
-/// start), its driven share twice where the method says so, and the grid's cells.
+/// start), its driven share twice where the method says so, a share of them for a liquid at
+/// rest ([`crate::methods::Rest`], [`crate::methods::StepCost::rest_share`]), and the grid's
+/// cells.
 pub fn cost(scene: &Scene, estimate: &MemoryEstimate) -> (f64, f64, f64) {
     let step = scene.method.step_cost(scene.dim());
     let units = match step.unit {
         Unit::Particle => estimate.held_mean,
         Unit::LiquidCell => estimate.liquid_cells_mean,
     };
-    let units = units
-        * if step.driven_twice {
-            1.0 + estimate.driven_share
-        } else {
-            1.0
-        };
+    let driven = match step.driven_twice {
+        true => 1.0 + estimate.driven_share,
+        false => 1.0,
+    };
+    let units = units * driven * step.rest_share(estimate.rest);
     let cells = estimate.cells as f64;
     (units, steps(scene, estimate), step.step_secs(units, cells))
 }
