@@ -370,8 +370,15 @@ fn time_per_step_3d(results: &[Measured]) -> Option<(String, Chart)> {
         })
         .filter(|s| !s.points.is_empty())
         .collect();
-    let named: Vec<(String, (f64, f64))> = (runs.iter())
-        .map(|m| (m.spec.label.clone(), at(m)))
+    let kinds: Vec<Option<String>> = (runs.iter())
+        .map(|m| m.machine.as_ref().map(|x| x.kind()))
+        .collect();
+    let named: Vec<(String, (f64, f64))> = (runs.iter().zip(on_other_machines(&kinds)))
+        .map(|(m, other)| match (other, &m.machine) {
+            (false, _) => (m.spec.label.clone(), at(m)),
+            (true, Some(x)) => (format!("{} (on {})", m.spec.label, x.cpu), at(m)),
+            (true, None) => (format!("{} (machine not recorded)", m.spec.label), at(m)),
+        })
         .collect();
     let chart = Chart {
         title: "3D: time per step against the grid's cells".into(),
@@ -384,6 +391,15 @@ fn time_per_step_3d(results: &[Measured]) -> Option<(String, Chart)> {
         notes: column_notes(&named),
     };
     Some(("time-per-step-3d".into(), chart))
+}
+
+/// For each run of `kinds` (its kind of machine, `None` when not recorded), whether another
+/// kind than the one that ran most of them ran it: timings compare only within one kind, so a
+/// plot of several says which points are another's.
+fn on_other_machines(kinds: &[Option<String>]) -> Vec<bool> {
+    let count = |k: &Option<String>| kinds.iter().filter(|j| *j == k).count();
+    let most = kinds.iter().max_by_key(|k| count(k));
+    kinds.iter().map(|k| Some(k) != most).collect()
 }
 
 /// One note a column of points (the points of one name at one x): the name, under the
@@ -481,6 +497,16 @@ mod tests {
             aligns[..],
             [HPos::Left, HPos::Left, HPos::Right, HPos::Center]
         ));
+    }
+
+    /// Only the runs of a kind other than the most common one are named by their machine.
+    #[test]
+    fn the_runs_of_another_machine_are_named_by_it() {
+        let kind = |k: &str| Some(k.to_string());
+        let (intel, amd) = (kind("Intel (2 cores)"), kind("AMD (2 cores)"));
+        let kinds = [intel.clone(), amd.clone(), intel.clone(), None, intel];
+        assert_eq!(on_other_machines(&kinds), [false, true, false, true, false]);
+        assert_eq!(on_other_machines(&[amd.clone(), amd]), [false, false]);
     }
 
     #[test]
