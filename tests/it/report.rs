@@ -3,6 +3,7 @@
 //! that fail (a scene that does not load, one that breaks an invariant) as rows, not aborts.
 
 use crate::common;
+use crate::sweep::untimed_rows;
 use cellflip::cmd::report::docs;
 use cellflip::cmd::report::measure::{figure_columns, COLUMNS};
 use cellflip::methods::MethodKind;
@@ -498,21 +499,9 @@ fn a_report_stopped_and_started_again_goes_on_where_it_stopped() {
     assert!(said.contains("resuming dam-2d ccp from"), "{said}");
     assert!(!said.contains("resuming dam-2d flip"), "{said}");
     assert_eq!((count("result"), count("checkpoints")), (2, 0));
-    // The memory copy bandwidth is measured by each process, as the timings are.
-    let timed = |c: &str| {
-        c.starts_with("ms_")
-            || c.starts_with("share_")
-            || c == "peak_mib"
-            || c.contains("_ms")
-            || c == "copy_gb_s"
-    };
-    let (a, b) = (rows(&straight), rows(&split));
+    let (a, b) = (untimed_rows(&straight), untimed_rows(&split));
     assert_eq!(a.len(), 2);
-    for (x, y) in a.iter().zip(&b) {
-        for (col, v) in x.iter().filter(|(c, _)| !timed(c)) {
-            assert_eq!(v, &y[col], "{} {}: {col}", x["scene"], x["method"]);
-        }
-    }
+    assert_eq!(a, b);
 }
 
 /// A report run's pauses for its checkpoints change none of its figures: checkpointed after

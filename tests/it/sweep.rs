@@ -419,7 +419,8 @@ fn cost_ratios(args: &[&str], csv: &str) -> Vec<CostRatio> {
 /// beyond 2x either way (these 2-core machines differ by up to 2x: env). A page is made on
 /// whatever machines its sessions have, and the model's CPU-seconds are those of the machine it
 /// was fitted on; what the bounds guard is how the model follows the jobs' sizes and methods,
-/// which no single factor can mend.
+/// which no single factor can mend. A kind that ran few jobs is held less by its own factor (one
+/// job alone always fits one): the paper page's AMD EPYC rows are nine jobs of four methods.
 fn within_on_each_machine(ratios: &[CostRatio], bound: impl Fn(&str) -> f64) {
     let mut kinds: Vec<&str> = ratios.iter().map(|r| &*r.machine).collect();
     kinds.sort_unstable();
